@@ -1,0 +1,1 @@
+//! The camera simulator: scene → optics → sensor (DESIGN.md §3).

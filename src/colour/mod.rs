@@ -1,0 +1,1 @@
+//! Colorimetry: tristimulus values, xyY, CIELAB, CIEDE2000, sRGB, CCT.

@@ -1,0 +1,21 @@
+//! l3 — the L3 (Local, Linear, Learned) camera pipeline.
+//!
+//! The crate is layered:
+//! - a pure numeric core with no knowledge of HTTP or SQL:
+//!   [`spectral`] (wavelength grids, spectra, built-in and CSV data),
+//!   [`colour`] (XYZ, CIELAB, CIEDE2000, sRGB, CCT),
+//!   [`camera`] (optics and sensor simulation),
+//!   [`scene`] (charts, textures and images as spectral scenes),
+//!   [`l3`] (classification, training, tables, rendering, illuminant correction),
+//!   [`eval`] (ΔE2000 reports, the paper's Table 1);
+//! - file formats in [`io`];
+//! - the command line in [`cli`], which only calls the core.
+
+pub mod camera;
+pub mod cli;
+pub mod colour;
+pub mod eval;
+pub mod io;
+pub mod l3;
+pub mod scene;
+pub mod spectral;
