@@ -11,6 +11,9 @@
 //! - file formats in [`io`];
 //! - the command line in [`cli`], which only calls the core.
 
+// Index loops read best in numeric kernels.
+#![allow(clippy::needless_range_loop)]
+
 pub mod camera;
 pub mod cli;
 pub mod colour;

@@ -1,1 +1,42 @@
-//! l3
+//! The L3 method: classify each sensor pixel by CFA position, response
+//! level, saturation case and local contrast, and apply the class's learned
+//! affine kernel to its patch (DESIGN.md §2, §5).
+
+mod classify;
+mod normal_eq;
+mod params;
+mod render;
+mod table;
+mod trainer;
+
+pub use classify::{MAX_CHANNELS, PatchGeometry, PatchStats, mirror, sat_case_index};
+pub use normal_eq::{ClassSolution, Gram, RidgeChoice};
+pub use params::{DEFAULT_LEVELS_1V8, L3Params};
+pub use render::{RenderStats, fuse_kernels, render_reference, resolve_sat_case};
+pub use table::{ClassReport, L3Table, TABLE_FORMAT_VERSION, TableKind, TableMeta};
+pub use trainer::{Learned, NoiseModel, TrainControl, TrainingFrame, learn, package};
+
+/// Errors of the L3 core.
+#[derive(Debug, thiserror::Error)]
+pub enum L3Error {
+    #[error("invalid parameters: {0}")]
+    InvalidParams(String),
+    #[error("invalid input: {0}")]
+    InvalidInput(String),
+    #[error("table file {path}: {msg}")]
+    BadTable { path: String, msg: String },
+    #[error("table is not usable: {0}")]
+    Table(String),
+    #[error("cannot write {path}: {source}")]
+    Write {
+        path: String,
+        #[source]
+        source: std::io::Error,
+    },
+    #[error("training was canceled")]
+    Canceled,
+    #[error(transparent)]
+    Spectral(#[from] crate::spectral::SpectralError),
+}
+#[cfg(test)]
+mod tests;

@@ -1,0 +1,133 @@
+use serde::{Deserialize, Serialize};
+
+use super::{L3Error, RidgeChoice};
+
+/// ISET's tuned RGBW luminance levels for a 1.8 V swing (DESIGN.md §5), volts.
+pub const DEFAULT_LEVELS_1V8: [f64; 20] = [
+    0.001, 0.0016, 0.0026, 0.0041, 0.0065, 0.0104, 0.0166, 0.0266, 0.0424, 0.0678, 0.1082, 0.1729,
+    0.2762, 0.4505, 0.6753, 0.9, 1.1248, 1.3495, 1.5743, 1.782,
+];
+
+/// Classification and learning parameters of an L3 table.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct L3Params {
+    /// Patch side: 3, 5, 7 or 9.
+    pub patch_size: usize,
+    /// Luminance levels in volts, increasing.
+    pub levels: Vec<f64>,
+    /// A pixel is saturated at or above `voltage_swing − saturation_margin_v`.
+    pub saturation_margin_v: f64,
+    /// Flat/texture split at this quantile of the class's training contrasts.
+    pub contrast_quantile: f64,
+    /// Whether to split classes by contrast at all.
+    pub contrast_classes: bool,
+    /// Whether to keep separate saturation cases (otherwise all pixels are
+    /// treated as unsaturated).
+    pub saturation_classes: bool,
+    /// A saturation case needs this fraction of a level's samples to get kernels.
+    pub min_saturation_case_fraction: f64,
+    /// Classes with fewer samples borrow from neighbouring levels.
+    pub min_class_samples: u64,
+    pub ridge: RidgeChoice,
+    /// Average flat kernels with their mirror images where the CFA allows.
+    pub symmetrize_flat: bool,
+}
+
+impl Default for L3Params {
+    fn default() -> Self {
+        Self {
+            patch_size: 5,
+            levels: DEFAULT_LEVELS_1V8.to_vec(),
+            saturation_margin_v: 0.001,
+            contrast_quantile: 0.6,
+            contrast_classes: true,
+            saturation_classes: true,
+            min_saturation_case_fraction: 0.002,
+            min_class_samples: 200,
+            ridge: RidgeChoice::Gcv,
+            symmetrize_flat: true,
+        }
+    }
+}
+
+impl L3Params {
+    /// `n` levels spread like the ISET list over a swing: the default 20 are
+    /// scaled by `swing / 1.8`; other counts are interpolated in log space
+    /// between the first and last default level.
+    pub fn levels_for(n: usize, swing: f64) -> Result<Vec<f64>, L3Error> {
+        if !(2..=256).contains(&n) {
+            return Err(L3Error::InvalidParams(format!(
+                "{n} luminance levels: between 2 and 256 are supported"
+            )));
+        }
+        if !(swing.is_finite() && swing > 0.0) {
+            return Err(L3Error::InvalidParams(format!("voltage swing {swing}")));
+        }
+        let k = swing / 1.8;
+        if n == DEFAULT_LEVELS_1V8.len() {
+            return Ok(DEFAULT_LEVELS_1V8.iter().map(|v| v * k).collect());
+        }
+        // Resample the default list's shape: interpolate the level value as a
+        // function of its normalised index.
+        let d = &DEFAULT_LEVELS_1V8;
+        let m = d.len() - 1;
+        Ok((0..n)
+            .map(|i| {
+                let t = i as f64 / (n - 1) as f64 * m as f64;
+                let j = (t.floor() as usize).min(m - 1);
+                let f = t - j as f64;
+                // interpolate in log space: the list is geometric at the low end
+                (d[j].ln() * (1.0 - f) + d[j + 1].ln() * f).exp() * k
+            })
+            .collect())
+    }
+
+    pub fn validate(&self) -> Result<(), L3Error> {
+        let bad = |m: String| Err(L3Error::InvalidParams(m));
+        if ![3, 5, 7, 9].contains(&self.patch_size) {
+            return bad(format!("patch size {} (3, 5, 7 or 9)", self.patch_size));
+        }
+        if self.levels.len() < 2 || self.levels.len() > 256 {
+            return bad(format!("{} levels (2 to 256)", self.levels.len()));
+        }
+        if self
+            .levels
+            .windows(2)
+            .any(|w| !(w[0].is_finite() && w[1].is_finite() && w[1] > w[0] && w[0] > 0.0))
+        {
+            return bad("levels must be positive, finite and increasing".into());
+        }
+        if !(0.0..=0.5).contains(&self.saturation_margin_v) {
+            return bad(format!("saturation margin {} V", self.saturation_margin_v));
+        }
+        if !(0.05..=0.95).contains(&self.contrast_quantile) {
+            return bad(format!("contrast quantile {}", self.contrast_quantile));
+        }
+        if !(0.0..=0.5).contains(&self.min_saturation_case_fraction) {
+            return bad("min_saturation_case_fraction must be within 0–0.5".into());
+        }
+        self.ridge.validate()
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn level_lists() {
+        let l = L3Params::levels_for(20, 1.8).unwrap();
+        assert_eq!(l, DEFAULT_LEVELS_1V8.to_vec());
+        for n in [10, 40] {
+            let l = L3Params::levels_for(n, 1.8).unwrap();
+            assert_eq!(l.len(), n);
+            assert!((l[0] - 0.001).abs() < 1e-12 && (l[n - 1] - 1.782).abs() < 1e-9);
+            assert!(l.windows(2).all(|w| w[1] > w[0]));
+        }
+        assert!(L3Params::levels_for(1, 1.8).is_err());
+        let mut p = L3Params::default();
+        assert!(p.validate().is_ok());
+        p.patch_size = 4;
+        assert!(p.validate().is_err());
+    }
+}

@@ -1,0 +1,162 @@
+//! Rendering: classify every pixel and apply its class kernel (the reference
+//! renderer: simple, parallel over rows, f32).
+
+use rayon::prelude::*;
+use serde::Serialize;
+
+use super::classify::sat_case_index;
+use super::{L3Error, L3Table, PatchGeometry};
+
+/// Counts of what the renderer did, for response headers and tests.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize)]
+pub struct RenderStats {
+    pub pixels: u64,
+    /// Pixels in a saturation case other than "none".
+    pub saturated: u64,
+    /// Pixels whose saturation case had no kernels and fell back.
+    pub fallback: u64,
+    /// Pixels classed as texture.
+    pub texture: u64,
+    /// Input values clamped into [0, swing].
+    pub clamped: u64,
+}
+
+impl std::ops::AddAssign for RenderStats {
+    fn add_assign(&mut self, o: Self) {
+        self.pixels += o.pixels;
+        self.saturated += o.saturated;
+        self.fallback += o.fallback;
+        self.texture += o.texture;
+        self.clamped += o.clamped;
+    }
+}
+
+/// Kernels with a 3×3 matrix applied after them: K' = M·K for every class.
+/// Rendering with fused kernels equals rendering and then applying M.
+pub fn fuse_kernels(table: &L3Table, m: &[[f64; 3]; 3]) -> Vec<f32> {
+    let nf = table.n_features();
+    let mut out = vec![0f32; table.kernels.len()];
+    for (src, dst) in table
+        .kernels
+        .chunks_exact(3 * nf)
+        .zip(out.chunks_exact_mut(3 * nf))
+    {
+        for i in 0..3 {
+            for j in 0..nf {
+                let v: f64 = (0..3).map(|k| m[i][k] * src[k * nf + j] as f64).sum();
+                dst[i * nf + j] = v as f32;
+            }
+        }
+    }
+    out
+}
+
+/// Which saturation case index a patch uses (see [`sat_case_index`]).
+pub fn resolve_sat_case(table: &L3Table, mask: u32, means: &[f32]) -> (usize, bool) {
+    sat_case_index(&table.meta.sat_cases, mask, means)
+}
+
+/// Render a mosaic in volts (`width × height`, row-major) to interleaved XYZ
+/// with `kernels` (the table's own or fused ones). Non-finite input is an
+/// error; values outside [0, swing] are clamped and counted.
+pub fn render_reference(
+    table: &L3Table,
+    kernels: &[f32],
+    volts: &[f32],
+    width: usize,
+    height: usize,
+) -> Result<(Vec<f32>, RenderStats), L3Error> {
+    if width == 0 || height == 0 {
+        return Err(L3Error::InvalidInput(format!("frame is {width}×{height}")));
+    }
+    if volts.len() != width * height {
+        return Err(L3Error::InvalidInput(format!(
+            "{} values for a {width}×{height} frame ({} expected)",
+            volts.len(),
+            width * height
+        )));
+    }
+    if kernels.len() != table.kernels.len() {
+        return Err(L3Error::InvalidInput(
+            "kernel set does not match the table".into(),
+        ));
+    }
+    if let Some(i) = volts.iter().position(|v| !v.is_finite()) {
+        return Err(L3Error::InvalidInput(format!(
+            "input value at row {}, column {} is not finite",
+            i / width,
+            i % width
+        )));
+    }
+    let swing = table.meta.voltage_swing as f32;
+    let mut clamped = 0u64;
+    let input: Vec<f32> = volts
+        .iter()
+        .map(|&v| {
+            if (0.0..=swing).contains(&v) {
+                v
+            } else {
+                clamped += 1;
+                v.clamp(0.0, swing)
+            }
+        })
+        .collect();
+    let geo = table.geometry()?;
+    let mut out = vec![0f32; width * height * 3];
+    let stats = out
+        .par_chunks_mut(width * 3)
+        .enumerate()
+        .map(|(r, row)| render_row(table, &geo, kernels, &input, width, height, r, row))
+        .reduce(RenderStats::default, |mut a, b| {
+            a += b;
+            a
+        });
+    let mut stats = stats;
+    stats.clamped = clamped;
+    Ok((out, stats))
+}
+
+#[allow(clippy::too_many_arguments)]
+fn render_row(
+    table: &L3Table,
+    geo: &PatchGeometry,
+    kernels: &[f32],
+    img: &[f32],
+    width: usize,
+    height: usize,
+    r: usize,
+    row: &mut [f32],
+) -> RenderStats {
+    let nf = geo.n_features();
+    let np = nf - 1;
+    let mut patch = vec![0f32; np];
+    let mut feat = vec![0f32; nf];
+    let mut st = RenderStats::default();
+    let sat_on = table.meta.params.saturation_classes;
+    let contrast_on = table.meta.params.contrast_classes;
+    for c in 0..width {
+        geo.gather(img, width, height, r, c, &mut patch);
+        let pos = geo.position(r, c);
+        let s = geo.stats(&patch, pos);
+        let level = geo.level_of(s.luminance);
+        let (sat, fell_back) = if sat_on && s.sat_mask != 0 {
+            resolve_sat_case(table, s.sat_mask, &s.channel_means)
+        } else {
+            (0, false)
+        };
+        let group = table.group_index(pos, level, sat);
+        let texture = contrast_on && s.contrast > table.contrast_thresholds[group];
+        let class = group * 2 + texture as usize;
+        geo.features(&patch, pos, table.meta.sat_cases[sat], &mut feat);
+        let k = &kernels[class * 3 * nf..(class + 1) * 3 * nf];
+        for i in 0..3 {
+            let w = &k[i * nf..(i + 1) * nf];
+            row[c * 3 + i] = w.iter().zip(&feat).map(|(a, b)| a * b).sum();
+        }
+        st.pixels += 1;
+        st.saturated += (sat != 0) as u64;
+        st.fallback += fell_back as u64;
+        st.texture += texture as u64;
+    }
+    st
+}

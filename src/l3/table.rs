@@ -1,0 +1,371 @@
+//! The L3 table: kernels per class plus everything needed to classify, in a
+//! self-describing, checksummed safetensors file (readable from numpy).
+
+use std::collections::HashMap;
+use std::path::Path;
+
+use safetensors::tensor::TensorView;
+use safetensors::{Dtype, SafeTensors};
+use serde::{Deserialize, Serialize};
+use sha2::{Digest, Sha256};
+
+use super::{L3Error, L3Params, PatchGeometry};
+use crate::camera::Cfa;
+use crate::spectral::WavelengthGrid;
+
+pub const TABLE_FORMAT_VERSION: u32 = 1;
+const FORMAT_NAME: &str = "l3-table";
+
+/// Same-illuminant (sensor under X → XYZ under X) or cross-illuminant
+/// (sensor under X → XYZ under D65).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum TableKind {
+    #[serde(rename = "si")]
+    SameIlluminant,
+    #[serde(rename = "cross")]
+    CrossIlluminant,
+}
+
+impl std::fmt::Display for TableKind {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(match self {
+            Self::SameIlluminant => "si",
+            Self::CrossIlluminant => "cross",
+        })
+    }
+}
+
+/// Everything about a table except its numbers.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct TableMeta {
+    pub format: String,
+    pub version: u32,
+    pub kind: TableKind,
+    /// Illuminants the training scenes were lit by.
+    pub train_illuminants: Vec<String>,
+    /// `same` for SI tables, else the target illuminant (D65).
+    pub target_illuminant: String,
+    pub sensor_name: String,
+    /// The full sensor design, as JSON.
+    pub sensor: serde_json::Value,
+    pub cfa: Cfa,
+    pub grid: WavelengthGrid,
+    pub params: L3Params,
+    pub voltage_swing: f64,
+    pub saturation_threshold: f64,
+    /// Saturation cases with kernels, as channel bit masks; 0 (none) first.
+    pub sat_cases: Vec<u32>,
+    /// The output scale: XYZ in volts-equivalent (see `camera` docs).
+    pub xyz_scale_note: String,
+    pub seed: u64,
+    pub created_unix_s: u64,
+    pub training_seconds: f64,
+    /// Free-form training summary (sample counts, timings, scene counts).
+    pub summary: serde_json::Value,
+}
+
+/// Training diagnostics of one class.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct ClassReport {
+    pub samples: u64,
+    pub lambda: f64,
+    pub condition: f64,
+    pub kernel_norm: f64,
+    /// Level whose data filled this class when it had too few samples
+    /// (−1: its own data).
+    pub filled_from: i32,
+}
+
+/// A trained L3 table.
+#[derive(Clone, Debug)]
+pub struct L3Table {
+    pub meta: TableMeta,
+    /// `n_classes × 3 × n_features`, class-major.
+    pub kernels: Vec<f32>,
+    /// Flat/texture split per (position, level, saturation case).
+    pub contrast_thresholds: Vec<f32>,
+    pub reports: Vec<ClassReport>,
+}
+
+impl L3Table {
+    pub fn n_positions(&self) -> usize {
+        self.meta.cfa.rows * self.meta.cfa.cols
+    }
+    pub fn n_levels(&self) -> usize {
+        self.meta.params.levels.len()
+    }
+    pub fn n_sat_cases(&self) -> usize {
+        self.meta.sat_cases.len()
+    }
+    pub fn n_features(&self) -> usize {
+        self.meta.params.patch_size * self.meta.params.patch_size + 1
+    }
+    pub fn n_classes(&self) -> usize {
+        self.n_positions() * self.n_levels() * self.n_sat_cases() * 2
+    }
+
+    /// Index of the (position, level, saturation case) group.
+    #[inline]
+    pub fn group_index(&self, pos: usize, level: usize, sat: usize) -> usize {
+        (pos * self.n_levels() + level) * self.n_sat_cases() + sat
+    }
+
+    /// Index of a class: its group, then flat (0) or texture (1).
+    #[inline]
+    pub fn class_index(&self, pos: usize, level: usize, sat: usize, texture: bool) -> usize {
+        self.group_index(pos, level, sat) * 2 + texture as usize
+    }
+
+    /// The kernel of class `class`: 3 rows of `n_features`.
+    pub fn kernel(&self, class: usize) -> &[f32] {
+        let n = 3 * self.n_features();
+        &self.kernels[class * n..(class + 1) * n]
+    }
+
+    /// Patch geometry for classification with this table.
+    pub fn geometry(&self) -> Result<PatchGeometry, L3Error> {
+        PatchGeometry::new(
+            self.meta.params.patch_size,
+            &self.meta.cfa,
+            &self.meta.params.levels,
+            self.meta.saturation_threshold,
+        )
+    }
+
+    /// Bytes of the kernel data (what a per-illuminant table costs).
+    pub fn kernel_bytes(&self) -> usize {
+        self.kernels.len() * 4 + self.contrast_thresholds.len() * 4
+    }
+
+    /// Check shapes and finiteness.
+    pub fn validate(&self) -> Result<(), L3Error> {
+        let bad = |m: String| Err(L3Error::Table(m));
+        self.meta.params.validate()?;
+        if self.meta.format != FORMAT_NAME {
+            return bad(format!(
+                "format '{}', expected '{FORMAT_NAME}'",
+                self.meta.format
+            ));
+        }
+        if self.meta.version != TABLE_FORMAT_VERSION {
+            return bad(format!(
+                "format version {} (this build reads version {TABLE_FORMAT_VERSION})",
+                self.meta.version
+            ));
+        }
+        let cfa = &self.meta.cfa;
+        if cfa.rows == 0 || cfa.cols == 0 || cfa.pattern.len() != cfa.rows * cfa.cols {
+            return bad("malformed CFA".into());
+        }
+        if self.meta.sat_cases.first() != Some(&0) {
+            return bad("saturation cases must start with the unsaturated case".into());
+        }
+        if self.kernels.len() != self.n_classes() * 3 * self.n_features() {
+            return bad(format!(
+                "{} kernel values, expected {} classes × 3 × {}",
+                self.kernels.len(),
+                self.n_classes(),
+                self.n_features()
+            ));
+        }
+        if self.contrast_thresholds.len() != self.n_classes() / 2 {
+            return bad("contrast threshold count does not match the classes".into());
+        }
+        if self.reports.len() != self.n_classes() {
+            return bad("class report count does not match the classes".into());
+        }
+        if let Some(i) = self.kernels.iter().position(|v| !v.is_finite()) {
+            return bad(format!("kernel value {i} is not finite"));
+        }
+        if self.contrast_thresholds.iter().any(|v| !v.is_finite()) {
+            return bad("a contrast threshold is not finite".into());
+        }
+        if !(self.meta.voltage_swing.is_finite() && self.meta.voltage_swing > 0.0) {
+            return bad("voltage swing must be positive".into());
+        }
+        self.geometry().map(|_| ())
+    }
+
+    /// Serialize to safetensors bytes with a SHA-256 checksum in the header.
+    pub fn to_bytes(&self) -> Result<Vec<u8>, L3Error> {
+        self.validate()?;
+        let n_pos = self.n_positions();
+        let (nl, ns, nf) = (self.n_levels(), self.n_sat_cases(), self.n_features());
+        let nc = self.n_classes();
+        let meta_json = serde_json::to_string(&self.meta)
+            .map_err(|e| L3Error::Table(format!("metadata: {e}")))?;
+        let kernels = f32_bytes(&self.kernels);
+        let thresholds = f32_bytes(&self.contrast_thresholds);
+        let r = &self.reports;
+        let samples: Vec<f64> = r.iter().map(|c| c.samples as f64).collect();
+        let lambda: Vec<f64> = r.iter().map(|c| c.lambda).collect();
+        let cond: Vec<f64> = r.iter().map(|c| c.condition.min(f64::MAX)).collect();
+        let norm: Vec<f64> = r.iter().map(|c| c.kernel_norm).collect();
+        let filled: Vec<f64> = r.iter().map(|c| c.filled_from as f64).collect();
+        let tensors: Vec<(&str, Dtype, Vec<usize>, Vec<u8>)> = vec![
+            ("kernels", Dtype::F32, vec![nc, 3, nf], kernels),
+            (
+                "contrast_thresholds",
+                Dtype::F32,
+                vec![n_pos, nl, ns],
+                thresholds,
+            ),
+            ("class_samples", Dtype::F64, vec![nc], f64_bytes(&samples)),
+            ("class_lambda", Dtype::F64, vec![nc], f64_bytes(&lambda)),
+            ("class_condition", Dtype::F64, vec![nc], f64_bytes(&cond)),
+            ("class_kernel_norm", Dtype::F64, vec![nc], f64_bytes(&norm)),
+            (
+                "class_filled_from",
+                Dtype::F64,
+                vec![nc],
+                f64_bytes(&filled),
+            ),
+        ];
+        let digest = checksum(&meta_json, tensors.iter().map(|t| (t.0, &t.3[..])));
+        let mut info = HashMap::new();
+        info.insert("l3".to_string(), meta_json);
+        info.insert("sha256".to_string(), digest);
+        let views = tensors
+            .iter()
+            .map(|(name, dt, shape, data)| {
+                TensorView::new(*dt, shape.clone(), data)
+                    .map(|v| (name.to_string(), v))
+                    .map_err(|e| L3Error::Table(format!("tensor {name}: {e}")))
+            })
+            .collect::<Result<Vec<_>, _>>()?;
+        safetensors::serialize(views, Some(info)).map_err(|e| L3Error::Table(e.to_string()))
+    }
+
+    /// Parse and verify a table file's bytes. `origin` names it in errors.
+    pub fn from_bytes(bytes: &[u8], origin: &str) -> Result<Self, L3Error> {
+        let bad = |m: String| L3Error::BadTable {
+            path: origin.to_string(),
+            msg: m,
+        };
+        let st = SafeTensors::deserialize(bytes)
+            .map_err(|e| bad(format!("not a valid safetensors file ({e})")))?;
+        let (_, md) = SafeTensors::read_metadata(bytes)
+            .map_err(|e| bad(format!("unreadable header ({e})")))?;
+        let info = md
+            .metadata()
+            .as_ref()
+            .ok_or_else(|| bad("no l3 metadata in the header".into()))?;
+        let meta_json = info
+            .get("l3")
+            .ok_or_else(|| bad("no l3 metadata in the header".into()))?;
+        let stored_sum = info
+            .get("sha256")
+            .ok_or_else(|| bad("no checksum in the header".into()))?;
+        let names = [
+            "kernels",
+            "contrast_thresholds",
+            "class_samples",
+            "class_lambda",
+            "class_condition",
+            "class_kernel_norm",
+            "class_filled_from",
+        ];
+        let mut views = Vec::new();
+        for n in names {
+            let v = st
+                .tensor(n)
+                .map_err(|_| bad(format!("tensor '{n}' is missing")))?;
+            views.push(v);
+        }
+        let sum = checksum(
+            meta_json,
+            names.iter().zip(&views).map(|(n, v)| (*n, v.data())),
+        );
+        if &sum != stored_sum {
+            return Err(bad("checksum mismatch: the file is corrupt".into()));
+        }
+        let meta: TableMeta =
+            serde_json::from_str(meta_json).map_err(|e| bad(format!("metadata: {e}")))?;
+        let f32s = |v: &TensorView| -> Result<Vec<f32>, L3Error> {
+            if v.dtype() != Dtype::F32 {
+                return Err(bad("expected f32 data".into()));
+            }
+            Ok(v.data()
+                .chunks_exact(4)
+                .map(|c| f32::from_le_bytes([c[0], c[1], c[2], c[3]]))
+                .collect())
+        };
+        let f64s = |v: &TensorView| -> Result<Vec<f64>, L3Error> {
+            if v.dtype() != Dtype::F64 {
+                return Err(bad("expected f64 data".into()));
+            }
+            Ok(v.data()
+                .chunks_exact(8)
+                .map(|c| f64::from_le_bytes([c[0], c[1], c[2], c[3], c[4], c[5], c[6], c[7]]))
+                .collect())
+        };
+        let kernels = f32s(&views[0])?;
+        let contrast_thresholds = f32s(&views[1])?;
+        let cols: Vec<Vec<f64>> = views[2..].iter().map(&f64s).collect::<Result<_, _>>()?;
+        let nc = cols[0].len();
+        if cols.iter().any(|c| c.len() != nc) {
+            return Err(bad("class report columns differ in length".into()));
+        }
+        let reports = (0..nc)
+            .map(|i| ClassReport {
+                samples: cols[0][i] as u64,
+                lambda: cols[1][i],
+                condition: cols[2][i],
+                kernel_norm: cols[3][i],
+                filled_from: cols[4][i] as i32,
+            })
+            .collect();
+        let t = L3Table {
+            meta,
+            kernels,
+            contrast_thresholds,
+            reports,
+        };
+        t.validate().map_err(|e| bad(e.to_string()))?;
+        Ok(t)
+    }
+
+    /// Write atomically: a temporary file beside the target, then rename.
+    pub fn save(&self, path: &Path) -> Result<(), L3Error> {
+        let bytes = self.to_bytes()?;
+        let werr = |source| L3Error::Write {
+            path: path.display().to_string(),
+            source,
+        };
+        let dir = path.parent().filter(|p| !p.as_os_str().is_empty());
+        if let Some(d) = dir {
+            std::fs::create_dir_all(d).map_err(werr)?;
+        }
+        let tmp = path.with_extension(format!("tmp{}", std::process::id()));
+        std::fs::write(&tmp, &bytes).map_err(werr)?;
+        std::fs::rename(&tmp, path).map_err(werr)
+    }
+
+    pub fn load(path: &Path) -> Result<Self, L3Error> {
+        let bytes = std::fs::read(path).map_err(|e| L3Error::BadTable {
+            path: path.display().to_string(),
+            msg: e.to_string(),
+        })?;
+        Self::from_bytes(&bytes, &path.display().to_string())
+    }
+}
+
+fn f32_bytes(v: &[f32]) -> Vec<u8> {
+    v.iter().flat_map(|x| x.to_le_bytes()).collect()
+}
+
+fn f64_bytes(v: &[f64]) -> Vec<u8> {
+    v.iter().flat_map(|x| x.to_le_bytes()).collect()
+}
+
+fn checksum<'a>(meta: &str, parts: impl Iterator<Item = (&'a str, &'a [u8])>) -> String {
+    let mut h = Sha256::new();
+    h.update(meta.as_bytes());
+    for (name, data) in parts {
+        h.update(name.as_bytes());
+        h.update((data.len() as u64).to_le_bytes());
+        h.update(data);
+    }
+    h.finalize().iter().map(|b| format!("{b:02x}")).collect()
+}

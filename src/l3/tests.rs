@@ -1,0 +1,211 @@
+//! End-to-end tests of the L3 core on synthetic sensors (no optics): a
+//! linear 4-channel sensor viewing blocky scenes.
+
+use std::sync::atomic::AtomicBool;
+
+use rand::{RngExt, SeedableRng};
+use rand_chacha::ChaCha8Rng;
+
+use super::*;
+use crate::camera::Cfa;
+use crate::spectral::WavelengthGrid;
+
+/// Sensor channel responses R, G, B, W to XYZ.
+const M: [[f32; 3]; 4] = [
+    [0.9, 0.1, -0.05],
+    [-0.3, 1.1, 0.1],
+    [0.0, -0.1, 0.9],
+    [0.5, 0.6, 0.4],
+];
+
+fn synth_frame(
+    seed: u64,
+    size: usize,
+    scale: f32,
+    noise: f32,
+    shift: (usize, usize),
+) -> TrainingFrame {
+    let cfa = Cfa::rgbw();
+    let mut rng = ChaCha8Rng::seed_from_u64(seed);
+    let block = 12;
+    let nb = size.div_ceil(block);
+    let colours: Vec<[f32; 3]> = (0..nb * nb)
+        .map(|_| {
+            let y = rng.random_range(0.05f32..1.0);
+            [
+                y * rng.random_range(0.6f32..1.2),
+                y,
+                y * rng.random_range(0.5f32..1.3),
+            ]
+        })
+        .collect();
+    let mut volts = vec![0f32; size * size];
+    let mut xyz = vec![0f32; size * size * 3];
+    for r in 0..size {
+        for c in 0..size {
+            let col = colours[(r / block) * nb + c / block].map(|v| v * scale);
+            let ch = cfa.channel_at(r + shift.0, c + shift.1);
+            let v: f32 = (0..3).map(|k| M[ch][k] * col[k]).sum();
+            let n: f32 = rng.random_range(-1.0f32..1.0) * noise;
+            volts[r * size + c] = (v + n).clamp(0.0, 1.8);
+            xyz[(r * size + c) * 3..(r * size + c) * 3 + 3].copy_from_slice(&col);
+        }
+    }
+    TrainingFrame {
+        width: size,
+        height: size,
+        volts,
+        xyz,
+        cfa_shift: shift,
+    }
+}
+
+fn meta(params: &L3Params) -> TableMeta {
+    TableMeta {
+        format: "l3-table".into(),
+        version: TABLE_FORMAT_VERSION,
+        kind: TableKind::SameIlluminant,
+        train_illuminants: vec!["synthetic".into()],
+        target_illuminant: "same".into(),
+        sensor_name: "synthetic".into(),
+        sensor: serde_json::Value::Null,
+        cfa: Cfa::rgbw(),
+        grid: WavelengthGrid::default(),
+        params: params.clone(),
+        voltage_swing: 1.8,
+        saturation_threshold: 1.799,
+        sat_cases: vec![0],
+        xyz_scale_note: "synthetic".into(),
+        seed: 1,
+        created_unix_s: 0,
+        training_seconds: 0.0,
+        summary: serde_json::Value::Null,
+    }
+}
+
+fn train_synthetic(noise: f32) -> L3Table {
+    let params = L3Params {
+        levels: L3Params::levels_for(8, 1.8).unwrap(),
+        min_class_samples: 60,
+        ..L3Params::default()
+    };
+    let geo = PatchGeometry::new(5, &Cfa::rgbw(), &params.levels, 1.799).unwrap();
+    let cancel = AtomicBool::new(false);
+    let ctl = TrainControl {
+        progress: &|_, _| {},
+        cancel: &cancel,
+    };
+    let nm = NoiseModel {
+        conversion_gain_v: 2e-4,
+        read_noise_v: 1e-3,
+        dsnu_v: 0.0,
+        prnu_fraction: 0.0,
+    };
+    let learned = learn(
+        &geo,
+        &params,
+        nm,
+        48,
+        |i| {
+            let scale = [0.01f32, 0.05, 0.2, 0.8, 1.5][i % 5];
+            Ok(synth_frame(
+                i as u64,
+                48,
+                scale,
+                noise,
+                ((i / 5) % 2, (i / 10) % 2),
+            ))
+        },
+        &ctl,
+    )
+    .unwrap();
+    package(meta(&params), learned).unwrap()
+}
+
+#[test]
+fn learns_a_linear_sensor_and_renders_block_interiors() {
+    let table = train_synthetic(0.0);
+    let f = synth_frame(999, 48, 0.5, 0.0, (0, 0));
+    let (xyz, stats) = render_reference(&table, &table.kernels, &f.volts, 48, 48).unwrap();
+    assert_eq!(stats.pixels, 48 * 48);
+    // interior pixels of blocks (2 px from block edges) are recovered closely
+    let mut worst = 0f32;
+    for r in 0..48 {
+        for c in 0..48 {
+            if (2..10).contains(&(r % 12)) && (2..10).contains(&(c % 12)) {
+                for k in 0..3 {
+                    let i = (r * 48 + c) * 3 + k;
+                    worst = worst.max((xyz[i] - f.xyz[i]).abs());
+                }
+            }
+        }
+    }
+    assert!(worst < 0.002, "worst interior error {worst}");
+    assert!(xyz.iter().all(|v| v.is_finite()));
+}
+
+#[test]
+fn fused_correction_equals_correction_after_rendering() {
+    let table = train_synthetic(0.01);
+    let t = [[1.1, 0.05, -0.1], [0.02, 0.98, 0.01], [-0.03, 0.04, 1.4]];
+    let fused = fuse_kernels(&table, &t);
+    let f = synth_frame(5, 32, 0.4, 0.01, (1, 0));
+    let (a, _) = render_reference(&table, &table.kernels, &f.volts, 32, 32).unwrap();
+    let (b, _) = render_reference(&table, &fused, &f.volts, 32, 32).unwrap();
+    for (pa, pb) in a.chunks_exact(3).zip(b.chunks_exact(3)) {
+        for i in 0..3 {
+            let want: f32 = (0..3).map(|k| t[i][k] as f32 * pa[k]).sum();
+            assert!((want - pb[i]).abs() < 1e-4 * (1.0 + want.abs()));
+        }
+    }
+}
+
+#[test]
+fn table_round_trips_and_rejects_corruption() {
+    let table = train_synthetic(0.005);
+    let bytes = table.to_bytes().unwrap();
+    let back = L3Table::from_bytes(&bytes, "mem").unwrap();
+    assert_eq!(back.kernels, table.kernels);
+    assert_eq!(back.meta, table.meta);
+    assert_eq!(back.reports, table.reports);
+    // flip one byte near the end (kernel data region)
+    let mut bad = bytes.clone();
+    let n = bad.len();
+    bad[n - 10] ^= 0x55;
+    let e = L3Table::from_bytes(&bad, "mem").unwrap_err().to_string();
+    assert!(e.contains("checksum") || e.contains("corrupt"), "{e}");
+    // truncated
+    assert!(L3Table::from_bytes(&bytes[..bytes.len() / 2], "mem").is_err());
+    assert!(L3Table::from_bytes(b"garbage", "mem").is_err());
+    // non-finite kernels are refused on save
+    let mut nan = table.clone();
+    nan.kernels[3] = f32::NAN;
+    assert!(nan.to_bytes().is_err());
+    // file round trip
+    let dir = tempfile::tempdir().unwrap();
+    let p = dir.path().join("t.safetensors");
+    table.save(&p).unwrap();
+    assert_eq!(L3Table::load(&p).unwrap().kernels, table.kernels);
+}
+
+#[test]
+fn hostile_render_inputs_are_errors_or_clamped() {
+    let table = train_synthetic(0.0);
+    let k = &table.kernels;
+    assert!(render_reference(&table, k, &[0.1; 10], 4, 4).is_err());
+    assert!(render_reference(&table, k, &[], 0, 0).is_err());
+    let mut v = vec![0.3f32; 16];
+    v[5] = f32::NAN;
+    assert!(render_reference(&table, k, &v, 4, 4).is_err());
+    v[5] = -3.0;
+    v[6] = 99.0;
+    let (out, st) = render_reference(&table, k, &v, 4, 4).unwrap();
+    assert_eq!(st.clamped, 2);
+    assert!(out.iter().all(|x| x.is_finite()));
+    // tiny frames
+    for (w, h) in [(1, 1), (1, 7), (3, 1), (5, 3)] {
+        let (o, _) = render_reference(&table, k, &vec![0.2; w * h], w, h).unwrap();
+        assert_eq!(o.len(), w * h * 3);
+        assert!(o.iter().all(|x| x.is_finite()));
+    }
+}
