@@ -1,1 +1,24 @@
-//! eval
+//! Evaluation: CIEDE2000 colour error of a rendered chart against the
+//! chart's ideal XYZ under D65 (DESIGN.md §7), as a stable JSON report.
+
+mod report;
+
+pub use report::{
+    ChartTruth, DeltaEReport, ErrorStats, PatchResult, PixelStats, REPORT_SCHEMA, evaluate_chart,
+    summarize,
+};
+
+/// Errors of the evaluation layer.
+#[derive(Debug, thiserror::Error)]
+pub enum EvalError {
+    #[error("invalid evaluation input: {0}")]
+    Invalid(String),
+    #[error(transparent)]
+    L3(#[from] crate::l3::L3Error),
+    #[error(transparent)]
+    Spectral(#[from] crate::spectral::SpectralError),
+    #[error(transparent)]
+    Colour(#[from] crate::colour::ColourError),
+    #[error(transparent)]
+    Scene(#[from] crate::scene::SceneError),
+}

@@ -2,14 +2,21 @@
 //! level, saturation case and local contrast, and apply the class's learned
 //! affine kernel to its patch (DESIGN.md §2, §5).
 
+mod baseline;
 mod classify;
+mod correction;
 mod normal_eq;
 mod params;
 mod render;
 mod table;
 mod trainer;
 
+pub use baseline::{ColourMatrix, bilinear_demosaic, render_baseline};
 pub use classify::{MAX_CHANNELS, PatchGeometry, PatchStats, mirror, sat_case_index};
+pub use correction::{
+    CorrectionSource, IDENTITY, IlluminantEntry, IlluminantRegistry, Mat3, correction_matrix,
+    default_reflectances,
+};
 pub use normal_eq::{ClassSolution, Gram, RidgeChoice};
 pub use params::{DEFAULT_LEVELS_1V8, L3Params};
 pub use render::{RenderStats, fuse_kernels, render_reference, resolve_sat_case};

@@ -1,0 +1,405 @@
+//! Illuminant correction: the 3×3 matrix T that maps XYZ under an
+//! acquisition illuminant to XYZ under D65, from first principles (least
+//! squares over surface reflectances, independent of the camera), and the
+//! registry of named corrections (DESIGN.md §6).
+
+use std::collections::BTreeMap;
+
+use nalgebra::{Matrix3, Matrix3xX};
+use serde::{Deserialize, Serialize};
+
+use crate::colour::{Cmfs, cct_from_xy, xy};
+use crate::spectral::{
+    Extrapolation, IlluminantSpec, IsetData, Samples, Spectrum, WavelengthGrid, ces_reflectances,
+    cie_illuminant, munsell_reflectances,
+};
+
+use super::L3Error;
+
+pub type Mat3 = [[f64; 3]; 3];
+
+pub const IDENTITY: Mat3 = [[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]];
+
+/// The default reflectance set for T: the Munsell matt set and the 99 CES
+/// samples, on `grid`.
+pub fn default_reflectances(grid: &WavelengthGrid) -> Vec<Spectrum> {
+    munsell_reflectances()
+        .into_iter()
+        .chain(ces_reflectances())
+        .map(|(_, s)| s.resample(grid, Extrapolation::Hold))
+        .collect()
+}
+
+/// T = argmin Σ‖T·xyz_X(r) − xyz_target(r)‖² over `reflectances`, each side
+/// normalised so a perfect white has Y = 1.
+pub fn correction_matrix(
+    cmfs: &Cmfs,
+    reflectances: &[Spectrum],
+    acquisition: &Spectrum,
+    target: &Spectrum,
+) -> Result<Mat3, L3Error> {
+    if reflectances.len() < 3 {
+        return Err(L3Error::InvalidParams(
+            "T needs at least 3 reflectances".into(),
+        ));
+    }
+    let err = |e: crate::colour::ColourError| L3Error::InvalidInput(format!("illuminant: {e}"));
+    let wa = cmfs.reflectance_weights(acquisition).map_err(err)?;
+    let wt = cmfs.reflectance_weights(target).map_err(err)?;
+    let n = reflectances.len();
+    let mut a = Matrix3xX::<f64>::zeros(n);
+    let mut b = Matrix3xX::<f64>::zeros(n);
+    for (j, r) in reflectances.iter().enumerate() {
+        if r.grid() != &cmfs.grid {
+            return Err(L3Error::InvalidInput(
+                "reflectance grid differs from the CMF grid".into(),
+            ));
+        }
+        for k in 0..3 {
+            a[(k, j)] = dot(&wa[k], r.values());
+            b[(k, j)] = dot(&wt[k], r.values());
+        }
+    }
+    let aat: Matrix3<f64> = &a * a.transpose();
+    let bat: Matrix3<f64> = &b * a.transpose();
+    let inv = aat.try_inverse().ok_or_else(|| {
+        L3Error::InvalidInput(
+            "the illuminant makes the reflectance XYZs degenerate (T is singular)".into(),
+        )
+    })?;
+    let t = bat * inv;
+    let out: Mat3 = [0, 1, 2].map(|i| [0, 1, 2].map(|j| t[(i, j)]));
+    if out.iter().flatten().any(|v| !v.is_finite()) {
+        return Err(L3Error::InvalidInput("T is not finite".into()));
+    }
+    Ok(out)
+}
+
+fn dot(a: &[f64], b: &[f64]) -> f64 {
+    a.iter().zip(b).map(|(x, y)| x * y).sum()
+}
+
+/// How a registry entry was made.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum CorrectionSource {
+    Builtin,
+    Iset,
+    Matrix,
+    Spd,
+    Cct,
+}
+
+/// One named illuminant correction.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct IlluminantEntry {
+    pub name: String,
+    /// XYZ under this illuminant → XYZ under D65.
+    pub t: Mat3,
+    /// Chromaticity of the illuminant's white, if known.
+    pub white_xy: Option<[f64; 2]>,
+    pub cct: Option<f64>,
+    pub source: CorrectionSource,
+}
+
+/// The registry: illuminant name → T. D65 is always present (identity).
+#[derive(Clone, Debug)]
+pub struct IlluminantRegistry {
+    grid: WavelengthGrid,
+    cmfs: Cmfs,
+    d65: Spectrum,
+    reflectances: Vec<Spectrum>,
+    entries: BTreeMap<String, IlluminantEntry>,
+}
+
+impl IlluminantRegistry {
+    /// An empty registry (D65 only) using `reflectances` for T.
+    pub fn new(grid: WavelengthGrid, reflectances: Vec<Spectrum>) -> Result<Self, L3Error> {
+        let cmfs = Cmfs::cie1931(&grid);
+        let d65 = cie_illuminant("D65")
+            .ok_or_else(|| L3Error::InvalidParams("D65 missing from the built-in data".into()))?
+            .resample(&grid, Extrapolation::Zero);
+        let mut r = Self {
+            grid,
+            cmfs,
+            d65,
+            reflectances,
+            entries: BTreeMap::new(),
+        };
+        let white = r.white_xy(&r.d65.clone());
+        r.entries.insert(
+            "D65".into(),
+            IlluminantEntry {
+                name: "D65".into(),
+                t: IDENTITY,
+                white_xy: white,
+                cct: white.and_then(|w| cct_from_xy(w).ok()),
+                source: CorrectionSource::Builtin,
+            },
+        );
+        Ok(r)
+    }
+
+    /// The defaults: D65, D50, A, F2, F11, and ISET's measured Tungsten and
+    /// Fluorescent when the data is present.
+    pub fn with_defaults(grid: WavelengthGrid, iset: Option<&IsetData>) -> Result<Self, L3Error> {
+        let mut r = Self::new(grid, default_reflectances(&grid))?;
+        for name in ["D50", "A", "F2", "F11"] {
+            let spd = cie_illuminant(name).ok_or_else(|| {
+                L3Error::InvalidParams(format!("{name} missing from built-in data"))
+            })?;
+            r.insert_spd(name, &spd, CorrectionSource::Builtin)?;
+        }
+        if let Some(d) = iset {
+            for name in ["Tungsten", "Fluorescent"] {
+                if let Ok(spd) = d.light(name) {
+                    r.insert_spd(name, &spd, CorrectionSource::Iset)?;
+                }
+            }
+        }
+        Ok(r)
+    }
+
+    pub fn grid(&self) -> &WavelengthGrid {
+        &self.grid
+    }
+
+    fn white_xy(&self, spd: &Spectrum) -> Option<[f64; 2]> {
+        self.cmfs.white(spd).ok().map(xy)
+    }
+
+    fn key(name: &str) -> String {
+        name.trim().to_ascii_lowercase()
+    }
+
+    /// Look up by name, case-insensitively.
+    pub fn get(&self, name: &str) -> Option<&IlluminantEntry> {
+        let k = Self::key(name);
+        self.entries.values().find(|e| Self::key(&e.name) == k)
+    }
+
+    pub fn entries(&self) -> impl Iterator<Item = &IlluminantEntry> {
+        self.entries.values()
+    }
+
+    pub fn len(&self) -> usize {
+        self.entries.len()
+    }
+
+    pub fn is_empty(&self) -> bool {
+        self.entries.is_empty()
+    }
+
+    fn check_name(name: &str) -> Result<(), L3Error> {
+        let ok = !name.is_empty()
+            && name.len() <= 64
+            && name
+                .chars()
+                .all(|c| c.is_ascii_alphanumeric() || "-_.:".contains(c));
+        if ok {
+            Ok(())
+        } else {
+            Err(L3Error::InvalidInput(format!(
+                "illuminant name '{name}': 1–64 characters of A–Z, a–z, 0–9, '-', '_', '.', ':'"
+            )))
+        }
+    }
+
+    fn put(&mut self, e: IlluminantEntry) -> Result<&IlluminantEntry, L3Error> {
+        Self::check_name(&e.name)?;
+        if Self::key(&e.name) == "d65" {
+            return Err(L3Error::InvalidInput(
+                "D65 is the target and cannot be replaced".into(),
+            ));
+        }
+        let existing = self
+            .entries
+            .keys()
+            .find(|k| Self::key(k) == Self::key(&e.name))
+            .cloned();
+        if let Some(k) = existing {
+            self.entries.remove(&k);
+        }
+        let name = e.name.clone();
+        self.entries.insert(name.clone(), e);
+        self.entries
+            .get(&name)
+            .ok_or_else(|| L3Error::InvalidInput("registry insert failed".into()))
+    }
+
+    /// Register an illuminant from its SPD (any sampling; resampled here).
+    pub fn insert_spd(
+        &mut self,
+        name: &str,
+        spd: &Samples,
+        source: CorrectionSource,
+    ) -> Result<&IlluminantEntry, L3Error> {
+        let s = spd.resample(&self.grid, Extrapolation::Zero);
+        if s.values().iter().any(|v| *v < 0.0) {
+            return Err(L3Error::InvalidInput(format!(
+                "SPD of '{name}' has negative values"
+            )));
+        }
+        let t = correction_matrix(&self.cmfs, &self.reflectances, &s, &self.d65)?;
+        let white = self.white_xy(&s);
+        let e = IlluminantEntry {
+            name: name.to_string(),
+            t,
+            white_xy: white,
+            cct: white.and_then(|w| cct_from_xy(w).ok()),
+            source,
+        };
+        self.put(e)
+    }
+
+    /// Register a given matrix.
+    pub fn insert_matrix(&mut self, name: &str, t: Mat3) -> Result<&IlluminantEntry, L3Error> {
+        if t.iter().flatten().any(|v| !v.is_finite()) {
+            return Err(L3Error::InvalidInput(
+                "matrix has non-finite entries".into(),
+            ));
+        }
+        let m = Matrix3::from_fn(|i, j| t[i][j]);
+        if m.determinant().abs() < 1e-9 {
+            return Err(L3Error::InvalidInput("matrix is singular".into()));
+        }
+        self.put(IlluminantEntry {
+            name: name.to_string(),
+            t,
+            white_xy: None,
+            cct: None,
+            source: CorrectionSource::Matrix,
+        })
+    }
+
+    /// Register a blackbody (below 4000 K) or CIE daylight (from 4000 K) by CCT.
+    pub fn insert_cct(&mut self, name: &str, cct: f64) -> Result<&IlluminantEntry, L3Error> {
+        let spec = IlluminantSpec::Cct(cct);
+        let spd = spec.resolve(None)?.spd;
+        let s = spd.resample(&self.grid, Extrapolation::Zero);
+        let t = correction_matrix(&self.cmfs, &self.reflectances, &s, &self.d65)?;
+        self.put(IlluminantEntry {
+            name: name.to_string(),
+            t,
+            white_xy: self.white_xy(&s),
+            cct: Some(cct),
+            source: CorrectionSource::Cct,
+        })
+    }
+
+    /// Remove an entry (never D65). Returns whether it existed.
+    pub fn remove(&mut self, name: &str) -> Result<bool, L3Error> {
+        if Self::key(name) == "d65" {
+            return Err(L3Error::InvalidInput("D65 cannot be deleted".into()));
+        }
+        let k = self
+            .entries
+            .keys()
+            .find(|k| Self::key(k) == Self::key(name))
+            .cloned();
+        Ok(k.and_then(|k| self.entries.remove(&k)).is_some())
+    }
+
+    /// Resolve a request's illuminant: a registered name, or `cct:K`
+    /// (computed and cached as `cct:K`), or any other spec that resolves to
+    /// an SPD (a CIE name, an ISET light, a CSV), computed and cached.
+    pub fn resolve(
+        &mut self,
+        spec: &str,
+        iset: Option<&IsetData>,
+    ) -> Result<IlluminantEntry, L3Error> {
+        if let Some(e) = self.get(spec) {
+            return Ok(e.clone());
+        }
+        let parsed = IlluminantSpec::parse(spec)?;
+        match &parsed {
+            IlluminantSpec::Cct(k) => {
+                let name = format!("cct:{}", k.round());
+                if let Some(e) = self.get(&name) {
+                    return Ok(e.clone());
+                }
+                Ok(self.insert_cct(&name, *k)?.clone())
+            }
+            IlluminantSpec::Csv { .. } => {
+                // never cache arbitrary files under their path
+                let spd = parsed.resolve(iset)?.spd;
+                let s = spd.resample(&self.grid, Extrapolation::Zero);
+                let t = correction_matrix(&self.cmfs, &self.reflectances, &s, &self.d65)?;
+                Ok(IlluminantEntry {
+                    name: parsed.to_string(),
+                    t,
+                    white_xy: self.white_xy(&s),
+                    cct: self.white_xy(&s).and_then(|w| cct_from_xy(w).ok()),
+                    source: CorrectionSource::Spd,
+                })
+            }
+            _ => {
+                let named = parsed.resolve(iset)?;
+                let src = if matches!(parsed, IlluminantSpec::Iset(_)) {
+                    CorrectionSource::Iset
+                } else {
+                    CorrectionSource::Builtin
+                };
+                Ok(self.insert_spd(&named.name, &named.spd, src)?.clone())
+            }
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn d65_is_identity_and_a_is_plausible() {
+        let g = WavelengthGrid::default();
+        let mut r = IlluminantRegistry::with_defaults(g, None).unwrap();
+        assert_eq!(r.get("d65").unwrap().t, IDENTITY);
+        // T computed for D65 from spectra is the identity too
+        let d65 = cie_illuminant("D65").unwrap();
+        r.insert_spd("D65copy", &d65, CorrectionSource::Spd)
+            .unwrap();
+        let t = r.get("D65copy").unwrap().t;
+        for i in 0..3 {
+            for j in 0..3 {
+                assert!((t[i][j] - IDENTITY[i][j]).abs() < 1e-9);
+            }
+        }
+        // A's white maps close to D65's white
+        let a = r.get("A").unwrap().clone();
+        let cmfs = Cmfs::cie1931(&g);
+        let wa = cmfs
+            .white(
+                &cie_illuminant("A")
+                    .unwrap()
+                    .resample(&g, Extrapolation::Zero),
+            )
+            .unwrap();
+        let mapped = crate::colour::mat3_mul_vec(&a.t, wa);
+        let d = crate::colour::D65_WHITE_XYZ;
+        for k in 0..3 {
+            assert!((mapped[k] - d[k]).abs() < 0.02, "{mapped:?}");
+        }
+        assert!((a.cct.unwrap() - 2856.0).abs() < 30.0);
+        assert!(r.get("F11").is_some() && r.get("f2").is_some());
+    }
+
+    #[test]
+    fn registry_edits() {
+        let g = WavelengthGrid::default();
+        let mut r = IlluminantRegistry::new(g, default_reflectances(&g)).unwrap();
+        assert!(r.remove("D65").is_err());
+        assert!(r.insert_matrix("bad", [[0.0; 3]; 3]).is_err());
+        assert!(r.insert_matrix("bad name!", IDENTITY).is_err());
+        assert!(r.insert_matrix("D65", IDENTITY).is_err());
+        r.insert_matrix("m1", [[1.1, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 0.9]])
+            .unwrap();
+        assert!(r.get("M1").is_some());
+        let e = r.resolve("cct:3200", None).unwrap();
+        assert_eq!(e.name, "cct:3200");
+        assert!(r.get("cct:3200").is_some());
+        assert!(r.resolve("nonsense", None).is_err());
+        assert!(r.remove("m1").unwrap());
+        assert!(!r.remove("m1").unwrap());
+    }
+}
