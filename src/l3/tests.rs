@@ -108,13 +108,13 @@ fn train_synthetic(noise: f32) -> L3Table {
         48,
         |i| {
             let scale = [0.01f32, 0.05, 0.2, 0.8, 1.5][i % 5];
-            Ok(synth_frame(
+            Ok(vec![synth_frame(
                 i as u64,
                 48,
                 scale,
                 noise,
                 ((i / 5) % 2, (i / 10) % 2),
-            ))
+            )])
         },
         &ctl,
     )

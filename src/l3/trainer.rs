@@ -97,8 +97,10 @@ pub struct Learned {
     pub samples: u64,
 }
 
-/// Learn kernels from `n_frames` frames produced on demand by `frame(i)`
-/// (deterministic in `i`; called in parallel, and twice for the survey subset).
+/// Learn kernels from `n_frames` batches of frames produced on demand by
+/// `frame(i)` (deterministic in `i`; called in parallel, and twice for the
+/// survey subset). A batch is typically one scene under one illuminant at
+/// several exposures and CFA shifts.
 pub fn learn<F>(
     geo: &PatchGeometry,
     params: &L3Params,
@@ -108,7 +110,7 @@ pub fn learn<F>(
     ctl: &TrainControl,
 ) -> Result<Learned, L3Error>
 where
-    F: Fn(usize) -> Result<TrainingFrame, L3Error> + Sync,
+    F: Fn(usize) -> Result<Vec<TrainingFrame>, L3Error> + Sync,
 {
     params.validate()?;
     if n_frames == 0 {
@@ -140,25 +142,27 @@ where
         .par_iter()
         .map(|&i| -> Result<Survey, L3Error> {
             check_cancel()?;
-            let f = frame(i)?;
+            let frames = frame(i)?;
             let mut s = Survey {
                 hist: vec![Vec::new(); n_pl],
                 count: vec![0; n_pl],
             };
-            for_each_patch(geo, &f, |pos, st, _patch| {
-                let level = geo.level_of(st.luminance);
-                let mask = if params.saturation_classes {
-                    st.sat_mask
-                } else {
-                    0
-                };
-                let k = d.pl_mask(pos, level, mask);
-                if s.hist[k].is_empty() {
-                    s.hist[k] = vec![0; HIST_BINS];
-                }
-                s.hist[k][hist_bin(st.contrast)] += 1;
-                s.count[k] += 1;
-            });
+            for f in &frames {
+                for_each_patch(geo, f, |pos, st, _patch| {
+                    let level = geo.level_of(st.luminance);
+                    let mask = if params.saturation_classes {
+                        st.sat_mask
+                    } else {
+                        0
+                    };
+                    let k = d.pl_mask(pos, level, mask);
+                    if s.hist[k].is_empty() {
+                        s.hist[k] = vec![0; HIST_BINS];
+                    }
+                    s.hist[k][hist_bin(st.contrast)] += 1;
+                    s.count[k] += 1;
+                });
+            }
             tick("survey");
             Ok(s)
         })
@@ -248,27 +252,30 @@ where
         .into_par_iter()
         .map(|i| -> Result<Vec<Option<Box<Gram>>>, L3Error> {
             check_cancel()?;
-            let f = frame(i)?;
+            let frames = frame(i)?;
             let mut acc = new_acc();
             let mut feat = vec![0f32; nf];
-            for_each_patch(geo, &f, |pos, st, patch| {
-                let level = geo.level_of(st.luminance);
-                let mask = if params.saturation_classes {
-                    st.sat_mask
-                } else {
-                    0
-                };
-                let case = case_of(mask, &st.channel_means);
-                let group = (pos * d.n_levels + level) * n_sat + case;
-                let texture = params.contrast_classes && st.contrast > thresholds[group];
-                let class = group * 2 + texture as usize;
-                geo.features(patch, pos, sat_cases[case], &mut feat);
-                let idx = st.index;
-                let y = [f.xyz[idx * 3], f.xyz[idx * 3 + 1], f.xyz[idx * 3 + 2]];
-                acc[class]
-                    .get_or_insert_with(|| Box::new(Gram::new(nf)))
-                    .push(&feat, y);
-            });
+            for f in &frames {
+                check_cancel()?;
+                for_each_patch(geo, f, |pos, st, patch| {
+                    let level = geo.level_of(st.luminance);
+                    let mask = if params.saturation_classes {
+                        st.sat_mask
+                    } else {
+                        0
+                    };
+                    let case = case_of(mask, &st.channel_means);
+                    let group = (pos * d.n_levels + level) * n_sat + case;
+                    let texture = params.contrast_classes && st.contrast > thresholds[group];
+                    let class = group * 2 + texture as usize;
+                    geo.features(patch, pos, sat_cases[case], &mut feat);
+                    let idx = st.index;
+                    let y = [f.xyz[idx * 3], f.xyz[idx * 3 + 1], f.xyz[idx * 3 + 2]];
+                    acc[class]
+                        .get_or_insert_with(|| Box::new(Gram::new(nf)))
+                        .push(&feat, y);
+                });
+            }
             tick("accumulate");
             Ok(acc)
         })
