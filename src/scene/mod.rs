@@ -2,6 +2,31 @@
 //! luminance and field of view, plus the labelled regions (chart patches)
 //! that evaluation reads back.
 
+mod chart;
+mod dead_leaves;
+mod image_lift;
+mod kind;
+mod kmeans;
+mod natural100;
+mod options;
+mod pca;
+mod simple;
+
+pub use chart::{
+    CHART_SURROUND, GREY_CATEGORY, GREY_STRIP_STEPS, MACBETH_CSV, grey_strip_levels, macbeth,
+    reflectance_chart,
+};
+pub use dead_leaves::{DeadLeavesParams, dead_leaves, dead_leaves_labels};
+pub use image_lift::{SrgbLift, from_srgb_file, from_srgb_image, from_srgb_pixels};
+pub use kind::{DEFAULT_TEXTURE_SIZE, MACBETH_PATCH_PX, SceneKind, ScenesKind};
+pub use natural100::{
+    ChartSample, NATURAL100_CATEGORIES, NATURAL100_COLS, NATURAL100_COMPONENTS,
+    NATURAL100_PATCH_PX, NATURAL100_SEED, Natural100Category, ces_chart, ces_samples,
+    natural100_chart, natural100_or_ces_chart, natural100_samples, natural100_samples_seeded,
+};
+pub use options::{DEFAULT_FOV_DEG, DEFAULT_MEAN_LUMINANCE, MAX_SCENE_VALUES, SceneOptions};
+pub use simple::{grey_ramp, uniform};
+
 use ndarray::Array3;
 use serde::{Deserialize, Serialize};
 
