@@ -740,9 +740,14 @@ fn huge_declared_sizes_fail_before_allocating() {
     let real = pgm_p5(&frame(1000, 1000), 65535);
     let (r, peak) = peak_bytes(|| decode_mosaic(&real, &lim()));
     assert!(r.is_ok() && peak >= 2_000_000, "peak {peak}");
+    eprintln!("control: valid 1000×1000 16-bit PGM, peak {peak} bytes allocated");
     for (name, bytes, want) in cases {
         let (r, peak) = peak_bytes(|| decode_mosaic(&bytes, &lim()));
         let e = err_of(r);
+        eprintln!(
+            "{name}: {} input bytes, peak {peak} bytes allocated: {e}",
+            bytes.len()
+        );
         assert!(e.contains(want), "{name}: {e}");
         assert!(
             peak < 4 << 20,
