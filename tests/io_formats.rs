@@ -718,9 +718,23 @@ fn huge_declared_sizes_fail_before_allocating() {
         false,
     );
     let tiff_over = hand_tiff(false, gray_tags(50_000, 10, 16, 1), &[vec![0u8; 64]], false);
+    // 9000 one-row LZW strips of garbage, all pointing at the same 16 bytes.
+    let mut lzw = gray_tags(9000, 9000, 16, 1);
+    lzw[3] = (259, vec![5]);
+    lzw.push((278, vec![1]));
+    let garbage = vec![
+        0x80u8, 0x01, 0xff, 0x00, 0x37, 0x12, 0x99, 0x42, 7, 7, 7, 7, 1, 2, 3, 4,
+    ];
+    let lzw = hand_tiff(false, lzw, &vec![garbage.clone(); 9000], false);
+    // One 162 MB Deflate strip in 16 bytes.
+    let mut deflate = gray_tags(9000, 9000, 16, 1);
+    deflate[3] = (259, vec![8]);
+    let deflate = hand_tiff(false, deflate, &[garbage], false);
     let pgm = b"P5 9000 9000 65535\n\x00\x01".to_vec();
     let p2 = b"P2 9000 9000 65535\n1 2 3".to_vec();
-    let cases: [(&str, Vec<u8>, &str); 6] = [
+    let cases: [(&str, Vec<u8>, &str); 8] = [
+        ("tiff lzw strips", lzw, "invalid TIFF"),
+        ("tiff deflate strip", deflate, "cannot expand"),
         (
             "png in limit",
             png_within_limit,

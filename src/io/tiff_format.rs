@@ -379,7 +379,10 @@ fn grow<T>(out: &mut Vec<T>, extra: usize, total: usize) {
 struct ChunkTable {
     offsets: Vec<u64>,
     counts: Vec<u64>,
-    uncompressed: bool,
+    /// Most a chunk's bytes can expand under its compression (1 when uncompressed); `None`
+    /// for methods without a useful bound (JPEG, ZSTD, ...).
+    max_ratio: Option<u128>,
+    compression: u16,
     bytes_per_sample: usize,
     file_len: u64,
 }
@@ -407,17 +410,26 @@ impl ChunkTable {
             .find_tag_unsigned(Tag::Compression)
             .map_err(decode_err)?
             .unwrap_or(1);
+        let max_ratio = match compression {
+            1 => Some(1),
+            32773 => Some(64),       // PackBits: 2 bytes → at most 128
+            8 | 32946 => Some(1100), // Deflate: at most 1032:1
+            5 => Some(4096),         // LZW: a ≥ 9-bit code → at most ~3840 bytes
+            _ => None,
+        };
         Ok(ChunkTable {
             offsets,
             counts,
-            uncompressed: compression == 1,
+            max_ratio,
+            compression,
             bytes_per_sample,
             file_len: file_len as u64,
         })
     }
 
-    /// Checks that chunk `index` lies inside the file and, when uncompressed, holds the
-    /// `stored_samples` it must.
+    /// Checks that chunk `index` lies inside the file and can hold the `stored_samples` it
+    /// must: exactly when uncompressed, within the compression's maximum ratio otherwise. This
+    /// refuses a tiny chunk that declares a huge strip before its buffer is allocated.
     fn check(&self, index: usize, stored_samples: usize) -> IoResult<()> {
         let (Some(&off), Some(&cnt)) = (self.offsets.get(index), self.counts.get(index)) else {
             return Err(IoError::Tiff(format!(
@@ -434,11 +446,21 @@ impl ChunkTable {
             )));
         }
         let need = stored_samples as u128 * self.bytes_per_sample as u128;
-        if self.uncompressed && u128::from(cnt) < need {
-            return Err(IoError::Tiff(format!(
+        match self.max_ratio {
+            Some(1) if u128::from(cnt) < need => Err(IoError::Tiff(format!(
                 "uncompressed chunk {index} has {cnt} bytes; {need} expected"
-            )));
-        }
+            ))),
+            Some(r) if u128::from(cnt) * r < need => Err(IoError::Tiff(format!(
+                "chunk {index} has {cnt} bytes, which {} cannot expand to the {need} bytes it \
+                 must hold (corrupt or truncated file)",
+                match self.compression {
+                    5 => "LZW",
+                    8 | 32946 => "Deflate",
+                    _ => "PackBits",
+                }
+            ))),
+            _ => Ok(()),
+        }?;
         Ok(())
     }
 }
