@@ -1,1 +1,35 @@
-//! io
+//! File formats: raw sensor frames with JSON sidecars, PNG, TIFF and PGM.
+//!
+//! Every decoder treats its input as hostile: it checks the declared size against a caller's
+//! [`Limits`] before allocating pixel memory, never panics, and reports what was wrong in an
+//! [`IoError`]. Writers write atomically (a temporary file in the same directory, then a
+//! rename); the `encode_*` functions return in-memory files for HTTP responses.
+
+mod atomic;
+mod error;
+mod limits;
+mod mosaic;
+mod pgm;
+mod png_format;
+mod raw;
+mod tiff_format;
+
+pub use error::{IoError, IoResult};
+pub use limits::Limits;
+pub use mosaic::{
+    DecodedMosaic, LoadedMosaic, MosaicFormat, SourceInfo, decode_mosaic, decode_mosaic_with_info,
+    detect_format, read_mosaic,
+};
+pub use png_format::{
+    PngCompression, decode_png_rgb8, encode_png_gray16, encode_png_rgb8, write_png_gray16,
+    write_png_rgb8,
+};
+pub use raw::{
+    MAX_SIDECAR_BYTES, RawFrame, RawMeta, RawPaths, decode_raw_u16_le, encode_raw_u16_le, read_raw,
+    read_sidecar, write_raw, write_raw_to,
+};
+pub use tiff_format::{
+    decode_tiff_f32_rgb, decode_tiff_rgb16, encode_tiff_f32_rgb, encode_tiff_gray_f32,
+    encode_tiff_gray16, encode_tiff_rgb16, read_tiff_f32_rgb, read_tiff_rgb16, write_tiff_f32_rgb,
+    write_tiff_gray_f32, write_tiff_gray16, write_tiff_rgb16,
+};
