@@ -22,3 +22,4 @@ pub mod io;
 pub mod l3;
 pub mod scene;
 pub mod spectral;
+pub mod training;

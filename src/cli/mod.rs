@@ -1,5 +1,116 @@
-//! cli
+//! The `l3` command line: thin wrappers over the core.
 
-pub fn main() -> std::process::ExitCode {
-    std::process::ExitCode::SUCCESS
+mod eval;
+mod render;
+mod simulate;
+mod train;
+
+use std::path::PathBuf;
+use std::process::ExitCode;
+
+use clap::{Parser, Subcommand};
+
+use crate::camera::SensorDesign;
+use crate::spectral::IsetData;
+
+/// L3 (Local, Linear, Learned) camera pipeline: simulate, train, render, evaluate.
+#[derive(Parser, Debug)]
+#[command(name = "l3", version, about)]
+pub struct Cli {
+    /// ISET spectral data folder (default: $L3_ISET_DIR or ../shared/data/iset).
+    #[arg(long, global = true)]
+    pub iset_dir: Option<PathBuf>,
+    #[command(subcommand)]
+    pub command: Command,
+}
+
+#[derive(Subcommand, Debug)]
+pub enum Command {
+    /// Simulate a scene through the camera: raw mosaic, ideal XYZ, sRGB preview.
+    Simulate(simulate::SimulateArgs),
+    /// Train an L3 table from simulated scenes.
+    Train(train::TrainArgs),
+    /// Render a raw mosaic with a table and an illuminant correction.
+    Render(render::RenderArgs),
+    /// ΔE2000 evaluation on the Natural-100 chart; `--paper-table` for Table 1.
+    Eval(eval::EvalArgs),
+}
+
+/// Errors of the CLI: any layer's error, shown with its message.
+#[derive(Debug, thiserror::Error)]
+pub enum CliError {
+    #[error("{0}")]
+    Usage(String),
+    #[error(transparent)]
+    Camera(#[from] crate::camera::CameraError),
+    #[error(transparent)]
+    Scene(#[from] crate::scene::SceneError),
+    #[error(transparent)]
+    Spectral(#[from] crate::spectral::SpectralError),
+    #[error(transparent)]
+    L3(#[from] crate::l3::L3Error),
+    #[error(transparent)]
+    Io(#[from] crate::io::IoError),
+    #[error(transparent)]
+    Eval(#[from] crate::eval::EvalError),
+    #[error(transparent)]
+    Train(#[from] crate::training::TrainError),
+    #[error("{path}: {source}")]
+    File {
+        path: String,
+        #[source]
+        source: std::io::Error,
+    },
+}
+
+pub(crate) fn iset(dir: &Option<PathBuf>) -> Result<Option<IsetData>, CliError> {
+    match dir {
+        Some(d) => Ok(Some(IsetData::at(d)?)),
+        None => Ok(IsetData::locate()),
+    }
+}
+
+pub(crate) fn load_sensor(
+    path: &Option<PathBuf>,
+    iset: Option<&IsetData>,
+) -> Result<SensorDesign, CliError> {
+    match path {
+        Some(p) => Ok(SensorDesign::load(p, iset)?),
+        None => Ok(SensorDesign::paper_default()),
+    }
+}
+
+pub(crate) fn write_file(path: &std::path::Path, bytes: &[u8]) -> Result<(), CliError> {
+    if let Some(d) = path.parent().filter(|d| !d.as_os_str().is_empty()) {
+        std::fs::create_dir_all(d).map_err(|source| CliError::File {
+            path: d.display().to_string(),
+            source,
+        })?;
+    }
+    std::fs::write(path, bytes).map_err(|source| CliError::File {
+        path: path.display().to_string(),
+        source,
+    })
+}
+
+/// Run the CLI; errors are printed and turn into exit code 1 (2 for usage).
+pub fn main() -> ExitCode {
+    let cli = Cli::parse();
+    let result = match &cli.command {
+        Command::Simulate(a) => simulate::run(&cli, a),
+        Command::Train(a) => train::run(&cli, a),
+        Command::Render(a) => render::run(&cli, a),
+        Command::Eval(a) => eval::run(&cli, a),
+    };
+    match result {
+        Ok(()) => ExitCode::SUCCESS,
+        Err(CliError::Usage(m)) => {
+            eprintln!("error: {m}");
+            ExitCode::from(2)
+        }
+        Err(e) => {
+            eprintln!("error: {e}");
+            ExitCode::FAILURE
+        }
+    }
 }

@@ -1,12 +1,20 @@
 //! Evaluation: CIEDE2000 colour error of a rendered chart against the
 //! chart's ideal XYZ under D65 (DESIGN.md §7), as a stable JSON report.
 
+mod budget;
+mod paper_table;
 mod report;
+mod workflow;
 
+pub use budget::{ErrorBudget, error_budget};
+pub use paper_table::{
+    PAPER_TABLE1, PaperOptions, PaperRow, PaperTable, StorageComparison, run_paper_table,
+};
 pub use report::{
     ChartTruth, DeltaEReport, ErrorStats, PatchResult, PixelStats, REPORT_SCHEMA, evaluate_chart,
     summarize,
 };
+pub use workflow::{ChartSetup, Method, chart_scene, evaluate_method, fit_baseline_matrix};
 
 /// Errors of the evaluation layer.
 #[derive(Debug, thiserror::Error)]

@@ -146,7 +146,7 @@ mod tests {
 
     #[test]
     fn demosaic_of_a_flat_field_is_flat_and_fit_recovers_a_matrix() {
-        let cfa = Cfa::rgbw();
+        let cfa = Cfa::parse("RG/WB").unwrap();
         let vals = [0.2f32, 0.4, 0.3, 0.9];
         let (w, h) = (7, 5);
         let v: Vec<f32> = (0..w * h)

@@ -354,7 +354,7 @@ mod tests {
 
     #[test]
     fn geometry_of_rgbw() {
-        let cfa = Cfa::rgbw();
+        let cfa = Cfa::parse("RG/WB").unwrap();
         let g = PatchGeometry::new(5, &cfa, &[0.01, 0.1, 1.0], 1.799).unwrap();
         assert_eq!(g.n_positions(), 4);
         assert_eq!(g.n_features(), 26);
@@ -371,7 +371,7 @@ mod tests {
 
     #[test]
     fn stats_of_a_flat_patch_with_saturated_white() {
-        let cfa = Cfa::rgbw();
+        let cfa = Cfa::parse("RG/WB").unwrap();
         let g = PatchGeometry::new(3, &cfa, &[0.1, 1.0], 1.799).unwrap();
         let chans = g.channels_of(0).to_vec();
         let vals = [0.2f32, 0.4, 0.3, 1.8]; // R G B W
@@ -390,7 +390,7 @@ mod tests {
 
     #[test]
     fn gather_mirrors_at_borders() {
-        let cfa = Cfa::rgbw();
+        let cfa = Cfa::parse("RG/WB").unwrap();
         let g = PatchGeometry::new(3, &cfa, &[0.1, 1.0], 1.7).unwrap();
         let img: Vec<f32> = (0..16).map(|v| v as f32).collect();
         let mut p = [0f32; 9];

@@ -31,12 +31,14 @@ pub fn default_reflectances(grid: &WavelengthGrid) -> Vec<Spectrum> {
 }
 
 /// T = argmin Σ‖T·xyz_X(r) − xyz_target(r)‖² over `reflectances`, each side
-/// normalised so a perfect white has Y = 1.
+/// normalised so a perfect white has Y = 1. With `white_preserving`, the
+/// minimum is taken subject to T mapping the perfect white exactly.
 pub fn correction_matrix(
     cmfs: &Cmfs,
     reflectances: &[Spectrum],
     acquisition: &Spectrum,
     target: &Spectrum,
+    white_preserving: bool,
 ) -> Result<Mat3, L3Error> {
     if reflectances.len() < 3 {
         return Err(L3Error::InvalidParams(
@@ -67,7 +69,18 @@ pub fn correction_matrix(
             "the illuminant makes the reflectance XYZs degenerate (T is singular)".into(),
         )
     })?;
-    let t = bat * inv;
+    let mut t = bat * inv;
+    if white_preserving {
+        // Constrained least squares: T·w_acq = w_target exactly (a perfect
+        // white keeps its colour), the rest as close as possible.
+        let wa3 = nalgebra::Vector3::from_fn(|k, _| wa[k].iter().sum::<f64>());
+        let wt3 = nalgebra::Vector3::from_fn(|k, _| wt[k].iter().sum::<f64>());
+        let g = inv * wa3;
+        let denom = wa3.dot(&g);
+        if denom > 0.0 {
+            t += (wt3 - t * wa3) * g.transpose() / denom;
+        }
+    }
     let out: Mat3 = [0, 1, 2].map(|i| [0, 1, 2].map(|j| t[(i, j)]));
     if out.iter().flatten().any(|v| !v.is_finite()) {
         return Err(L3Error::InvalidInput("T is not finite".into()));
@@ -109,6 +122,7 @@ pub struct IlluminantRegistry {
     cmfs: Cmfs,
     d65: Spectrum,
     reflectances: Vec<Spectrum>,
+    white_preserving: bool,
     entries: BTreeMap<String, IlluminantEntry>,
 }
 
@@ -124,6 +138,7 @@ impl IlluminantRegistry {
             cmfs,
             d65,
             reflectances,
+            white_preserving: false,
             entries: BTreeMap::new(),
         };
         let white = r.white_xy(&r.d65.clone());
@@ -143,7 +158,23 @@ impl IlluminantRegistry {
     /// The defaults: D65, D50, A, F2, F11, and ISET's measured Tungsten and
     /// Fluorescent when the data is present.
     pub fn with_defaults(grid: WavelengthGrid, iset: Option<&IsetData>) -> Result<Self, L3Error> {
-        let mut r = Self::new(grid, default_reflectances(&grid))?;
+        let refl = match std::env::var("L3_DEBUG_TSET").as_deref() {
+            Ok("natural") => crate::training::training_reflectances(&grid, iset)
+                .map_err(|e| L3Error::InvalidInput(e.to_string()))?
+                .into_iter()
+                .filter(|(n, _)| {
+                    n.starts_with("obj") || n.starts_with("CES") || n.starts_with("dupont")
+                })
+                .map(|(_, s)| s)
+                .collect(),
+            Ok("all") => crate::training::training_reflectances(&grid, iset)
+                .map_err(|e| L3Error::InvalidInput(e.to_string()))?
+                .into_iter()
+                .map(|(_, s)| s)
+                .collect(),
+            _ => default_reflectances(&grid),
+        };
+        let mut r = Self::new(grid, refl)?;
         for name in ["D50", "A", "F2", "F11"] {
             let spd = cie_illuminant(name).ok_or_else(|| {
                 L3Error::InvalidParams(format!("{name} missing from built-in data"))
@@ -240,7 +271,13 @@ impl IlluminantRegistry {
                 "SPD of '{name}' has negative values"
             )));
         }
-        let t = correction_matrix(&self.cmfs, &self.reflectances, &s, &self.d65)?;
+        let t = correction_matrix(
+            &self.cmfs,
+            &self.reflectances,
+            &s,
+            &self.d65,
+            self.white_preserving,
+        )?;
         let white = self.white_xy(&s);
         let e = IlluminantEntry {
             name: name.to_string(),
@@ -277,7 +314,13 @@ impl IlluminantRegistry {
         let spec = IlluminantSpec::Cct(cct);
         let spd = spec.resolve(None)?.spd;
         let s = spd.resample(&self.grid, Extrapolation::Zero);
-        let t = correction_matrix(&self.cmfs, &self.reflectances, &s, &self.d65)?;
+        let t = correction_matrix(
+            &self.cmfs,
+            &self.reflectances,
+            &s,
+            &self.d65,
+            self.white_preserving,
+        )?;
         self.put(IlluminantEntry {
             name: name.to_string(),
             t,
@@ -324,7 +367,13 @@ impl IlluminantRegistry {
                 // never cache arbitrary files under their path
                 let spd = parsed.resolve(iset)?.spd;
                 let s = spd.resample(&self.grid, Extrapolation::Zero);
-                let t = correction_matrix(&self.cmfs, &self.reflectances, &s, &self.d65)?;
+                let t = correction_matrix(
+                    &self.cmfs,
+                    &self.reflectances,
+                    &s,
+                    &self.d65,
+                    self.white_preserving,
+                )?;
                 Ok(IlluminantEntry {
                     name: parsed.to_string(),
                     t,

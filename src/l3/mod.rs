@@ -6,6 +6,7 @@ mod baseline;
 mod classify;
 mod correction;
 mod normal_eq;
+mod output;
 mod params;
 mod render;
 mod table;
@@ -18,6 +19,7 @@ pub use correction::{
     default_reflectances,
 };
 pub use normal_eq::{ClassSolution, Gram, RidgeChoice};
+pub use output::{WhiteLevel, white_y, xyz_to_srgb8, xyz_to_srgb16};
 pub use params::{DEFAULT_LEVELS_1V8, L3Params};
 pub use render::{RenderStats, fuse_kernels, render_reference, resolve_sat_case};
 pub use table::{ClassReport, L3Table, TABLE_FORMAT_VERSION, TableKind, TableMeta};

@@ -190,7 +190,7 @@ pub fn solve(
         r.max(0.0)
     };
     // a floor keeps rank-deficient classes (e.g. zeroed saturated channels) solvable
-    let floor = mean_e * 1e-9;
+    let floor = (mean_e * 1e-9).max(1e-24);
     let lambda = match ridge {
         RidgeChoice::Fixed { relative } => (relative * mean_e).max(floor),
         RidgeChoice::NoiseVariance => noise_var.max(floor),
@@ -207,7 +207,8 @@ pub fn solve(
             }
             best.1
         }
-    };
+    }
+    .max(floor);
     // w = V diag(1/(e+λ)) q
     let mut scaled = q.clone();
     for i in 0..p {
@@ -227,7 +228,9 @@ pub fn solve(
         kernel[k * nf + p] = b;
     }
     if kernel.iter().any(|v| !v.is_finite()) {
-        return Err(L3Error::Table("non-finite kernel".into()));
+        return Err(L3Error::Table(format!(
+            "non-finite kernel ({n} samples, λ {lambda:.3e}, eigenvalues {emin:.3e}–{emax:.3e})"
+        )));
     }
     Ok(ClassSolution {
         kernel,
@@ -287,6 +290,14 @@ mod tests {
         let s = solve(&mut g, RidgeChoice::Gcv, 0.0).unwrap();
         assert!(s.kernel.iter().all(|v| v.is_finite()));
         assert!(s.condition > 1e6);
+        // all regressors constant (a fully saturated, zeroed class)
+        let mut z = Gram::new(4);
+        for _ in 0..30 {
+            z.push(&[0.0, 0.0, 0.0, 1.0], [0.3, 0.2, 0.1]);
+        }
+        let s = solve(&mut z, RidgeChoice::Gcv, 0.0).unwrap();
+        assert!(s.kernel.iter().all(|v| v.is_finite()));
+        assert!((s.kernel[3] - 0.3).abs() < 1e-6);
         // the zero regressor gets zero weight
         assert!(s.kernel[2].abs() < 1e-9);
         let mut e = Gram::new(4);

@@ -25,7 +25,7 @@ fn synth_frame(
     noise: f32,
     shift: (usize, usize),
 ) -> TrainingFrame {
-    let cfa = Cfa::rgbw();
+    let cfa = Cfa::parse("RG/WB").unwrap();
     let mut rng = ChaCha8Rng::seed_from_u64(seed);
     let block = 12;
     let nb = size.div_ceil(block);
@@ -69,7 +69,7 @@ fn meta(params: &L3Params) -> TableMeta {
         target_illuminant: "same".into(),
         sensor_name: "synthetic".into(),
         sensor: serde_json::Value::Null,
-        cfa: Cfa::rgbw(),
+        cfa: Cfa::parse("RG/WB").unwrap(),
         grid: WavelengthGrid::default(),
         params: params.clone(),
         voltage_swing: 1.8,
@@ -89,7 +89,7 @@ fn train_synthetic(noise: f32) -> L3Table {
         min_class_samples: 60,
         ..L3Params::default()
     };
-    let geo = PatchGeometry::new(5, &Cfa::rgbw(), &params.levels, 1.799).unwrap();
+    let geo = PatchGeometry::new(5, &Cfa::parse("RG/WB").unwrap(), &params.levels, 1.799).unwrap();
     let cancel = AtomicBool::new(false);
     let ctl = TrainControl {
         progress: &|_, _| {},

@@ -373,7 +373,11 @@ where
                         )));
                     }
                     let lv = geo.levels()[l] as f64;
-                    let sol = solve(&mut g, params.ridge, noise.variance(lv))?;
+                    let sol = solve(&mut g, params.ridge, noise.variance(lv)).map_err(|e| {
+                        L3Error::Table(format!(
+                            "class (position {pos}, level {l}, case {c}, texture {t}): {e}"
+                        ))
+                    })?;
                     let norm = sol.kernel.iter().map(|v| v * v).sum::<f64>().sqrt();
                     for (dst, src) in kernels[k * 3 * nf..(k + 1) * 3 * nf]
                         .iter_mut()

@@ -1,0 +1,130 @@
+use std::path::{Path, PathBuf};
+
+use clap::Args;
+
+use super::{Cli, CliError, iset, write_file};
+use crate::io::{
+    DecodedMosaic, Limits, PngCompression, encode_png_rgb8, encode_tiff_f32_rgb, encode_tiff_rgb16,
+    read_mosaic,
+};
+use crate::l3::{
+    IlluminantRegistry, L3Table, TableKind, WhiteLevel, fuse_kernels, render_reference, white_y,
+    xyz_to_srgb8, xyz_to_srgb16,
+};
+
+#[derive(Args, Debug)]
+pub struct RenderArgs {
+    /// The L3 table (safetensors).
+    #[arg(long)]
+    pub table: PathBuf,
+    /// Acquisition illuminant: a registry name (D65, D50, A, F2, F11, Tungsten,
+    /// Fluorescent), cct:K, or any illuminant spec.
+    #[arg(long, default_value = "D65")]
+    pub illuminant: String,
+    /// Input mosaic: .raw (+ .json sidecar), 16-bit PNG, TIFF or PGM.
+    #[arg(long = "in")]
+    pub input: PathBuf,
+    /// Output: .png (sRGB 8-bit), .tiff (float XYZ), .raw (f32 XYZ).
+    #[arg(long)]
+    pub out: PathBuf,
+    /// `auto` or the Y that maps to white.
+    #[arg(long, default_value = "auto")]
+    pub white_level: String,
+    /// For .tiff output: `xyz` (float) or `srgb16`.
+    #[arg(long, default_value = "xyz")]
+    pub tiff: String,
+}
+
+/// The input mosaic in volts: integer frames are scaled by their sidecar's
+/// black/white levels (default 0/65535) to the table's swing; float frames
+/// are taken as volts.
+pub fn mosaic_volts(path: &Path, swing: f64) -> Result<(Vec<f32>, usize, usize), CliError> {
+    let loaded = read_mosaic(path, &Limits::default())?;
+    match loaded.mosaic {
+        DecodedMosaic::U16(frame) => {
+            let meta = match loaded.meta {
+                Some(m) => m,
+                None => crate::io::RawMeta::new(frame.width, frame.height, "", 0, 65535, swing),
+            };
+            let mut m = meta;
+            m.voltage_swing = swing;
+            Ok((frame.to_volts(&m)?, frame.width, frame.height))
+        }
+        DecodedMosaic::F32 {
+            width,
+            height,
+            data,
+        } => Ok((data, width, height)),
+    }
+}
+
+pub fn run(cli: &Cli, a: &RenderArgs) -> Result<(), CliError> {
+    let iset = iset(&cli.iset_dir)?;
+    let table = L3Table::load(&a.table)?;
+    let white: WhiteLevel = a.white_level.parse()?;
+    let (volts, w, h) = mosaic_volts(&a.input, table.meta.voltage_swing)?;
+    let mut registry = IlluminantRegistry::with_defaults(table.meta.grid, iset.as_ref())?;
+    let entry = registry.resolve(&a.illuminant, iset.as_ref())?;
+    let kernels = match table.meta.kind {
+        TableKind::SameIlluminant => fuse_kernels(&table, &entry.t),
+        TableKind::CrossIlluminant => {
+            if !table
+                .meta
+                .train_illuminants
+                .iter()
+                .any(|n| n.eq_ignore_ascii_case(&entry.name))
+            {
+                eprintln!(
+                    "warning: cross-illuminant table trained for {} used for {}",
+                    table.meta.train_illuminants.join("+"),
+                    entry.name
+                );
+            }
+            table.kernels.clone()
+        }
+    };
+    let started = std::time::Instant::now();
+    let (xyz, stats) = render_reference(&table, &kernels, &volts, w, h)?;
+    let ms = started.elapsed().as_secs_f64() * 1e3;
+    let ext = a
+        .out
+        .extension()
+        .and_then(|e| e.to_str())
+        .unwrap_or("")
+        .to_ascii_lowercase();
+    let bytes = match ext.as_str() {
+        "png" => encode_png_rgb8(
+            w,
+            h,
+            &xyz_to_srgb8(&xyz, white_y(&xyz, white)),
+            PngCompression::Default,
+        )?,
+        "tif" | "tiff" => match a.tiff.as_str() {
+            "xyz" => encode_tiff_f32_rgb(w, h, &xyz)?,
+            "srgb16" => encode_tiff_rgb16(w, h, &xyz_to_srgb16(&xyz, white_y(&xyz, white)))?,
+            other => {
+                return Err(CliError::Usage(format!(
+                    "--tiff '{other}': expected xyz or srgb16"
+                )));
+            }
+        },
+        "raw" | "bin" | "f32" => xyz.iter().flat_map(|v| v.to_le_bytes()).collect(),
+        _ => {
+            return Err(CliError::Usage(format!(
+                "--out {}: use .png, .tiff or .raw",
+                a.out.display()
+            )));
+        }
+    };
+    write_file(&a.out, &bytes)?;
+    println!(
+        "rendered {w}×{h} with {} under {} in {ms:.1} ms ({:.1} Mpix/s): {} saturated, {} texture pixels; wrote {}",
+        a.table.display(),
+        entry.name,
+        (w * h) as f64 / ms / 1e3,
+        stats.saturated,
+        stats.texture,
+        a.out.display()
+    );
+    Ok(())
+}

@@ -1,0 +1,255 @@
+//! The paper's Table 1: I_Tun, SI_Tun+T, SI_D65+T, SI_Ens+T and the
+//! conventional baseline on the Natural-100 chart, under tungsten and again
+//! under fluorescent, beside the published figures.
+
+use std::collections::BTreeMap;
+use std::sync::atomic::AtomicBool;
+
+use serde::{Deserialize, Serialize};
+
+use super::workflow::{ChartSetup, Method, evaluate_method, fit_baseline_matrix};
+use super::{DeltaEReport, EvalError};
+use crate::camera::{Camera, SensorDesign};
+use crate::l3::{IlluminantRegistry, L3Table, TableKind};
+use crate::spectral::{IsetData, WavelengthGrid};
+use crate::training::{TrainingSpec, train_table};
+
+/// The paper's Table 1 (tungsten acquisition): mean, std, p90 of ΔE2000.
+pub const PAPER_TABLE1: [(&str, f64, f64, f64); 4] = [
+    ("I_Tun", 2.5, 1.8, 4.9),
+    ("SI_Tun+T", 2.5, 2.0, 5.4),
+    ("SI_D65+T", 4.0, 3.0, 8.3),
+    ("SI_Ens+T", 2.9, 2.2, 6.0),
+];
+
+/// Options of a Table 1 run.
+#[derive(Clone, Debug, Serialize, Deserialize)]
+pub struct PaperOptions {
+    /// Acquisition illuminants, each a row block (tungsten first).
+    pub acquisitions: Vec<String>,
+    /// Training scenes and their size for every table.
+    pub scenes: usize,
+    pub scene_size: usize,
+    pub seed: u64,
+    pub chart: ChartSetup,
+}
+
+impl Default for PaperOptions {
+    fn default() -> Self {
+        Self {
+            acquisitions: vec!["Tungsten".into(), "Fluorescent".into()],
+            scenes: 48,
+            scene_size: 96,
+            seed: 1,
+            chart: ChartSetup::default(),
+        }
+    }
+}
+
+/// One row of the table.
+#[derive(Clone, Debug, Serialize, Deserialize)]
+pub struct PaperRow {
+    pub acquisition: String,
+    pub method: String,
+    pub mean: f64,
+    pub std: f64,
+    pub median: f64,
+    pub p90: f64,
+    pub max: f64,
+    pub pixel_mean: f64,
+    /// The paper's (mean, std, p90) for this row, tungsten only.
+    pub paper: Option<[f64; 3]>,
+    pub training_seconds: Option<f64>,
+}
+
+/// Storage of one SI table plus N matrices against N cross-illuminant tables.
+#[derive(Clone, Debug, Serialize, Deserialize)]
+pub struct StorageComparison {
+    pub illuminants: usize,
+    pub table_bytes: usize,
+    pub matrix_bytes: usize,
+    pub si_plus_matrices_bytes: usize,
+    pub cross_tables_bytes: usize,
+}
+
+/// The whole result.
+#[derive(Clone, Debug, Serialize, Deserialize)]
+pub struct PaperTable {
+    pub sensor: String,
+    pub chart: String,
+    pub rows: Vec<PaperRow>,
+    pub storage: StorageComparison,
+    pub reports: Vec<DeltaEReport>,
+    pub options: PaperOptions,
+}
+
+impl PaperTable {
+    /// The row of `method` under `acquisition`.
+    pub fn row(&self, acquisition: &str, method: &str) -> Option<&PaperRow> {
+        self.rows
+            .iter()
+            .find(|r| r.acquisition.eq_ignore_ascii_case(acquisition) && r.method == method)
+    }
+
+    /// A markdown rendering beside the paper's figures.
+    pub fn markdown(&self) -> String {
+        let mut s = format!(
+            "Natural-100 chart ({}), sensor `{}`, CIEDE2000 of patch means\n\n",
+            self.chart, self.sensor
+        );
+        s.push_str("| acquisition | method | mean ΔE (std) | median | p90 | max | per-pixel mean | paper mean (std) / p90 |\n");
+        s.push_str("|---|---|---|---|---|---|---|---|\n");
+        for r in &self.rows {
+            let paper = r
+                .paper
+                .map(|p| format!("{:.1} ({:.1}) / {:.1}", p[0], p[1], p[2]))
+                .unwrap_or_else(|| "—".into());
+            s.push_str(&format!(
+                "| {} | {} | {:.2} ({:.2}) | {:.2} | {:.2} | {:.2} | {:.2} | {} |\n",
+                r.acquisition, r.method, r.mean, r.std, r.median, r.p90, r.max, r.pixel_mean, paper
+            ));
+        }
+        let st = &self.storage;
+        s.push_str(&format!(
+            "\nStorage for {} illuminants: one SI table + {} matrices = {} bytes; {} cross-illuminant tables = {} bytes ({:.1}× more).\n",
+            st.illuminants,
+            st.illuminants,
+            st.si_plus_matrices_bytes,
+            st.illuminants,
+            st.cross_tables_bytes,
+            st.cross_tables_bytes as f64 / st.si_plus_matrices_bytes.max(1) as f64
+        ));
+        s
+    }
+}
+
+fn short(name: &str) -> String {
+    match name.to_ascii_lowercase().as_str() {
+        "tungsten" => "Tun".into(),
+        "fluorescent" => "Flu".into(),
+        _ => name.to_string(),
+    }
+}
+
+/// Train the tables and evaluate every row. `progress(message)` reports each step.
+pub fn run_paper_table(
+    design: &SensorDesign,
+    iset: Option<&IsetData>,
+    opts: &PaperOptions,
+    progress: &(dyn Fn(&str) + Sync),
+) -> Result<PaperTable, EvalError> {
+    let grid = WavelengthGrid::default();
+    let camera = Camera::new(design, grid, iset).map_err(|e| EvalError::Invalid(e.to_string()))?;
+    let mut registry = IlluminantRegistry::with_defaults(grid, iset)?;
+    let cancel = AtomicBool::new(false);
+    let train = |kind: TableKind, ills: &[&str]| -> Result<L3Table, EvalError> {
+        progress(&format!("training {kind} table on {}", ills.join("+")));
+        let spec = TrainingSpec {
+            kind,
+            illuminants: ills.iter().map(|s| s.to_string()).collect(),
+            seed: opts.seed,
+            scenes: opts.scenes,
+            scene_size: opts.scene_size,
+            ..TrainingSpec::default()
+        };
+        train_table(design, &spec, iset, &|_, _| {}, &cancel)
+            .map_err(|e| EvalError::Invalid(e.to_string()))
+    };
+    let si_d65 = train(TableKind::SameIlluminant, &["D65"])?;
+    let si_ens = train(TableKind::SameIlluminant, &["D65", "Tungsten"])?;
+    let all_ens: Vec<&str> = std::iter::once("D65")
+        .chain(opts.acquisitions.iter().map(|s| s.as_str()))
+        .collect();
+    let si_all = if opts.acquisitions.len() > 1 {
+        Some(train(TableKind::SameIlluminant, &all_ens)?)
+    } else {
+        None
+    };
+    progress("fitting the baseline colour matrix (D65)");
+    let baseline = fit_baseline_matrix(&camera, &["D65".to_string()], iset)?;
+    let mut rows = Vec::new();
+    let mut reports = Vec::new();
+    let mut chart_name = String::new();
+    let mut cross_bytes = 0usize;
+    let paper: BTreeMap<&str, [f64; 3]> = PAPER_TABLE1
+        .iter()
+        .map(|(m, a, b, c)| (*m, [*a, *b, *c]))
+        .collect();
+    for acq in &opts.acquisitions {
+        let tag = short(acq);
+        let cross = train(TableKind::CrossIlluminant, &[acq])?;
+        let si_acq = train(TableKind::SameIlluminant, &[acq])?;
+        cross_bytes += cross.kernel_bytes();
+        let corr = registry.resolve(acq, iset)?;
+        let mut methods: Vec<(String, Method, Option<f64>)> = vec![
+            (
+                format!("I_{tag}"),
+                Method::Table(&cross),
+                Some(cross.meta.training_seconds),
+            ),
+            (
+                format!("SI_{tag}+T"),
+                Method::Table(&si_acq),
+                Some(si_acq.meta.training_seconds),
+            ),
+            (
+                "SI_D65+T".into(),
+                Method::Table(&si_d65),
+                Some(si_d65.meta.training_seconds),
+            ),
+            (
+                "SI_Ens+T".into(),
+                Method::Table(&si_ens),
+                Some(si_ens.meta.training_seconds),
+            ),
+        ];
+        if let Some(t) = &si_all {
+            methods.push((
+                format!("SI_Ens{}+T", all_ens.len()),
+                Method::Table(t),
+                Some(t.meta.training_seconds),
+            ));
+        }
+        methods.push(("Baseline+T".into(), Method::Baseline(&baseline), None));
+        for (name, method, secs) in methods {
+            progress(&format!("evaluating {name} under {acq}"));
+            let rep = evaluate_method(&camera, &method, &name, acq, &corr, iset, &opts.chart)?;
+            chart_name = rep.chart.clone();
+            let is_tungsten = tag == "Tun";
+            rows.push(PaperRow {
+                acquisition: rep.acquisition_illuminant.clone(),
+                method: name.clone(),
+                mean: rep.summary.mean,
+                std: rep.summary.std,
+                median: rep.summary.median,
+                p90: rep.summary.p90,
+                max: rep.summary.max,
+                pixel_mean: rep.per_pixel.mean,
+                paper: if is_tungsten {
+                    paper.get(name.as_str()).copied()
+                } else {
+                    None
+                },
+                training_seconds: secs,
+            });
+            reports.push(rep);
+        }
+    }
+    let n = opts.acquisitions.len().max(1);
+    let table_bytes = si_ens.kernel_bytes();
+    let matrix_bytes = 9 * 8;
+    Ok(PaperTable {
+        sensor: design.name.clone(),
+        chart: chart_name,
+        rows,
+        storage: StorageComparison {
+            illuminants: n,
+            table_bytes,
+            matrix_bytes,
+            si_plus_matrices_bytes: table_bytes + n * matrix_bytes,
+            cross_tables_bytes: cross_bytes,
+        },
+        reports,
+        options: opts.clone(),
+    })
+}

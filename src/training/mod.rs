@@ -1,0 +1,341 @@
+//! Training an L3 table from the camera simulation: the training scenes,
+//! the frames simulated from them, and the call into the learner
+//! (DESIGN.md §5). Shared by the CLI and the service's training jobs.
+
+mod scenes;
+
+use std::sync::atomic::AtomicBool;
+use std::time::Instant;
+
+use rand::{RngExt, SeedableRng};
+use rand_chacha::ChaCha8Rng;
+use serde::{Deserialize, Serialize};
+
+use crate::camera::{Camera, CameraError, NoiseSwitches, SensorDesign, mosaic};
+use crate::l3::{
+    L3Error, L3Params, L3Table, NoiseModel, PatchGeometry, RidgeChoice, TABLE_FORMAT_VERSION,
+    TableKind, TableMeta, TrainControl, TrainingFrame, learn, package,
+};
+use crate::scene::SceneError;
+use crate::spectral::{
+    Extrapolation, IlluminantSpec, IsetData, SpectralError, WavelengthGrid, cie_illuminant,
+};
+
+pub use scenes::{TrainingScenes, training_reflectances};
+
+/// Errors of a training run.
+#[derive(Debug, thiserror::Error)]
+pub enum TrainError {
+    #[error("invalid training spec: {0}")]
+    Invalid(String),
+    #[error(transparent)]
+    L3(#[from] L3Error),
+    #[error(transparent)]
+    Camera(#[from] CameraError),
+    #[error(transparent)]
+    Scene(#[from] SceneError),
+    #[error(transparent)]
+    Spectral(#[from] SpectralError),
+}
+
+impl From<TrainError> for L3Error {
+    fn from(e: TrainError) -> Self {
+        match e {
+            TrainError::L3(e) => e,
+            other => L3Error::InvalidInput(other.to_string()),
+        }
+    }
+}
+
+/// What to train (the JSON body of a training job; the CLI builds the same).
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct TrainingSpec {
+    /// `si` (same-illuminant) or `cross` (to D65).
+    #[serde(default = "default_kind")]
+    pub kind: TableKind,
+    /// Training illuminants (IlluminantSpec strings); several make an ensemble.
+    #[serde(default = "default_illuminants")]
+    pub illuminants: Vec<String>,
+    #[serde(default = "default_patch")]
+    pub patch_size: usize,
+    #[serde(default = "default_levels")]
+    pub levels: usize,
+    #[serde(default)]
+    pub seed: u64,
+    /// Number of training scenes (each simulated under every illuminant).
+    #[serde(default = "default_scenes")]
+    pub scenes: usize,
+    /// Side of each training scene, pixels.
+    #[serde(default = "default_scene_size")]
+    pub scene_size: usize,
+    /// Simulate full sensor noise (otherwise noise-free patches with the
+    /// analytic noise-variance ridge).
+    #[serde(default = "default_true")]
+    pub noise: bool,
+    #[serde(default = "default_true")]
+    pub contrast_classes: bool,
+    #[serde(default = "default_true")]
+    pub saturation_classes: bool,
+    /// Mean scene luminance of the training scenes, cd/m² (exposure is set per level).
+    #[serde(default = "default_luminance")]
+    pub mean_luminance: f64,
+}
+
+fn default_kind() -> TableKind {
+    TableKind::SameIlluminant
+}
+fn default_illuminants() -> Vec<String> {
+    vec!["D65".into(), "Tungsten".into()]
+}
+fn default_patch() -> usize {
+    5
+}
+fn default_levels() -> usize {
+    20
+}
+fn default_scenes() -> usize {
+    48
+}
+fn default_scene_size() -> usize {
+    96
+}
+fn default_true() -> bool {
+    true
+}
+fn default_luminance() -> f64 {
+    100.0
+}
+
+impl Default for TrainingSpec {
+    fn default() -> Self {
+        Self {
+            kind: default_kind(),
+            illuminants: default_illuminants(),
+            patch_size: default_patch(),
+            levels: default_levels(),
+            seed: 0,
+            scenes: default_scenes(),
+            scene_size: default_scene_size(),
+            noise: true,
+            contrast_classes: true,
+            saturation_classes: true,
+            mean_luminance: default_luminance(),
+        }
+    }
+}
+
+impl TrainingSpec {
+    pub fn validate(&self) -> Result<(), TrainError> {
+        let bad = |m: String| Err(TrainError::Invalid(m));
+        if self.illuminants.is_empty() || self.illuminants.len() > 16 {
+            return bad(format!("{} illuminants (1 to 16)", self.illuminants.len()));
+        }
+        for s in &self.illuminants {
+            IlluminantSpec::parse(s)?;
+        }
+        if ![3, 5, 7, 9].contains(&self.patch_size) {
+            return bad(format!("patch_size {} (3, 5, 7 or 9)", self.patch_size));
+        }
+        if !(2..=64).contains(&self.levels) {
+            return bad(format!("levels {} (2 to 64)", self.levels));
+        }
+        if !(1..=10_000).contains(&self.scenes) {
+            return bad(format!("scenes {} (1 to 10000)", self.scenes));
+        }
+        if !(16..=1024).contains(&self.scene_size) {
+            return bad(format!("scene_size {} (16 to 1024)", self.scene_size));
+        }
+        if !(self.mean_luminance.is_finite() && self.mean_luminance > 0.0) {
+            return bad(format!("mean_luminance {}", self.mean_luminance));
+        }
+        Ok(())
+    }
+
+    /// The L3 parameters this spec implies for a sensor with `swing` volts.
+    pub fn params(&self, swing: f64) -> Result<L3Params, TrainError> {
+        let p = L3Params {
+            patch_size: self.patch_size,
+            levels: L3Params::levels_for(self.levels, swing)?,
+            contrast_classes: self.contrast_classes,
+            saturation_classes: self.saturation_classes,
+            ridge: match std::env::var("L3_DEBUG_RIDGE")
+                .ok()
+                .and_then(|v| v.parse::<f64>().ok())
+            {
+                Some(r) => RidgeChoice::Fixed { relative: r },
+                None if self.noise => RidgeChoice::Gcv,
+                None => RidgeChoice::NoiseVariance,
+            },
+            ..L3Params::default()
+        };
+        p.validate()?;
+        Ok(p)
+    }
+}
+
+/// Train a table for `design` as `spec` says. `progress(stage, fraction)`
+/// is called as work completes; setting `cancel` stops the run with
+/// [`L3Error::Canceled`].
+pub fn train_table(
+    design: &SensorDesign,
+    spec: &TrainingSpec,
+    iset: Option<&IsetData>,
+    progress: &(dyn Fn(&str, f64) + Sync),
+    cancel: &AtomicBool,
+) -> Result<L3Table, TrainError> {
+    spec.validate()?;
+    let started = Instant::now();
+    let grid = WavelengthGrid::default();
+    let camera = Camera::new(design, grid, iset)?;
+    let swing = design.voltage_swing_v;
+    let params = spec.params(swing)?;
+    let sat_threshold = swing - params.saturation_margin_v;
+    let geo = PatchGeometry::new(
+        params.patch_size,
+        camera.cfa(),
+        &params.levels,
+        sat_threshold,
+    )?;
+    let illuminants = spec
+        .illuminants
+        .iter()
+        .map(|s| {
+            let named = IlluminantSpec::parse(s)?.resolve(iset)?;
+            Ok((named.name, named.spd.resample(&grid, Extrapolation::Zero)))
+        })
+        .collect::<Result<Vec<_>, TrainError>>()?;
+    let d65 = cie_illuminant("D65")
+        .ok_or_else(|| TrainError::Invalid("D65 missing".into()))?
+        .resample(&grid, Extrapolation::Zero);
+    let scenes = TrainingScenes::new(grid, iset, spec.seed, spec.scene_size, spec.mean_luminance)?;
+    let noise = if spec.noise {
+        NoiseSwitches::all()
+    } else {
+        NoiseSwitches::none()
+    };
+    let n_ill = illuminants.len();
+    let levels = params.levels.clone();
+    let cfa = camera.cfa().clone();
+    let n_batches = spec.scenes * n_ill;
+    let frame = |b: usize| -> Result<Vec<TrainingFrame>, L3Error> {
+        let (s, i) = (b / n_ill, b % n_ill);
+        let (ill_name, ill) = &illuminants[i];
+        let scene = scenes.scene(s, ill, ill_name).map_err(TrainError::from)?;
+        let optical = camera.optical_image(&scene).map_err(TrainError::from)?;
+        let rates = camera.channel_rates(&optical).map_err(TrainError::from)?;
+        let target_ill = match spec.kind {
+            TableKind::SameIlluminant => ill,
+            TableKind::CrossIlluminant => &d65,
+        };
+        let xyz_rates = camera
+            .xyz_rates(&optical, target_ill)
+            .map_err(TrainError::from)?;
+        let xyz_rates = xyz_rates.as_slice().map(|v| v.to_vec()).unwrap_or_default();
+        // luminance statistic of the noise-free frame: median over pixels of
+        // the mean over channels of the channel rates
+        let (_, rows, cols) = rates.dim();
+        let mut lum: Vec<f32> = (0..rows * cols)
+            .map(|p| {
+                let (r, c) = (p / cols, p % cols);
+                (0..rates.dim().0).map(|ch| rates[[ch, r, c]]).sum::<f32>() / rates.dim().0 as f32
+            })
+            .collect();
+        lum.sort_by(f32::total_cmp);
+        let median_rate =
+            lum[lum.len() / 2].max(1e-3) as f64 * design.conversion_gain_v() * design.analog_gain;
+        let mut rng = ChaCha8Rng::seed_from_u64(mix(spec.seed, b as u64, 0x5eed));
+        let mut frames = Vec::with_capacity(levels.len() * cfa.n_positions());
+        for (l, &level) in levels.iter().enumerate() {
+            // jitter the level across its bin (geometric midpoints)
+            let lo = if l == 0 {
+                level * 0.7
+            } else {
+                (level * levels[l - 1]).sqrt()
+            };
+            let hi = if l + 1 == levels.len() {
+                level * 1.1
+            } else {
+                (level * levels[l + 1]).sqrt()
+            };
+            for shift in 0..cfa.n_positions() {
+                let target = (lo.ln() + rng.random::<f64>() * (hi.ln() - lo.ln())).exp();
+                let exposure = target / median_rate;
+                let (dr, dc) = (shift / cfa.cols, shift % cfa.cols);
+                let shifted = cfa.shifted(dr, dc);
+                let mean = mosaic(&rates, &shifted).map_err(TrainError::from)?;
+                let seed = mix(spec.seed, b as u64, (l * 64 + shift) as u64);
+                let volts = camera
+                    .capture(&mean, exposure, &noise, seed)
+                    .map_err(TrainError::from)?;
+                let t = exposure as f32;
+                frames.push(TrainingFrame {
+                    width: cols,
+                    height: rows,
+                    volts: volts.into_raw_vec_and_offset().0,
+                    xyz: xyz_rates.iter().map(|v| v * t).collect(),
+                    cfa_shift: (dr, dc),
+                });
+            }
+        }
+        Ok(frames)
+    };
+    let ctl = TrainControl { progress, cancel };
+    let nm = NoiseModel {
+        conversion_gain_v: design.conversion_gain_v(),
+        read_noise_v: design.read_noise_v(),
+        dsnu_v: design.dsnu_v(),
+        prnu_fraction: design.prnu_fraction(),
+    };
+    let learned = learn(&geo, &params, nm, n_batches, frame, &ctl)?;
+    let samples = learned.samples;
+    let meta = TableMeta {
+        format: "l3-table".into(),
+        version: TABLE_FORMAT_VERSION,
+        kind: spec.kind,
+        train_illuminants: illuminants.iter().map(|(n, _)| n.clone()).collect(),
+        target_illuminant: match spec.kind {
+            TableKind::SameIlluminant => "same".into(),
+            TableKind::CrossIlluminant => "D65".into(),
+        },
+        sensor_name: design.name.clone(),
+        sensor: serde_json::to_value(design).unwrap_or(serde_json::Value::Null),
+        cfa: cfa.clone(),
+        grid,
+        params,
+        voltage_swing: swing,
+        saturation_threshold: sat_threshold,
+        sat_cases: vec![0],
+        xyz_scale_note: format!(
+            "XYZ in volts-equivalent: an equal-energy irradiance gives Y equal to the mean channel volts (kappa = {:.6e})",
+            camera.xyz_scale()
+        ),
+        seed: spec.seed,
+        created_unix_s: std::time::SystemTime::now()
+            .duration_since(std::time::UNIX_EPOCH)
+            .map(|d| d.as_secs())
+            .unwrap_or(0),
+        training_seconds: started.elapsed().as_secs_f64(),
+        summary: serde_json::json!({
+            "spec": spec,
+            "batches": n_batches,
+            "frames": n_batches * levels.len() * cfa.n_positions(),
+            "samples": samples,
+        }),
+    };
+    let mut table = package(meta, learned)?;
+    table.meta.training_seconds = started.elapsed().as_secs_f64();
+    Ok(table)
+}
+
+/// A well-mixed 64-bit seed from three inputs (SplitMix64 finaliser).
+pub fn mix(a: u64, b: u64, c: u64) -> u64 {
+    let mut z = a
+        .wrapping_mul(0x9E37_79B9_7F4A_7C15)
+        .wrapping_add(b.wrapping_mul(0xBF58_476D_1CE4_E5B9))
+        .wrapping_add(c.wrapping_mul(0x94D0_49BB_1331_11EB))
+        .wrapping_add(0x2545_F491_4F6C_DD1D);
+    z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
+    z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
+    z ^ (z >> 31)
+}

@@ -1,0 +1,131 @@
+//! The training scenes: random-size patch charts and dead-leaves textures
+//! of training reflectances, and grey ramps, each seeded by its index.
+
+use rand::{RngExt, SeedableRng};
+use rand_chacha::ChaCha8Rng;
+
+use super::{TrainError, mix};
+use crate::scene::{
+    DeadLeavesParams, Scene, SceneOptions, dead_leaves, grey_ramp, natural100_samples,
+    reflectance_chart,
+};
+use crate::spectral::{
+    Extrapolation, IsetData, Spectrum, WavelengthGrid, ces_reflectances, munsell_reflectances,
+};
+
+/// The training reflectances: the Munsell matt set and the 99 CES from the
+/// crate, plus ISET's Vrhel objects, DuPont paints and Munsell samples when
+/// present — never the 100 samples of the Natural-100 evaluation chart.
+pub fn training_reflectances(
+    grid: &WavelengthGrid,
+    iset: Option<&IsetData>,
+) -> Result<Vec<(String, Spectrum)>, TrainError> {
+    let mut out: Vec<(String, Spectrum)> = munsell_reflectances()
+        .into_iter()
+        .chain(ces_reflectances())
+        .map(|(n, s)| (n, s.resample(grid, Extrapolation::Hold)))
+        .collect();
+    if let Some(d) = iset {
+        let excluded: Vec<String> = natural100_samples(d)?.into_iter().map(|s| s.name).collect();
+        for file in [
+            "surfaces/reflectances/Objects_Vhrel.csv",
+            "surfaces/reflectances/DupontPaintChip_Vhrel.csv",
+            "surfaces/reflectances/MunsellSamples_Vhrel.csv",
+        ] {
+            for (name, s) in d.table(file)?.all()? {
+                if !excluded.contains(&name) {
+                    out.push((name, s.resample(grid, Extrapolation::Hold)));
+                }
+            }
+        }
+    }
+    Ok(out)
+}
+
+/// Generator of the training scenes.
+pub struct TrainingScenes {
+    grid: WavelengthGrid,
+    reflectances: Vec<Spectrum>,
+    seed: u64,
+    size: usize,
+    mean_luminance: f64,
+}
+
+impl TrainingScenes {
+    pub fn new(
+        grid: WavelengthGrid,
+        iset: Option<&IsetData>,
+        seed: u64,
+        size: usize,
+        mean_luminance: f64,
+    ) -> Result<Self, TrainError> {
+        let reflectances = training_reflectances(&grid, iset)?
+            .into_iter()
+            .map(|(_, s)| s)
+            .collect();
+        Ok(Self {
+            grid,
+            reflectances,
+            seed,
+            size,
+            mean_luminance,
+        })
+    }
+
+    pub fn reflectance_count(&self) -> usize {
+        self.reflectances.len()
+    }
+
+    /// Scene `index` lit by `illuminant` (on the grid). Every 8th scene is a
+    /// grey ramp, every 4th a dead-leaves texture, the rest random-size
+    /// patch charts.
+    pub fn scene(
+        &self,
+        index: usize,
+        illuminant: &Spectrum,
+        name: &str,
+    ) -> Result<Scene, TrainError> {
+        let opts = SceneOptions::new(self.grid, illuminant.clone(), name)?
+            .with_mean_luminance(self.mean_luminance);
+        let seed = mix(self.seed, index as u64, 0x5CE7E);
+        let mut rng = ChaCha8Rng::seed_from_u64(seed);
+        let n = self.size;
+        let scene = if index % 8 == 7 {
+            grey_ramp(&opts, n, n, rng.random_range(8..=n.min(32)))?
+        } else if index % 4 == 2 {
+            let p = DeadLeavesParams::new(n, n, seed);
+            dead_leaves(&opts, &self.reflectances, &p)?
+        } else {
+            let patch = rng.random_range(4..=(n / 3).max(5));
+            let cols = n.div_ceil(patch);
+            let count = cols * cols;
+            let picks: Vec<(String, String, Spectrum)> = (0..count)
+                .map(|k| {
+                    let j = rng.random_range(0..self.reflectances.len());
+                    (
+                        format!("t{k}"),
+                        "train".to_string(),
+                        self.reflectances[j].clone(),
+                    )
+                })
+                .collect();
+            let mut chart = reflectance_chart(&opts, &picks, cols, patch, false)?;
+            crop(&mut chart, n);
+            chart
+        };
+        Ok(scene)
+    }
+}
+
+/// Crop a scene to `n × n` from its top-left corner (charts round up).
+fn crop(scene: &mut Scene, n: usize) {
+    use ndarray::s;
+    let (_, r, c) = scene.reflectance.dim();
+    if r > n || c > n {
+        scene.reflectance = scene
+            .reflectance
+            .slice(s![.., ..n.min(r), ..n.min(c)])
+            .to_owned();
+        scene.patches.clear();
+    }
+}
