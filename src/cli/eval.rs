@@ -42,6 +42,16 @@ pub struct EvalArgs {
     pub out: PathBuf,
 }
 
+/// The sensor design stored in a table.
+pub fn table_sensor(table: &L3Table) -> Result<crate::camera::SensorDesign, CliError> {
+    let d: crate::camera::SensorDesign = serde_json::from_value(table.meta.sensor.clone())
+        .map_err(|e| {
+            CliError::Usage(format!("the table's sensor description is unreadable: {e}"))
+        })?;
+    d.validate()?;
+    Ok(d)
+}
+
 pub fn run(cli: &Cli, a: &EvalArgs) -> Result<(), CliError> {
     let iset = iset(&cli.iset_dir)?;
     let design = load_sensor(&a.sensor, iset.as_ref())?;
@@ -92,24 +102,33 @@ pub fn run(cli: &Cli, a: &EvalArgs) -> Result<(), CliError> {
                 .as_ref()
                 .ok_or_else(|| CliError::Usage("--table is required with --method l3".into()))?;
             let table = L3Table::load(path)?;
+            let table_camera;
+            let camera = if a.sensor.is_none() {
+                // evaluate on the sensor the table was trained for
+                table_camera = Camera::new(&table_sensor(&table)?, grid, iset.as_ref())?;
+                &table_camera
+            } else {
+                &camera
+            };
             let name = format!(
                 "L3 {} ({})",
                 table.meta.kind,
                 table.meta.train_illuminants.join("+")
             );
-            evaluate_method(
-                &camera,
+            let r = evaluate_method(
+                camera,
                 &Method::Table(&table),
                 &name,
                 &acq,
                 &corr,
                 iset.as_ref(),
                 &chart,
-            )?
+            )?;
+            print_budget(camera, &acq, &corr, iset.as_ref(), &chart, r)?
         }
         "baseline" => {
             let m = fit_baseline_matrix(&camera, &["D65".to_string()], iset.as_ref())?;
-            evaluate_method(
+            let r = evaluate_method(
                 &camera,
                 &Method::Baseline(&m),
                 "Baseline+T",
@@ -117,7 +136,8 @@ pub fn run(cli: &Cli, a: &EvalArgs) -> Result<(), CliError> {
                 &corr,
                 iset.as_ref(),
                 &chart,
-            )?
+            )?;
+            print_budget(&camera, &acq, &corr, iset.as_ref(), &chart, r)?
         }
         other => {
             return Err(CliError::Usage(format!(
@@ -125,18 +145,6 @@ pub fn run(cli: &Cli, a: &EvalArgs) -> Result<(), CliError> {
             )));
         }
     };
-    let budget = crate::eval::error_budget(&camera, &acq, &corr, iset.as_ref(), &chart)?;
-    println!(
-        "error budget: T alone {:.2} (p90 {:.2}); linear floor {:.2} (p90 {:.2}); linear SI + T {:.2} (p90 {:.2})",
-        budget.t_only.mean,
-        budget.t_only.p90,
-        budget.linear_floor.mean,
-        budget.linear_floor.p90,
-        budget.linear_si_then_t.mean,
-        budget.linear_si_then_t.p90
-    );
-    let mut report = report;
-    report.context["error_budget"] = serde_json::to_value(&budget).unwrap_or_default();
     let s = &report.summary;
     println!(
         "{} on {} under {}: mean ΔE2000 {:.2} (std {:.2}), median {:.2}, p90 {:.2}, max {:.2}; per-pixel mean {:.2}",
@@ -159,4 +167,26 @@ pub fn run(cli: &Cli, a: &EvalArgs) -> Result<(), CliError> {
     write_file(&out, &json)?;
     println!("wrote {}", out.display());
     Ok(())
+}
+
+fn print_budget(
+    camera: &Camera,
+    acq: &str,
+    corr: &crate::l3::IlluminantEntry,
+    iset: Option<&crate::spectral::IsetData>,
+    chart: &ChartSetup,
+    mut report: crate::eval::DeltaEReport,
+) -> Result<crate::eval::DeltaEReport, CliError> {
+    let budget = crate::eval::error_budget(camera, acq, corr, iset, chart)?;
+    println!(
+        "error budget: T alone {:.2} (p90 {:.2}); linear floor {:.2} (p90 {:.2}); linear SI + T {:.2} (p90 {:.2})",
+        budget.t_only.mean,
+        budget.t_only.p90,
+        budget.linear_floor.mean,
+        budget.linear_floor.p90,
+        budget.linear_si_then_t.mean,
+        budget.linear_si_then_t.p90
+    );
+    report.context["error_budget"] = serde_json::to_value(&budget).unwrap_or_default();
+    Ok(report)
 }

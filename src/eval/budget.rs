@@ -100,8 +100,8 @@ pub fn error_budget(
         [0, 1, 2].map(|k| c.iter().enumerate().map(|(j, v)| m.m[j][k] * v).sum())
     };
     let floor: Vec<Xyz> = chans.iter().map(|c| apply(&floor_m, c)).collect();
-    let si_m =
-        super::fit_baseline_matrix(camera, &[acquisition.to_string()], iset)?.then(&correction.t);
+    let si_m = super::workflow::fit_colour_matrix(camera, &[acquisition.to_string()], iset, false)?
+        .then(&correction.t);
     let si: Vec<Xyz> = chans.iter().map(|c| apply(&si_m, c)).collect();
     let (a, b, c) = (
         per_patch(&t_only, &truth, white),

@@ -14,7 +14,9 @@ pub use report::{
     ChartTruth, DeltaEReport, ErrorStats, PatchResult, PixelStats, REPORT_SCHEMA, evaluate_chart,
     summarize,
 };
-pub use workflow::{ChartSetup, Method, chart_scene, evaluate_method, fit_baseline_matrix};
+pub use workflow::{
+    ChartSetup, Method, chart_scene, evaluate_method, fit_baseline_matrix, fit_colour_matrix,
+};
 
 /// Errors of the evaluation layer.
 #[derive(Debug, thiserror::Error)]

@@ -109,13 +109,32 @@ fn percentile(sorted: &[f64], q: f64) -> f64 {
 
 /// The interior of a patch: its rectangle shrunk by a margin that keeps the
 /// kernel footprint and optical blur of the neighbours out.
-fn interior(p: &Patch) -> (usize, usize, usize, usize) {
+pub fn interior(p: &Patch) -> (usize, usize, usize, usize) {
     let m = (p.height.min(p.width) / 5).max(3);
     let (h, w) = (
         p.height.saturating_sub(2 * m).max(1),
         p.width.saturating_sub(2 * m).max(1),
     );
     (p.row + (p.height - h) / 2, p.col + (p.width - w) / 2, h, w)
+}
+
+/// Mean of an interleaved XYZ image over each patch's interior.
+pub fn patch_means(patches: &[Patch], xyz: &[f32], width: usize) -> Vec<Xyz> {
+    patches
+        .iter()
+        .map(|p| {
+            let (r0, c0, h, w) = interior(p);
+            let mut s = [0f64; 3];
+            for r in r0..r0 + h {
+                for c in c0..c0 + w {
+                    for k in 0..3 {
+                        s[k] += xyz.get((r * width + c) * 3 + k).copied().unwrap_or(0.0) as f64;
+                    }
+                }
+            }
+            s.map(|v| v / (h * w) as f64)
+        })
+        .collect()
 }
 
 /// Evaluate a rendered XYZ image (`width × height × 3`, interleaved) of a
@@ -163,22 +182,7 @@ pub fn evaluate_chart(
         .copied()
         .max_by(|&a, &b| truth.ideal_d65[a][1].total_cmp(&truth.ideal_d65[b][1]))
         .unwrap_or(0);
-    let means: Vec<Xyz> = truth
-        .patches
-        .iter()
-        .map(|p| {
-            let (r0, c0, h, w) = interior(p);
-            let mut s = [0f64; 3];
-            for r in r0..r0 + h {
-                for c in c0..c0 + w {
-                    for k in 0..3 {
-                        s[k] += xyz[(r * width + c) * 3 + k] as f64;
-                    }
-                }
-            }
-            s.map(|v| v / (h * w) as f64)
-        })
-        .collect();
+    let means = patch_means(truth.patches, xyz, width);
     let y_true = truth.ideal_d65[wi][1];
     let y_est = means[wi][1];
     if !(y_true > 0.0 && y_est > 0.0 && y_est.is_finite()) {

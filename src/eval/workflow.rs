@@ -106,15 +106,20 @@ pub fn evaluate_method(
         }
     };
     let render_ms = started.elapsed().as_secs_f64() * 1e3;
-    let cmfs = Cmfs::cie1931(camera.grid());
+    // The truth: the ideal (noise-free) XYZ image of the same optical image
+    // relit by D65, averaged over each patch interior — what a perfect
+    // camera behind this lens would record. The lens's flare is not the
+    // pipeline's error.
     let d65 = cie_illuminant("D65")
         .ok_or_else(|| EvalError::Invalid("D65 missing".into()))?
         .resample(camera.grid(), Extrapolation::Zero);
-    let ideal = scene
-        .patches
-        .iter()
-        .map(|p| cmfs.reflectance_xyz(&p.reflectance, &d65))
-        .collect::<Result<Vec<_>, _>>()?;
+    let optical = camera
+        .optical_image(&scene)
+        .map_err(|e| EvalError::Invalid(e.to_string()))?;
+    let ideal_img = camera
+        .xyz_rates(&optical, &d65)
+        .map_err(|e| EvalError::Invalid(e.to_string()))?;
+    let ideal = super::report::patch_means(&scene.patches, ideal_img.as_slice().unwrap_or(&[]), w);
     let truth = ChartTruth {
         name: &scene.name,
         patches: &scene.patches,
@@ -132,17 +137,38 @@ pub fn evaluate_method(
     evaluate_chart(&truth, &xyz, w, h, &acq_name, method_name, ctx)
 }
 
-/// The least-squares colour matrix of the baseline for `illuminants`:
-/// noise-free channel responses of the training reflectances → their XYZ
-/// under the same illuminant (same-illuminant, like an SI table).
+/// The least-squares colour matrix of the conventional baseline for
+/// `illuminants`: noise-free channel responses of the training reflectances
+/// → their XYZ under the same illuminant (same-illuminant, like an SI
+/// table). A conventional pipeline uses a 3×3 matrix on R, G, B: when the
+/// CFA has channels named R, G and B only those are used (W gets weight 0);
+/// other CFAs use all their channels.
 pub fn fit_baseline_matrix(
     camera: &Camera,
     illuminants: &[String],
     iset: Option<&IsetData>,
 ) -> Result<ColourMatrix, EvalError> {
+    fit_colour_matrix(camera, illuminants, iset, true)
+}
+
+/// [`fit_baseline_matrix`], or with every channel when `rgb_only` is false.
+pub fn fit_colour_matrix(
+    camera: &Camera,
+    illuminants: &[String],
+    iset: Option<&IsetData>,
+    rgb_only: bool,
+) -> Result<ColourMatrix, EvalError> {
     let grid = *camera.grid();
-    let refl = crate::training::training_reflectances(&grid, iset)
-        .map_err(|e| EvalError::Invalid(e.to_string()))?;
+    let refl = crate::scene::training_reflectances(&grid, iset)?;
+    let cfa = camera.cfa();
+    let rgb: Option<Vec<usize>> = ["R", "G", "B"]
+        .iter()
+        .map(|n| cfa.channel_index(n))
+        .collect();
+    let used: Vec<usize> = match rgb {
+        Some(v) if rgb_only => v,
+        _ => (0..cfa.n_channels()).collect(),
+    };
     let mut chans = Vec::new();
     let mut xyz = Vec::new();
     for spec in illuminants {
@@ -150,11 +176,19 @@ pub fn fit_baseline_matrix(
         let ill = named.spd.resample(&grid, Extrapolation::Zero);
         for (_, r) in &refl {
             let (c, x) = reflectance_response(camera, r, &ill)?;
-            chans.push(c);
+            chans.push(used.iter().map(|&i| c[i]).collect::<Vec<f64>>());
             xyz.push(x);
         }
     }
-    Ok(ColourMatrix::fit(&chans, &xyz)?)
+    let sub = ColourMatrix::fit(&chans, &xyz)?;
+    let mut m = vec![[0.0; 3]; cfa.n_channels()];
+    for (k, &i) in used.iter().enumerate() {
+        m[i] = sub.m[k];
+    }
+    Ok(ColourMatrix {
+        m,
+        n_channels: cfa.n_channels(),
+    })
 }
 
 /// Noise-free channel volts and volts-equivalent XYZ of a uniform

@@ -20,8 +20,9 @@ pub type Mat3 = [[f64; 3]; 3];
 
 pub const IDENTITY: Mat3 = [[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]];
 
-/// The default reflectance set for T: the Munsell matt set and the 99 CES
-/// samples, on `grid`.
+/// The crate-only reflectance set for T: the Munsell matt set and the 99
+/// CES samples, on `grid` (see `scene::correction_reflectances` for the
+/// default, which prefers natural surfaces when the ISET data is present).
 pub fn default_reflectances(grid: &WavelengthGrid) -> Vec<Spectrum> {
     munsell_reflectances()
         .into_iter()
@@ -158,22 +159,11 @@ impl IlluminantRegistry {
     /// The defaults: D65, D50, A, F2, F11, and ISET's measured Tungsten and
     /// Fluorescent when the data is present.
     pub fn with_defaults(grid: WavelengthGrid, iset: Option<&IsetData>) -> Result<Self, L3Error> {
-        let refl = match std::env::var("L3_DEBUG_TSET").as_deref() {
-            Ok("natural") => crate::training::training_reflectances(&grid, iset)
-                .map_err(|e| L3Error::InvalidInput(e.to_string()))?
-                .into_iter()
-                .filter(|(n, _)| {
-                    n.starts_with("obj") || n.starts_with("CES") || n.starts_with("dupont")
-                })
-                .map(|(_, s)| s)
-                .collect(),
-            Ok("all") => crate::training::training_reflectances(&grid, iset)
-                .map_err(|e| L3Error::InvalidInput(e.to_string()))?
-                .into_iter()
-                .map(|(_, s)| s)
-                .collect(),
-            _ => default_reflectances(&grid),
-        };
+        let refl = crate::scene::correction_reflectances(&grid, iset)
+            .map_err(|e| L3Error::InvalidInput(e.to_string()))?
+            .into_iter()
+            .map(|(_, s)| s)
+            .collect();
         let mut r = Self::new(grid, refl)?;
         for name in ["D50", "A", "F2", "F11"] {
             let spd = cie_illuminant(name).ok_or_else(|| {

@@ -18,7 +18,7 @@ pub use correction::{
     CorrectionSource, IDENTITY, IlluminantEntry, IlluminantRegistry, Mat3, correction_matrix,
     default_reflectances,
 };
-pub use normal_eq::{ClassSolution, Gram, RidgeChoice};
+pub use normal_eq::{ChannelSumConstraint, ClassSolution, Gram, RidgeChoice, solve, solve_with};
 pub use output::{WhiteLevel, white_y, xyz_to_srgb8, xyz_to_srgb16};
 pub use params::{DEFAULT_LEVELS_1V8, L3Params};
 pub use render::{RenderStats, fuse_kernels, render_reference, resolve_sat_case};

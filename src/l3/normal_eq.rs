@@ -140,12 +140,38 @@ pub struct ClassSolution {
     pub rss_per_sample: f64,
 }
 
+/// A linear equality constraint on a kernel: for each output k and each
+/// channel c, the weights of the patch pixels of channel c sum to
+/// `sums[k][c]` — the kernel then maps a flat patch exactly as the colour
+/// map `sums` (plus its intercept) does, whatever it does spatially.
+#[derive(Clone, Debug)]
+pub struct ChannelSumConstraint<'a> {
+    /// Channel of each patch pixel (the non-constant regressors).
+    pub channel_of: &'a [u8],
+    pub n_channels: usize,
+    /// `sums[k][c]`: required weight sum of channel c for output k.
+    pub sums: [Vec<f64>; 3],
+    /// Required intercept per output.
+    pub intercept: [f64; 3],
+}
+
 /// Solve ridge regression from a Gram matrix whose last regressor is the
 /// constant 1. The constant is not penalised: the problem is centred first.
 pub fn solve(
     gram: &mut Gram,
     ridge: RidgeChoice,
     noise_var: f64,
+) -> Result<ClassSolution, L3Error> {
+    solve_with(gram, ridge, noise_var, None)
+}
+
+/// [`solve`], optionally subject to a [`ChannelSumConstraint`] (the ridge λ
+/// is still chosen on the unconstrained problem).
+pub fn solve_with(
+    gram: &mut Gram,
+    ridge: RidgeChoice,
+    noise_var: f64,
+    constraint: Option<&ChannelSumConstraint>,
 ) -> Result<ClassSolution, L3Error> {
     let nf = gram.n_features();
     let n = gram.count();
@@ -217,7 +243,45 @@ pub fn solve(
             scaled[(i, k)] *= d;
         }
     }
-    let w = &eig.eigenvectors * scaled; // p × 3
+    let mut w = &eig.eigenvectors * scaled; // p × 3
+    let mut intercept: Option<[f64; 3]> = None;
+    if let Some(con) = constraint {
+        if con.channel_of.len() == p {
+            // KKT: w = H⁻¹(cxy − Aᵀν), ν = (A H⁻¹ Aᵀ)⁻¹ (A H⁻¹ cxy − m),
+            // with H = V diag(e+λ) Vᵀ and A the channel-membership matrix.
+            let nc = con.n_channels;
+            let present: Vec<usize> = (0..nc)
+                .filter(|&c| con.channel_of.iter().any(|&x| x as usize == c))
+                .collect();
+            let a = DMatrix::from_fn(present.len(), p, |r, j| {
+                (con.channel_of[j] as usize == present[r]) as u8 as f64
+            });
+            let hinv = {
+                let mut d = eig.eigenvectors.clone();
+                for j in 0..p {
+                    let f = 1.0 / (evals[j] + lambda);
+                    for i in 0..p {
+                        d[(i, j)] *= f;
+                    }
+                }
+                d * eig.eigenvectors.transpose()
+            };
+            let ahinv = &a * &hinv; // nc × p
+            let s_mat = &ahinv * a.transpose(); // nc × nc
+            if let Some(s_inv) = s_mat.try_inverse() {
+                for k in 0..3 {
+                    let m = nalgebra::DVector::from_fn(present.len(), |r, _| {
+                        con.sums[k].get(present[r]).copied().unwrap_or(0.0)
+                    });
+                    let wk = w.column(k).into_owned(); // = H⁻¹ cxy
+                    let nu = &s_inv * (&a * &wk - m);
+                    let corr = &hinv * (a.transpose() * nu);
+                    w.set_column(k, &(wk - corr));
+                }
+                intercept = Some(con.intercept);
+            }
+        }
+    }
     let mut kernel = vec![0.0; 3 * nf];
     for k in 0..3 {
         let mut b = my[k];
@@ -225,7 +289,7 @@ pub fn solve(
             kernel[k * nf + i] = w[(i, k)];
             b -= w[(i, k)] * mx[i];
         }
-        kernel[k * nf + p] = b;
+        kernel[k * nf + p] = intercept.map(|c| c[k]).unwrap_or(b);
     }
     if kernel.iter().any(|v| !v.is_finite()) {
         return Err(L3Error::Table(format!(
@@ -302,6 +366,37 @@ mod tests {
         assert!(s.kernel[2].abs() < 1e-9);
         let mut e = Gram::new(4);
         assert!(solve(&mut e, RidgeChoice::Gcv, 0.0).is_err());
+    }
+
+    #[test]
+    fn channel_sum_constraint_is_met() {
+        let mut rng = ChaCha8Rng::seed_from_u64(3);
+        let mut g = Gram::new(5);
+        for _ in 0..2000 {
+            let base = rng.random::<f32>();
+            let x = [
+                base + 0.1 * rng.random::<f32>(),
+                base + 0.1 * rng.random::<f32>(),
+                0.5 * base + 0.1 * rng.random::<f32>(),
+                0.5 * base + 0.1 * rng.random::<f32>(),
+                1.0,
+            ];
+            g.push(&x, [base, 0.5 * base, 0.2]);
+        }
+        let con = ChannelSumConstraint {
+            channel_of: &[0, 0, 1, 1],
+            n_channels: 2,
+            sums: [vec![0.7, 0.6], vec![0.5, 0.0], vec![0.0, 0.0]],
+            intercept: [0.01, 0.0, 0.2],
+        };
+        let s = solve_with(&mut g, RidgeChoice::Gcv, 0.0, Some(&con)).unwrap();
+        for k in 0..3 {
+            let c0 = s.kernel[k * 5] + s.kernel[k * 5 + 1];
+            let c1 = s.kernel[k * 5 + 2] + s.kernel[k * 5 + 3];
+            assert!((c0 - con.sums[k][0]).abs() < 1e-9, "{k} {c0}");
+            assert!((c1 - con.sums[k][1]).abs() < 1e-9);
+            assert_eq!(s.kernel[k * 5 + 4], con.intercept[k]);
+        }
     }
 
     #[test]

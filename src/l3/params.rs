@@ -31,6 +31,15 @@ pub struct L3Params {
     pub ridge: RidgeChoice,
     /// Average flat kernels with their mirror images where the CFA allows.
     pub symmetrize_flat: bool,
+    /// Constrain flat unsaturated kernels to map flat patches exactly as the
+    /// noise-free colour map of their class does (no colour bias from
+    /// errors-in-variables shrinkage; the spatial weights still denoise).
+    #[serde(default = "default_true")]
+    pub unbiased_flat: bool,
+}
+
+fn default_true() -> bool {
+    true
 }
 
 impl Default for L3Params {
@@ -46,6 +55,7 @@ impl Default for L3Params {
             min_class_samples: 200,
             ridge: RidgeChoice::Gcv,
             symmetrize_flat: true,
+            unbiased_flat: true,
         }
     }
 }

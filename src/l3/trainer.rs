@@ -9,7 +9,7 @@ use rayon::prelude::*;
 
 use super::classify::MAX_CHANNELS;
 use super::classify::sat_case_index;
-use super::normal_eq::solve;
+use super::normal_eq::{ChannelSumConstraint, solve, solve_with};
 use super::{ClassReport, Gram, L3Error, L3Params, L3Table, PatchGeometry, RidgeChoice, TableMeta};
 
 /// One training frame: a noisy mosaic in volts and the ideal XYZ at every
@@ -20,6 +20,9 @@ pub struct TrainingFrame {
     pub height: usize,
     pub volts: Vec<f32>,
     pub xyz: Vec<f32>,
+    /// The same mosaic without noise (volts), when known: flat kernels are
+    /// then constrained to map flat patches without colour bias.
+    pub clean: Option<Vec<f32>>,
     /// Pixel (r, c) sits under the base CFA's (r + dr, c + dc) filter.
     pub cfa_shift: (usize, usize),
 }
@@ -247,7 +250,12 @@ where
     // ---- pass 2: accumulate normal equations ----
     let nf = geo.n_features();
     let n_classes = n_groups * 2;
-    let new_acc = || -> Vec<Option<Box<Gram>>> { (0..n_classes).map(|_| None).collect() };
+    // after the class accumulators: one per (position, level) for the
+    // noise-free colour map of flat unsaturated patches
+    let n_maps = d.n_pos * d.n_levels;
+    let nch = geo.n_channels();
+    let use_maps = params.unbiased_flat;
+    let new_acc = || -> Vec<Option<Box<Gram>>> { (0..n_classes + n_maps).map(|_| None).collect() };
     let accs = (0..n_frames)
         .into_par_iter()
         .map(|i| -> Result<Vec<Option<Box<Gram>>>, L3Error> {
@@ -255,6 +263,8 @@ where
             let frames = frame(i)?;
             let mut acc = new_acc();
             let mut feat = vec![0f32; nf];
+            let mut clean_patch = vec![0f32; nf - 1];
+            let mut map_feat = vec![0f32; nch + 1];
             for f in &frames {
                 check_cancel()?;
                 for_each_patch(geo, f, |pos, st, patch| {
@@ -274,6 +284,19 @@ where
                     acc[class]
                         .get_or_insert_with(|| Box::new(Gram::new(nf)))
                         .push(&feat, y);
+                    if use_maps && case == 0 && !texture {
+                        if let Some(clean) = &f.clean {
+                            let (r, c) = (idx / f.width, idx % f.width);
+                            geo.gather(clean, f.width, f.height, r, c, &mut clean_patch);
+                            let cs = geo.stats(&clean_patch, pos);
+                            map_feat[..nch].copy_from_slice(&cs.channel_means[..nch]);
+                            map_feat[nch] = 1.0;
+                            let my = patch_mean_xyz(geo, f, r, c);
+                            acc[n_classes + pos * d.n_levels + level]
+                                .get_or_insert_with(|| Box::new(Gram::new(nch + 1)))
+                                .push(&map_feat, my);
+                        }
+                    }
                 });
             }
             tick("accumulate");
@@ -293,6 +316,8 @@ where
     (ctl.progress)("solve", 0.95);
 
     // ---- solve ----
+    let mut accs = accs;
+    let mut maps: Vec<Option<Box<Gram>>> = accs.split_off(n_classes);
     let mut grams: Vec<Gram> = accs
         .into_iter()
         .map(|g| g.map(|b| *b).unwrap_or_else(|| Gram::new(nf)))
@@ -373,11 +398,35 @@ where
                         )));
                     }
                     let lv = geo.levels()[l] as f64;
-                    let sol = solve(&mut g, params.ridge, noise.variance(lv)).map_err(|e| {
-                        L3Error::Table(format!(
-                            "class (position {pos}, level {l}, case {c}, texture {t}): {e}"
-                        ))
-                    })?;
+                    // flat, unsaturated: unbiased on flat patches
+                    let mut con_sums = None;
+                    if c == 0 && t_src == 0 && use_maps {
+                        if let Some(mg) = maps[pos * d.n_levels + l].as_mut() {
+                            if mg.count() >= 50 {
+                                if let Ok(ms) =
+                                    solve(mg, RidgeChoice::Fixed { relative: 1e-9 }, 0.0)
+                                {
+                                    let w = nch + 1;
+                                    con_sums = Some((
+                                        [0, 1, 2].map(|k| ms.kernel[k * w..k * w + nch].to_vec()),
+                                        [0, 1, 2].map(|k| ms.kernel[k * w + nch]),
+                                    ));
+                                }
+                            }
+                        }
+                    }
+                    let con = con_sums.map(|(sums, intercept)| ChannelSumConstraint {
+                        channel_of: geo.channels_of(pos),
+                        n_channels: nch,
+                        sums,
+                        intercept,
+                    });
+                    let sol = solve_with(&mut g, params.ridge, noise.variance(lv), con.as_ref())
+                        .map_err(|e| {
+                            L3Error::Table(format!(
+                                "class (position {pos}, level {l}, case {c}, texture {t}): {e}"
+                            ))
+                        })?;
                     let norm = sol.kernel.iter().map(|v| v * v).sum::<f64>().sqrt();
                     for (dst, src) in kernels[k * 3 * nf..(k + 1) * 3 * nf]
                         .iter_mut()
@@ -439,6 +488,24 @@ fn quantile_edge(h: &[u64], q: f64) -> f32 {
         }
     }
     hist_edge(HIST_BINS)
+}
+
+/// Mean target XYZ over the patch window centred on (r, c) (mirrored borders).
+fn patch_mean_xyz(geo: &PatchGeometry, f: &TrainingFrame, r: usize, c: usize) -> [f32; 3] {
+    let rad = geo.radius as isize;
+    let mut s = [0f32; 3];
+    for dy in -rad..=rad {
+        let rr = super::classify::mirror(r as isize + dy, f.height);
+        for dx in -rad..=rad {
+            let cc = super::classify::mirror(c as isize + dx, f.width);
+            let o = (rr * f.width + cc) * 3;
+            for k in 0..3 {
+                s[k] += f.xyz[o + k];
+            }
+        }
+    }
+    let n = (geo.size * geo.size) as f32;
+    s.map(|v| v / n)
 }
 
 /// Per-patch statistics with the flat index of the centre pixel.

@@ -21,7 +21,8 @@ use crate::spectral::{
     Extrapolation, IlluminantSpec, IsetData, SpectralError, WavelengthGrid, cie_illuminant,
 };
 
-pub use scenes::{TrainingScenes, training_reflectances};
+pub use crate::scene::training_reflectances;
+pub use scenes::TrainingScenes;
 
 /// Errors of a training run.
 #[derive(Debug, thiserror::Error)]
@@ -269,11 +270,22 @@ pub fn train_table(
                     .capture(&mean, exposure, &noise, seed)
                     .map_err(TrainError::from)?;
                 let t = exposure as f32;
+                let volts = volts.into_raw_vec_and_offset().0;
+                let clean = if spec.noise {
+                    camera
+                        .capture(&mean, exposure, &NoiseSwitches::none(), seed)
+                        .map_err(TrainError::from)?
+                        .into_raw_vec_and_offset()
+                        .0
+                } else {
+                    volts.clone()
+                };
                 frames.push(TrainingFrame {
                     width: cols,
                     height: rows,
-                    volts: volts.into_raw_vec_and_offset().0,
+                    volts,
                     xyz: xyz_rates.iter().map(|v| v * t).collect(),
+                    clean: Some(clean),
                     cfa_shift: (dr, dc),
                 });
             }

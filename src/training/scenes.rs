@@ -6,41 +6,10 @@ use rand_chacha::ChaCha8Rng;
 
 use super::{TrainError, mix};
 use crate::scene::{
-    DeadLeavesParams, Scene, SceneOptions, dead_leaves, grey_ramp, natural100_samples,
-    reflectance_chart,
+    DeadLeavesParams, Scene, SceneOptions, dead_leaves, grey_ramp, reflectance_chart,
+    training_reflectances,
 };
-use crate::spectral::{
-    Extrapolation, IsetData, Spectrum, WavelengthGrid, ces_reflectances, munsell_reflectances,
-};
-
-/// The training reflectances: the Munsell matt set and the 99 CES from the
-/// crate, plus ISET's Vrhel objects, DuPont paints and Munsell samples when
-/// present — never the 100 samples of the Natural-100 evaluation chart.
-pub fn training_reflectances(
-    grid: &WavelengthGrid,
-    iset: Option<&IsetData>,
-) -> Result<Vec<(String, Spectrum)>, TrainError> {
-    let mut out: Vec<(String, Spectrum)> = munsell_reflectances()
-        .into_iter()
-        .chain(ces_reflectances())
-        .map(|(n, s)| (n, s.resample(grid, Extrapolation::Hold)))
-        .collect();
-    if let Some(d) = iset {
-        let excluded: Vec<String> = natural100_samples(d)?.into_iter().map(|s| s.name).collect();
-        for file in [
-            "surfaces/reflectances/Objects_Vhrel.csv",
-            "surfaces/reflectances/DupontPaintChip_Vhrel.csv",
-            "surfaces/reflectances/MunsellSamples_Vhrel.csv",
-        ] {
-            for (name, s) in d.table(file)?.all()? {
-                if !excluded.contains(&name) {
-                    out.push((name, s.resample(grid, Extrapolation::Hold)));
-                }
-            }
-        }
-    }
-    Ok(out)
-}
+use crate::spectral::{IsetData, Spectrum, WavelengthGrid};
 
 /// Generator of the training scenes.
 pub struct TrainingScenes {
