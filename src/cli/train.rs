@@ -25,7 +25,7 @@ pub struct TrainArgs {
     pub levels: usize,
     #[arg(long, default_value_t = 0)]
     pub seed: u64,
-    /// Training scenes (each under every illuminant).
+    /// Training scenes (scene s lit by illuminant s mod n).
     #[arg(long, default_value_t = 48)]
     pub scenes: usize,
     /// Side of each training scene, pixels.

@@ -12,7 +12,7 @@ pub use paper_table::{
 };
 pub use report::{
     ChartTruth, DeltaEReport, ErrorStats, PatchResult, PixelStats, REPORT_SCHEMA, evaluate_chart,
-    summarize,
+    patch_means, summarize,
 };
 pub use workflow::{
     ChartSetup, Method, chart_scene, evaluate_method, fit_baseline_matrix, fit_colour_matrix,

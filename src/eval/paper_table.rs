@@ -235,9 +235,12 @@ pub fn run_paper_table(
             reports.push(rep);
         }
     }
-    let n = opts.acquisitions.len().max(1);
+    // N = the registry's illuminants: one cross table each, against one SI
+    // table plus one 3×3 matrix (9 f64) each.
+    let n = registry.len().max(1);
     let table_bytes = si_ens.kernel_bytes();
     let matrix_bytes = 9 * 8;
+    let cross_bytes = cross_bytes / opts.acquisitions.len().max(1) * n;
     Ok(PaperTable {
         sensor: design.name.clone(),
         chart: chart_name,

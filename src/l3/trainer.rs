@@ -256,62 +256,70 @@ where
     let nch = geo.n_channels();
     let use_maps = params.unbiased_flat;
     let new_acc = || -> Vec<Option<Box<Gram>>> { (0..n_classes + n_maps).map(|_| None).collect() };
-    let accs = (0..n_frames)
-        .into_par_iter()
-        .map(|i| -> Result<Vec<Option<Box<Gram>>>, L3Error> {
+    let batch = |i: usize| -> Result<Vec<Option<Box<Gram>>>, L3Error> {
+        check_cancel()?;
+        let frames = frame(i)?;
+        let mut acc = new_acc();
+        let mut feat = vec![0f32; nf];
+        let mut clean_patch = vec![0f32; nf - 1];
+        let mut map_feat = vec![0f32; nch + 1];
+        for f in &frames {
             check_cancel()?;
-            let frames = frame(i)?;
-            let mut acc = new_acc();
-            let mut feat = vec![0f32; nf];
-            let mut clean_patch = vec![0f32; nf - 1];
-            let mut map_feat = vec![0f32; nch + 1];
-            for f in &frames {
-                check_cancel()?;
-                for_each_patch(geo, f, |pos, st, patch| {
-                    let level = geo.level_of(st.luminance);
-                    let mask = if params.saturation_classes {
-                        st.sat_mask
-                    } else {
-                        0
-                    };
-                    let case = case_of(mask, &st.channel_means);
-                    let group = (pos * d.n_levels + level) * n_sat + case;
-                    let texture = params.contrast_classes && st.contrast > thresholds[group];
-                    let class = group * 2 + texture as usize;
-                    geo.features(patch, pos, sat_cases[case], &mut feat);
-                    let idx = st.index;
-                    let y = [f.xyz[idx * 3], f.xyz[idx * 3 + 1], f.xyz[idx * 3 + 2]];
-                    acc[class]
-                        .get_or_insert_with(|| Box::new(Gram::new(nf)))
-                        .push(&feat, y);
-                    if use_maps && case == 0 && !texture {
-                        if let Some(clean) = &f.clean {
-                            let (r, c) = (idx / f.width, idx % f.width);
-                            geo.gather(clean, f.width, f.height, r, c, &mut clean_patch);
-                            let cs = geo.stats(&clean_patch, pos);
-                            map_feat[..nch].copy_from_slice(&cs.channel_means[..nch]);
-                            map_feat[nch] = 1.0;
-                            let my = patch_mean_xyz(geo, f, r, c);
-                            acc[n_classes + pos * d.n_levels + level]
-                                .get_or_insert_with(|| Box::new(Gram::new(nch + 1)))
-                                .push(&map_feat, my);
-                        }
+            for_each_patch(geo, f, |pos, st, patch| {
+                let level = geo.level_of(st.luminance);
+                let mask = if params.saturation_classes {
+                    st.sat_mask
+                } else {
+                    0
+                };
+                let case = case_of(mask, &st.channel_means);
+                let group = (pos * d.n_levels + level) * n_sat + case;
+                let texture = params.contrast_classes && st.contrast > thresholds[group];
+                let class = group * 2 + texture as usize;
+                geo.features(patch, pos, sat_cases[case], &mut feat);
+                let idx = st.index;
+                let y = [f.xyz[idx * 3], f.xyz[idx * 3 + 1], f.xyz[idx * 3 + 2]];
+                acc[class]
+                    .get_or_insert_with(|| Box::new(Gram::new(nf)))
+                    .push(&feat, y);
+                if use_maps && case == 0 && !texture {
+                    if let Some(clean) = &f.clean {
+                        let (r, c) = (idx / f.width, idx % f.width);
+                        geo.gather(clean, f.width, f.height, r, c, &mut clean_patch);
+                        let cs = geo.stats(&clean_patch, pos);
+                        map_feat[..nch].copy_from_slice(&cs.channel_means[..nch]);
+                        map_feat[nch] = 1.0;
+                        let my = patch_mean_xyz(geo, f, r, c);
+                        acc[n_classes + pos * d.n_levels + level]
+                            .get_or_insert_with(|| Box::new(Gram::new(nch + 1)))
+                            .push(&map_feat, my);
                     }
-                });
-            }
-            tick("accumulate");
-            Ok(acc)
-        })
-        .try_reduce(new_acc, |mut a, b| {
-            for (x, y) in a.iter_mut().zip(b) {
+                }
+            });
+        }
+        tick("accumulate");
+        Ok(acc)
+    };
+    // Batches run in parallel a chunk at a time, and their f64 sums are
+    // merged in batch order: the result does not depend on thread timing.
+    const CHUNK: usize = 8;
+    let mut accs = new_acc();
+    for start in (0..n_frames).step_by(CHUNK) {
+        let end = (start + CHUNK).min(n_frames);
+        let parts = (start..end)
+            .into_par_iter()
+            .map(batch)
+            .collect::<Result<Vec<_>, L3Error>>()?;
+        for part in parts {
+            for (x, y) in accs.iter_mut().zip(part) {
                 match (x.as_mut(), y) {
                     (Some(g), Some(h)) => g.merge(&h),
                     (None, Some(h)) => *x = Some(h),
                     _ => {}
                 }
             }
-            Ok(a)
-        })?;
+        }
+    }
     check_cancel()?;
     (ctl.progress)("solve", 0.95);
 

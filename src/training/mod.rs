@@ -64,7 +64,7 @@ pub struct TrainingSpec {
     pub levels: usize,
     #[serde(default)]
     pub seed: u64,
-    /// Number of training scenes (each simulated under every illuminant).
+    /// Number of training scenes; scene s is lit by illuminant s mod n.
     #[serde(default = "default_scenes")]
     pub scenes: usize,
     /// Side of each training scene, pixels.
@@ -218,9 +218,12 @@ pub fn train_table(
     let n_ill = illuminants.len();
     let levels = params.levels.clone();
     let cfa = camera.cfa().clone();
-    let n_batches = spec.scenes * n_ill;
+    // A fixed scene budget: scene s is lit by illuminant s mod n (an
+    // ensemble is a mixture of scenes, not every scene under every light),
+    // so an ensemble costs what a single-illuminant table costs.
+    let n_batches = spec.scenes;
     let frame = |b: usize| -> Result<Vec<TrainingFrame>, L3Error> {
-        let (s, i) = (b / n_ill, b % n_ill);
+        let (s, i) = (b, b % n_ill);
         let (ill_name, ill) = &illuminants[i];
         let scene = scenes.scene(s, ill, ill_name).map_err(TrainError::from)?;
         let optical = camera.optical_image(&scene).map_err(TrainError::from)?;

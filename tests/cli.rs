@@ -1,0 +1,229 @@
+//! The `l3` binary end to end: simulate → train → render → eval, through
+//! the real executable, in a temporary folder.
+
+use std::path::Path;
+use std::process::Command;
+
+fn l3(args: &[&str], dir: &Path) -> (bool, String, String) {
+    let out = Command::new(env!("CARGO_BIN_EXE_l3"))
+        .args(args)
+        .current_dir(dir)
+        .output()
+        .expect("run l3");
+    (
+        out.status.success(),
+        String::from_utf8_lossy(&out.stdout).into_owned(),
+        String::from_utf8_lossy(&out.stderr).into_owned(),
+    )
+}
+
+fn iset_arg() -> Option<String> {
+    l3::spectral::IsetData::for_tests().map(|d| d.root().display().to_string())
+}
+
+#[test]
+fn simulate_train_render_eval() {
+    let Some(iset) = iset_arg() else { return };
+    let tmp = tempfile::tempdir().unwrap();
+    let d = tmp.path();
+    let sim = d.join("sim");
+    let (ok, out, err) = l3(
+        &[
+            "--iset-dir",
+            &iset,
+            "simulate",
+            "--scene",
+            "macbeth",
+            "--illuminant",
+            "Tungsten",
+            "--seed",
+            "3",
+            "--out",
+            sim.to_str().unwrap(),
+        ],
+        d,
+    );
+    assert!(ok, "simulate failed: {out}{err}");
+    for f in [
+        "mosaic.raw",
+        "mosaic.json",
+        "mosaic.png",
+        "ideal_xyz.tiff",
+        "preview.png",
+    ] {
+        assert!(sim.join(f).is_file(), "missing {f}");
+    }
+    let meta: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(sim.join("mosaic.json")).unwrap()).unwrap();
+    assert_eq!(meta["cfa"], "RG/WB");
+    assert_eq!(meta["illuminant"], "Tungsten");
+    let (w, h) = (
+        meta["width"].as_u64().unwrap(),
+        meta["height"].as_u64().unwrap(),
+    );
+    assert_eq!(
+        std::fs::metadata(sim.join("mosaic.raw")).unwrap().len(),
+        w * h * 2
+    );
+    // same seed → same bytes
+    let sim2 = d.join("sim2");
+    let (ok, _, _) = l3(
+        &[
+            "--iset-dir",
+            &iset,
+            "simulate",
+            "--scene",
+            "macbeth",
+            "--illuminant",
+            "Tungsten",
+            "--seed",
+            "3",
+            "--out",
+            sim2.to_str().unwrap(),
+        ],
+        d,
+    );
+    assert!(ok);
+    assert_eq!(
+        std::fs::read(sim.join("mosaic.raw")).unwrap(),
+        std::fs::read(sim2.join("mosaic.raw")).unwrap()
+    );
+
+    let table = d.join("t.safetensors");
+    let (ok, out, err) = l3(
+        &[
+            "--iset-dir",
+            &iset,
+            "train",
+            "--kind",
+            "si",
+            "--illuminants",
+            "D65,Tungsten",
+            "--scenes",
+            "4",
+            "--scene-size",
+            "48",
+            "--levels",
+            "10",
+            "--out",
+            table.to_str().unwrap(),
+        ],
+        d,
+    );
+    assert!(ok, "train failed: {out}{err}");
+    assert!(out.contains("trained si table"), "{out}");
+
+    for (name, extra) in [
+        ("out.png", vec![]),
+        ("out.tiff", vec![]),
+        ("out16.tiff", vec!["--tiff", "srgb16"]),
+    ] {
+        let mut args = vec![
+            "--iset-dir",
+            &iset,
+            "render",
+            "--table",
+            table.to_str().unwrap(),
+            "--illuminant",
+            "Tungsten",
+            "--in",
+        ];
+        let input = sim.join("mosaic.raw");
+        args.push(input.to_str().unwrap());
+        let o = d.join(name);
+        args.extend(["--out", o.to_str().unwrap()]);
+        args.extend(extra);
+        let (ok, out, err) = l3(&args, d);
+        assert!(ok, "render {name} failed: {out}{err}");
+        assert!(std::fs::metadata(&o).unwrap().len() > 1000);
+    }
+    // the rendered PNG decodes at the input's size
+    let png = image::open(d.join("out.png")).unwrap();
+    assert_eq!((png.width() as u64, png.height() as u64), (w, h));
+    // a 16-bit PNG input renders the same as the raw
+    let (ok, _, err) = l3(
+        &[
+            "--iset-dir",
+            &iset,
+            "render",
+            "--table",
+            table.to_str().unwrap(),
+            "--illuminant",
+            "Tungsten",
+            "--in",
+            sim.join("mosaic.png").to_str().unwrap(),
+            "--out",
+            d.join("from_png.tiff").to_str().unwrap(),
+        ],
+        d,
+    );
+    assert!(ok, "{err}");
+    assert_eq!(
+        std::fs::read(d.join("out.tiff")).unwrap(),
+        std::fs::read(d.join("from_png.tiff")).unwrap()
+    );
+
+    let report = d.join("report.json");
+    let (ok, out, err) = l3(
+        &[
+            "--iset-dir",
+            &iset,
+            "eval",
+            "--table",
+            table.to_str().unwrap(),
+            "--illuminant",
+            "Tungsten",
+            "--out",
+            report.to_str().unwrap(),
+        ],
+        d,
+    );
+    assert!(ok, "eval failed: {out}{err}");
+    let r: serde_json::Value = serde_json::from_slice(&std::fs::read(&report).unwrap()).unwrap();
+    assert_eq!(r["schema"], "l3.delta_e.v1");
+    assert_eq!(r["patches"].as_array().unwrap().len(), 110);
+    let mean = r["summary"]["mean"].as_f64().unwrap();
+    assert!(
+        mean.is_finite() && mean > 0.0 && mean < 6.0,
+        "mean ΔE {mean}"
+    );
+}
+
+#[test]
+fn bad_arguments_are_clear_errors() {
+    let tmp = tempfile::tempdir().unwrap();
+    let d = tmp.path();
+    let (ok, _, err) = l3(&["simulate", "--illuminant", "nonsense", "--out", "x"], d);
+    assert!(!ok && err.contains("unknown illuminant"), "{err}");
+    let (ok, _, err) = l3(
+        &[
+            "render",
+            "--table",
+            "missing.safetensors",
+            "--in",
+            "x.raw",
+            "--out",
+            "y.png",
+        ],
+        d,
+    );
+    assert!(!ok && err.contains("missing.safetensors"), "{err}");
+    std::fs::write(d.join("bad.safetensors"), b"not a table").unwrap();
+    let (ok, _, err) = l3(
+        &[
+            "render",
+            "--table",
+            "bad.safetensors",
+            "--in",
+            "x.raw",
+            "--out",
+            "y.png",
+        ],
+        d,
+    );
+    assert!(!ok && err.contains("bad.safetensors"), "{err}");
+    let (ok, _, err) = l3(&["train", "--patch", "4", "--out", "t.safetensors"], d);
+    assert!(!ok && err.contains("patch"), "{err}");
+    let (ok, _, err) = l3(&["simulate", "--exposure", "-1", "--out", "x"], d);
+    assert!(!ok && err.contains("exposure"), "{err}");
+}
