@@ -225,7 +225,7 @@ pub fn train_table(
     let frame = |b: usize| -> Result<Vec<TrainingFrame>, L3Error> {
         let (s, i) = (b, b % n_ill);
         let (ill_name, ill) = &illuminants[i];
-        let scene = scenes.scene(s, ill, ill_name).map_err(TrainError::from)?;
+        let scene = scenes.scene(s, ill, ill_name)?;
         let optical = camera.optical_image(&scene).map_err(TrainError::from)?;
         let rates = camera.channel_rates(&optical).map_err(TrainError::from)?;
         let target_ill = match spec.kind {
