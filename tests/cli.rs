@@ -18,7 +18,12 @@ fn l3(args: &[&str], dir: &Path) -> (bool, String, String) {
 }
 
 fn iset_arg() -> Option<String> {
-    l3::spectral::IsetData::for_tests().map(|d| d.root().display().to_string())
+    l3::spectral::IsetData::for_tests().map(|d| {
+        std::fs::canonicalize(d.root())
+            .unwrap_or_else(|_| d.root().to_path_buf())
+            .display()
+            .to_string()
+    })
 }
 
 #[test]
@@ -224,6 +229,6 @@ fn bad_arguments_are_clear_errors() {
     assert!(!ok && err.contains("bad.safetensors"), "{err}");
     let (ok, _, err) = l3(&["train", "--patch", "4", "--out", "t.safetensors"], d);
     assert!(!ok && err.contains("patch"), "{err}");
-    let (ok, _, err) = l3(&["simulate", "--exposure", "-1", "--out", "x"], d);
+    let (ok, _, err) = l3(&["simulate", "--exposure=-1", "--out", "x"], d);
     assert!(!ok && err.contains("exposure"), "{err}");
 }

@@ -1,0 +1,67 @@
+//! Render throughput: a 12 MP RGBW frame → XYZ → sRGB 8-bit with the
+//! reference renderer (fused T), against a plain copy of the same frame
+//! measured in the same run. Run: `cargo bench --bench render`.
+
+use std::hint::black_box;
+use std::sync::atomic::AtomicBool;
+
+use criterion::{Criterion, Throughput, criterion_group, criterion_main};
+use l3::camera::{Camera, NoiseSwitches, SensorDesign, mosaic};
+use l3::l3::{IlluminantRegistry, fuse_kernels, render_reference, xyz_to_srgb8};
+use l3::scene::{DeadLeavesParams, SceneOptions, dead_leaves};
+use l3::spectral::{Extrapolation, WavelengthGrid, ces_reflectances, cie_illuminant};
+use l3::training::{TrainingSpec, train_table};
+
+const W: usize = 4000;
+const H: usize = 3000;
+
+fn bench(c: &mut Criterion) {
+    let design = SensorDesign::paper_default();
+    let cancel = AtomicBool::new(false);
+    let spec = TrainingSpec {
+        illuminants: vec!["D65".into(), "A".into()],
+        scenes: 16,
+        ..TrainingSpec::default()
+    };
+    let table = train_table(&design, &spec, None, &|_, _| {}, &cancel).expect("train");
+    let grid = WavelengthGrid::default();
+    let camera = Camera::new(&design, grid, None).expect("camera");
+    // a 1000×750 dead-leaves frame under A, tiled to 12 MP
+    let a = cie_illuminant("A").expect("A").resample(&grid, Extrapolation::Zero);
+    let opts = SceneOptions::new(grid, a, "A").expect("opts");
+    let refl: Vec<_> = ces_reflectances()
+        .into_iter()
+        .map(|(_, s)| s.resample(&grid, Extrapolation::Hold))
+        .collect();
+    let scene = dead_leaves(&opts, &refl, &DeadLeavesParams::new(750, 1000, 3)).expect("scene");
+    let optical = camera.optical_image(&scene).expect("optics");
+    let rates = camera.channel_rates(&optical).expect("rates");
+    let mean = mosaic(&rates, camera.cfa()).expect("mosaic");
+    let t = camera.auto_exposure(&rates, camera.cfa(), 0.95).expect("ae");
+    let tile = camera.capture(&mean, t, &NoiseSwitches::all(), 1).expect("capture");
+    let (th, tw) = tile.dim();
+    let tile = tile.as_slice().expect("contiguous").to_vec();
+    let frame: Vec<f32> = (0..W * H)
+        .map(|i| tile[((i / W) % th) * tw + (i % W) % tw])
+        .collect();
+    let mut reg = IlluminantRegistry::with_defaults(grid, None).expect("registry");
+    let kernels = fuse_kernels(&table, &reg.resolve("A", None).expect("A").t);
+
+    let mut g = c.benchmark_group("render_12mp");
+    g.sample_size(10);
+    g.throughput(Throughput::Elements((W * H) as u64));
+    let mut copy = vec![0f32; W * H];
+    g.bench_function("plain_copy_f32", |b| {
+        b.iter(|| copy.copy_from_slice(black_box(&frame)))
+    });
+    g.bench_function("l3_reference_to_srgb8", |b| {
+        b.iter(|| {
+            let (xyz, _) = render_reference(&table, &kernels, black_box(&frame), W, H).expect("render");
+            black_box(xyz_to_srgb8(&xyz, 1.0))
+        })
+    });
+    g.finish();
+}
+
+criterion_group!(benches, bench);
+criterion_main!(benches);
