@@ -27,7 +27,9 @@ fn bench(c: &mut Criterion) {
     let grid = WavelengthGrid::default();
     let camera = Camera::new(&design, grid, None).expect("camera");
     // a 1000×750 dead-leaves frame under A, tiled to 12 MP
-    let a = cie_illuminant("A").expect("A").resample(&grid, Extrapolation::Zero);
+    let a = cie_illuminant("A")
+        .expect("A")
+        .resample(&grid, Extrapolation::Zero);
     let opts = SceneOptions::new(grid, a, "A").expect("opts");
     let refl: Vec<_> = ces_reflectances()
         .into_iter()
@@ -37,8 +39,12 @@ fn bench(c: &mut Criterion) {
     let optical = camera.optical_image(&scene).expect("optics");
     let rates = camera.channel_rates(&optical).expect("rates");
     let mean = mosaic(&rates, camera.cfa()).expect("mosaic");
-    let t = camera.auto_exposure(&rates, camera.cfa(), 0.95).expect("ae");
-    let tile = camera.capture(&mean, t, &NoiseSwitches::all(), 1).expect("capture");
+    let t = camera
+        .auto_exposure(&rates, camera.cfa(), 0.95)
+        .expect("ae");
+    let tile = camera
+        .capture(&mean, t, &NoiseSwitches::all(), 1)
+        .expect("capture");
     let (th, tw) = tile.dim();
     let tile = tile.as_slice().expect("contiguous").to_vec();
     let frame: Vec<f32> = (0..W * H)
@@ -56,7 +62,8 @@ fn bench(c: &mut Criterion) {
     });
     g.bench_function("l3_reference_to_srgb8", |b| {
         b.iter(|| {
-            let (xyz, _) = render_reference(&table, &kernels, black_box(&frame), W, H).expect("render");
+            let (xyz, _) =
+                render_reference(&table, &kernels, black_box(&frame), W, H).expect("render");
             black_box(xyz_to_srgb8(&xyz, 1.0))
         })
     });

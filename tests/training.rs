@@ -25,7 +25,10 @@ fn training_is_reproducible_and_thread_count_independent() {
     let cancel = AtomicBool::new(false);
     let a = train_table(&design, &tiny(5), None, &|_, _| {}, &cancel).unwrap();
     let b = train_table(&design, &tiny(5), None, &|_, _| {}, &cancel).unwrap();
-    let pool = rayon::ThreadPoolBuilder::new().num_threads(1).build().unwrap();
+    let pool = rayon::ThreadPoolBuilder::new()
+        .num_threads(1)
+        .build()
+        .unwrap();
     let c = pool.install(|| train_table(&design, &tiny(5), None, &|_, _| {}, &cancel).unwrap());
     assert_eq!(a.kernels, b.kernels);
     assert_eq!(a.kernels, c.kernels);
@@ -51,7 +54,11 @@ fn cancel_stops_training() {
         }
     };
     let r = train_table(&design, &tiny(1), None, &progress, &cancel);
-    assert!(matches!(r, Err(TrainError::L3(L3Error::Canceled))), "{:?}", r.err());
+    assert!(
+        matches!(r, Err(TrainError::L3(L3Error::Canceled))),
+        "{:?}",
+        r.err()
+    );
 }
 
 #[test]
@@ -59,12 +66,30 @@ fn bad_specs_are_rejected() {
     let design = SensorDesign::paper_default();
     let cancel = AtomicBool::new(false);
     for spec in [
-        TrainingSpec { patch_size: 4, ..tiny(1) },
-        TrainingSpec { levels: 1, ..tiny(1) },
-        TrainingSpec { scenes: 0, ..tiny(1) },
-        TrainingSpec { illuminants: vec![], ..tiny(1) },
-        TrainingSpec { illuminants: vec!["nonsense".into()], ..tiny(1) },
-        TrainingSpec { mean_luminance: f64::NAN, ..tiny(1) },
+        TrainingSpec {
+            patch_size: 4,
+            ..tiny(1)
+        },
+        TrainingSpec {
+            levels: 1,
+            ..tiny(1)
+        },
+        TrainingSpec {
+            scenes: 0,
+            ..tiny(1)
+        },
+        TrainingSpec {
+            illuminants: vec![],
+            ..tiny(1)
+        },
+        TrainingSpec {
+            illuminants: vec!["nonsense".into()],
+            ..tiny(1)
+        },
+        TrainingSpec {
+            mean_luminance: f64::NAN,
+            ..tiny(1)
+        },
     ] {
         assert!(train_table(&design, &spec, None, &|_, _| {}, &cancel).is_err());
     }

@@ -14,7 +14,8 @@ pub use ciede2000::ciede2000;
 pub use lab::{lab_to_xyz, xy, xy_to_xyz, xyy_to_xyz, xyz_to_lab, xyz_to_xyy};
 pub use srgb::{
     LINEAR_SRGB_TO_XYZ, SRGB_PRIMARIES_XY, SRGB_WHITE_XY, SrgbLut, XYZ_TO_LINEAR_SRGB,
-    encode_srgb8, encode_srgb16, linear_srgb_to_xyz, srgb_decode, srgb_encode, xyz_to_linear_srgb,
+    checked_inverse3, encode_srgb8, encode_srgb16, linear_srgb_to_xyz, srgb_decode, srgb_encode,
+    xyz_to_linear_srgb,
 };
 pub use tristimulus::Cmfs;
 

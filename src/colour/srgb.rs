@@ -18,6 +18,19 @@ const fn xyz_of_xy(p: [f64; 2]) -> [f64; 3] {
     [p[0] / p[1], 1.0, (1.0 - p[0] - p[1]) / p[1]]
 }
 
+/// The inverse of a 3×3 matrix, or `None` when it is (numerically) singular.
+pub fn checked_inverse3(m: [[f64; 3]; 3]) -> Option<[[f64; 3]; 3]> {
+    let c00 = m[1][1] * m[2][2] - m[1][2] * m[2][1];
+    let c01 = m[1][2] * m[2][0] - m[1][0] * m[2][2];
+    let c02 = m[1][0] * m[2][1] - m[1][1] * m[2][0];
+    let det = m[0][0] * c00 + m[0][1] * c01 + m[0][2] * c02;
+    let scale = m.iter().flatten().fold(0.0f64, |a, v| a.max(v.abs()));
+    if !det.is_finite() || det.abs() <= 1e-12 * scale.powi(3) {
+        return None;
+    }
+    Some(inverse3(m))
+}
+
 const fn inverse3(m: [[f64; 3]; 3]) -> [[f64; 3]; 3] {
     let c00 = m[1][1] * m[2][2] - m[1][2] * m[2][1];
     let c01 = m[1][2] * m[2][0] - m[1][0] * m[2][2];

@@ -248,6 +248,36 @@ impl IlluminantRegistry {
             .ok_or_else(|| L3Error::InvalidInput("registry insert failed".into()))
     }
 
+    /// The correction entry of an SPD already on the registry's grid.
+    fn entry_for(
+        &self,
+        name: &str,
+        spd: &Spectrum,
+        cct: Option<f64>,
+        source: CorrectionSource,
+    ) -> Result<IlluminantEntry, L3Error> {
+        if spd.values().iter().any(|v| *v < 0.0) {
+            return Err(L3Error::InvalidInput(format!(
+                "SPD of '{name}' has negative values"
+            )));
+        }
+        let t = correction_matrix(
+            &self.cmfs,
+            &self.reflectances,
+            spd,
+            &self.d65,
+            self.white_preserving,
+        )?;
+        let white = self.white_xy(spd);
+        Ok(IlluminantEntry {
+            name: name.to_string(),
+            t,
+            white_xy: white,
+            cct: cct.or_else(|| white.and_then(|w| cct_from_xy(w).ok())),
+            source,
+        })
+    }
+
     /// Register an illuminant from its SPD (any sampling; resampled here).
     pub fn insert_spd(
         &mut self,
@@ -256,26 +286,7 @@ impl IlluminantRegistry {
         source: CorrectionSource,
     ) -> Result<&IlluminantEntry, L3Error> {
         let s = spd.resample(&self.grid, Extrapolation::Zero);
-        if s.values().iter().any(|v| *v < 0.0) {
-            return Err(L3Error::InvalidInput(format!(
-                "SPD of '{name}' has negative values"
-            )));
-        }
-        let t = correction_matrix(
-            &self.cmfs,
-            &self.reflectances,
-            &s,
-            &self.d65,
-            self.white_preserving,
-        )?;
-        let white = self.white_xy(&s);
-        let e = IlluminantEntry {
-            name: name.to_string(),
-            t,
-            white_xy: white,
-            cct: white.and_then(|w| cct_from_xy(w).ok()),
-            source,
-        };
+        let e = self.entry_for(name, &s, None, source)?;
         self.put(e)
     }
 
@@ -301,23 +312,10 @@ impl IlluminantRegistry {
 
     /// Register a blackbody (below 4000 K) or CIE daylight (from 4000 K) by CCT.
     pub fn insert_cct(&mut self, name: &str, cct: f64) -> Result<&IlluminantEntry, L3Error> {
-        let spec = IlluminantSpec::Cct(cct);
-        let spd = spec.resolve(None)?.spd;
+        let spd = IlluminantSpec::Cct(cct).resolve(None)?.spd;
         let s = spd.resample(&self.grid, Extrapolation::Zero);
-        let t = correction_matrix(
-            &self.cmfs,
-            &self.reflectances,
-            &s,
-            &self.d65,
-            self.white_preserving,
-        )?;
-        self.put(IlluminantEntry {
-            name: name.to_string(),
-            t,
-            white_xy: self.white_xy(&s),
-            cct: Some(cct),
-            source: CorrectionSource::Cct,
-        })
+        let e = self.entry_for(name, &s, Some(cct), CorrectionSource::Cct)?;
+        self.put(e)
     }
 
     /// Remove an entry (never D65). Returns whether it existed.
@@ -357,20 +355,7 @@ impl IlluminantRegistry {
                 // never cache arbitrary files under their path
                 let spd = parsed.resolve(iset)?.spd;
                 let s = spd.resample(&self.grid, Extrapolation::Zero);
-                let t = correction_matrix(
-                    &self.cmfs,
-                    &self.reflectances,
-                    &s,
-                    &self.d65,
-                    self.white_preserving,
-                )?;
-                Ok(IlluminantEntry {
-                    name: parsed.to_string(),
-                    t,
-                    white_xy: self.white_xy(&s),
-                    cct: self.white_xy(&s).and_then(|w| cct_from_xy(w).ok()),
-                    source: CorrectionSource::Spd,
-                })
+                self.entry_for(&parsed.to_string(), &s, None, CorrectionSource::Spd)
             }
             _ => {
                 let named = parsed.resolve(iset)?;

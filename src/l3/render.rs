@@ -34,6 +34,10 @@ impl std::ops::AddAssign for RenderStats {
 /// Kernels with a 3×3 matrix applied after them: K' = M·K for every class.
 /// Rendering with fused kernels equals rendering and then applying M.
 pub fn fuse_kernels(table: &L3Table, m: &[[f64; 3]; 3]) -> Vec<f32> {
+    if *m == super::IDENTITY {
+        // D65: the table as is
+        return table.kernels.clone();
+    }
     let nf = table.n_features();
     let mut out = vec![0f32; table.kernels.len()];
     for (src, dst) in table

@@ -62,7 +62,7 @@ impl SrgbLift {
                 *v = dot(&to_xyz[i], &pca.components[k]);
             }
         }
-        let solve = inverse3(m).ok_or_else(|| {
+        let solve = crate::colour::checked_inverse3(m).ok_or_else(|| {
             SceneError::Invalid(format!(
                 "the reflectance basis is degenerate on {grid:?} (its XYZ matrix is singular)"
             ))
@@ -133,35 +133,6 @@ impl SrgbLift {
         });
         mat3_mul_vec(&XYZ_TO_LINEAR_SRGB, xyz)
     }
-}
-
-fn inverse3(m: [[f64; 3]; 3]) -> Option<[[f64; 3]; 3]> {
-    let c00 = m[1][1] * m[2][2] - m[1][2] * m[2][1];
-    let c01 = m[1][2] * m[2][0] - m[1][0] * m[2][2];
-    let c02 = m[1][0] * m[2][1] - m[1][1] * m[2][0];
-    let det = m[0][0] * c00 + m[0][1] * c01 + m[0][2] * c02;
-    let scale = m.iter().flatten().fold(0.0f64, |a, v| a.max(v.abs()));
-    if !det.is_finite() || det.abs() <= 1e-12 * scale.powi(3) {
-        return None;
-    }
-    let d = 1.0 / det;
-    Some([
-        [
-            c00 * d,
-            (m[0][2] * m[2][1] - m[0][1] * m[2][2]) * d,
-            (m[0][1] * m[1][2] - m[0][2] * m[1][1]) * d,
-        ],
-        [
-            c01 * d,
-            (m[0][0] * m[2][2] - m[0][2] * m[2][0]) * d,
-            (m[0][2] * m[1][0] - m[0][0] * m[1][2]) * d,
-        ],
-        [
-            c02 * d,
-            (m[0][1] * m[2][0] - m[0][0] * m[2][1]) * d,
-            (m[0][0] * m[1][1] - m[0][1] * m[1][0]) * d,
-        ],
-    ])
 }
 
 /// Build the scene from per-pixel linear sRGB.
