@@ -250,9 +250,9 @@ where
     // ---- pass 2: accumulate normal equations ----
     let nf = geo.n_features();
     let n_classes = n_groups * 2;
-    // after the class accumulators: one per (position, level) for the
-    // noise-free colour map of flat unsaturated patches
-    let n_maps = d.n_pos * d.n_levels;
+    // one noise-free colour map per level, pooled over CFA positions: a flat
+    // patch maps to the same XYZ whichever filter sits at its centre
+    let n_maps = d.n_levels;
     let nch = geo.n_channels();
     let use_maps = params.unbiased_flat;
     let new_acc = || -> Vec<Option<Box<Gram>>> { (0..n_classes + n_maps).map(|_| None).collect() };
@@ -290,7 +290,7 @@ where
                         map_feat[..nch].copy_from_slice(&cs.channel_means[..nch]);
                         map_feat[nch] = 1.0;
                         let my = patch_mean_xyz(geo, f, r, c);
-                        acc[n_classes + pos * d.n_levels + level]
+                        acc[n_classes + level]
                             .get_or_insert_with(|| Box::new(Gram::new(nch + 1)))
                             .push(&map_feat, my);
                     }
@@ -409,7 +409,7 @@ where
                     // flat, unsaturated: unbiased on flat patches
                     let mut con_sums = None;
                     if c == 0 && t_src == 0 && use_maps {
-                        if let Some(mg) = maps[pos * d.n_levels + l].as_mut() {
+                        if let Some(mg) = maps[l].as_mut() {
                             if mg.count() >= 50 {
                                 if let Ok(ms) =
                                     solve(mg, RidgeChoice::Fixed { relative: 1e-9 }, 0.0)
