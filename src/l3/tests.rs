@@ -56,6 +56,7 @@ fn synth_frame(
         height: size,
         volts,
         xyz,
+        clean: None,
         cfa_shift: shift,
     }
 }
