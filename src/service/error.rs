@@ -33,6 +33,8 @@ pub enum ServiceError {
     #[error("{0}")]
     NotAcceptable(String),
     #[error("{0}")]
+    MethodNotAllowed(String),
+    #[error("{0}")]
     Unauthorized(String),
     /// Too many renders at once; retry after the given seconds.
     #[error("{msg}")]
@@ -67,6 +69,7 @@ impl ServiceError {
             PayloadTooLarge(_) => StatusCode::PAYLOAD_TOO_LARGE,
             UnsupportedMediaType(_) => StatusCode::UNSUPPORTED_MEDIA_TYPE,
             NotAcceptable(_) => StatusCode::NOT_ACCEPTABLE,
+            MethodNotAllowed(_) => StatusCode::METHOD_NOT_ALLOWED,
             Unauthorized(_) => StatusCode::UNAUTHORIZED,
             Overloaded { .. } | NotReady(_) => StatusCode::SERVICE_UNAVAILABLE,
             Timeout(_) => StatusCode::GATEWAY_TIMEOUT,
@@ -88,6 +91,7 @@ impl ServiceError {
             PayloadTooLarge(_) => "payload_too_large",
             UnsupportedMediaType(_) => "unsupported_media_type",
             NotAcceptable(_) => "not_acceptable",
+            MethodNotAllowed(_) => "method_not_allowed",
             Unauthorized(_) => "unauthorized",
             Overloaded { .. } => "overloaded",
             NotReady(_) => "not_ready",

@@ -124,15 +124,12 @@ async fn not_found(req: Request) -> ServiceError {
     ServiceError::NotFound(format!("no route for {} {}", req.method(), req.uri().path()))
 }
 
-async fn method_not_allowed(req: Request) -> Response {
-    let mut r = ServiceError::BadRequest(format!(
+async fn method_not_allowed(req: Request) -> ServiceError {
+    ServiceError::MethodNotAllowed(format!(
         "method {} is not allowed on {}",
         req.method(),
         req.uri().path()
     ))
-    .into_response();
-    *r.status_mut() = axum::http::StatusCode::METHOD_NOT_ALLOWED;
-    r
 }
 
 /// Bearer token check, request timeout and metrics around every request.

@@ -110,13 +110,9 @@ impl Inner {
                     "its CCT {cct:.0} K is outside 1000–25000 K"
                 )));
             }
-            let name = format!("xy:{x:.4},{y:.4}");
-            if let Some(e) = reg.get(&name) {
-                return Ok(e.clone());
-            }
+            // corrected as the illuminant of that CCT (blackbody below 4000 K, daylight above)
             return reg
-                .insert_cct(&name, cct)
-                .cloned()
+                .resolve(&format!("cct:{}", cct.round()), self.iset.as_ref())
                 .map_err(|e| unknown(e.to_string()));
         }
         reg.resolve(spec, self.iset.as_ref())
