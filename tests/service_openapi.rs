@@ -7,7 +7,11 @@ use std::collections::BTreeSet;
 fn openapi_documents_exactly_the_served_routes() {
     let text = std::fs::read_to_string(concat!(env!("CARGO_MANIFEST_DIR"), "/openapi.yaml"))
         .expect("read openapi.yaml");
-    assert_eq!(text, l3::service::OPENAPI_YAML, "the served document is the committed file");
+    assert_eq!(
+        text,
+        l3::service::OPENAPI_YAML,
+        "the served document is the committed file"
+    );
     let doc: serde_yaml_ng::Value = serde_yaml_ng::from_str(&text).expect("openapi.yaml parses");
     assert!(doc["openapi"].as_str().unwrap().starts_with("3."));
     let paths = doc["paths"].as_mapping().expect("paths");
@@ -27,8 +31,14 @@ fn openapi_documents_exactly_the_served_routes() {
         .collect();
     let undocumented: Vec<_> = served.difference(&documented).collect();
     let unserved: Vec<_> = documented.difference(&served).collect();
-    assert!(undocumented.is_empty(), "served but not documented: {undocumented:?}");
-    assert!(unserved.is_empty(), "documented but not served: {unserved:?}");
+    assert!(
+        undocumented.is_empty(),
+        "served but not documented: {undocumented:?}"
+    );
+    assert!(
+        unserved.is_empty(),
+        "documented but not served: {unserved:?}"
+    );
     // every $ref points at a defined component
     let comps = &doc["components"];
     for r in text.match_indices("$ref: \"#/components/") {

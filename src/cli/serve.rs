@@ -35,8 +35,8 @@ async fn shutdown_signal() {
 }
 
 pub fn run(cli: &Cli, a: &ServeArgs) -> Result<(), CliError> {
-    let mut cfg = ServiceConfig::load(a.config.as_deref())
-        .map_err(|e| CliError::Usage(e.to_string()))?;
+    let mut cfg =
+        ServiceConfig::load(a.config.as_deref()).map_err(|e| CliError::Usage(e.to_string()))?;
     if let Some(d) = &cli.iset_dir {
         cfg.data.iset_dir = Some(d.clone());
     }
@@ -56,6 +56,9 @@ pub fn run(cli: &Cli, a: &ServeArgs) -> Result<(), CliError> {
         let server = start_with(cfg, shutdown_signal())
             .await
             .map_err(|e| CliError::Usage(e.to_string()))?;
-        server.wait().await.map_err(|e| CliError::Usage(e.to_string()))
+        server
+            .wait()
+            .await
+            .map_err(|e| CliError::Usage(e.to_string()))
     })
 }

@@ -117,9 +117,11 @@ impl ServiceConfig {
         }
         match key {
             "L3_BIND" => {
-                self.server.bind = value
-                    .parse()
-                    .map_err(|_| bad(format!("L3_BIND={value:?} is not an address like 127.0.0.1:8080")))?
+                self.server.bind = value.parse().map_err(|_| {
+                    bad(format!(
+                        "L3_BIND={value:?} is not an address like 127.0.0.1:8080"
+                    ))
+                })?
             }
             "L3_DATA_DIR" => self.data.dir = PathBuf::from(value),
             "L3_ISET_DIR" => self.data.iset_dir = Some(PathBuf::from(value)),
@@ -133,7 +135,11 @@ impl ServiceConfig {
                 self.training.auto_train_default = match value.trim() {
                     "1" | "true" | "yes" => true,
                     "0" | "false" | "no" => false,
-                    _ => return Err(bad(format!("L3_AUTO_TRAIN={value:?}: expected true or false"))),
+                    _ => {
+                        return Err(bad(format!(
+                            "L3_AUTO_TRAIN={value:?}: expected true or false"
+                        )));
+                    }
                 }
             }
             "L3_MAX_CONCURRENT_JOBS" => self.training.max_concurrent_jobs = num(key, value)?,
@@ -146,7 +152,10 @@ impl ServiceConfig {
     pub fn validate(&self) -> Result<(), ServiceError> {
         let s = &self.server;
         if s.max_body_bytes < 1024 {
-            return Err(bad(format!("max_body_bytes {} (at least 1024)", s.max_body_bytes)));
+            return Err(bad(format!(
+                "max_body_bytes {} (at least 1024)",
+                s.max_body_bytes
+            )));
         }
         if s.max_pixels == 0 {
             return Err(bad("max_pixels must be at least 1".into()));

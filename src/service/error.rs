@@ -137,10 +137,8 @@ impl IntoResponse for ServiceError {
                 .insert(header::RETRY_AFTER, HeaderValue::from_static("5"));
         }
         if let ServiceError::Unauthorized(_) = &self {
-            resp.headers_mut().insert(
-                header::WWW_AUTHENTICATE,
-                HeaderValue::from_static("Bearer"),
-            );
+            resp.headers_mut()
+                .insert(header::WWW_AUTHENTICATE, HeaderValue::from_static("Bearer"));
         }
         resp
     }

@@ -155,7 +155,9 @@ pub async fn create(
                         .bind(id)
                         .fetch_optional(&state.db)
                         .await?
-                        .ok_or_else(|| ServiceError::NotFound(format!("no table with id '{id}'")))?;
+                        .ok_or_else(|| {
+                            ServiceError::NotFound(format!("no table with id '{id}'"))
+                        })?;
                     let path = state.tables_dir.join(row.try_get::<String, _>("path")?);
                     let sha: String = row.try_get("sha256")?;
                     let id2 = id.clone();
@@ -242,7 +244,10 @@ pub async fn create(
                 }
             };
             if let Value::Object(m) = &mut report.context {
-                m.insert("table_id".into(), json!(table.as_ref().map(|t| t.id.clone())));
+                m.insert(
+                    "table_id".into(),
+                    json!(table.as_ref().map(|t| t.id.clone())),
+                );
             }
             Ok(report)
         };

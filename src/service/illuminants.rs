@@ -63,7 +63,11 @@ pub fn apply(
                 s.values.len()
             )));
         }
-        if s.values.iter().chain(&s.wavelengths_nm).any(|v| !v.is_finite()) {
+        if s.values
+            .iter()
+            .chain(&s.wavelengths_nm)
+            .any(|v| !v.is_finite())
+        {
             return Err(bad("spd has non-finite numbers".into()));
         }
         let samples = Samples::new(s.wavelengths_nm.clone(), s.values.clone())
@@ -83,9 +87,10 @@ pub fn apply(
 pub async fn user_definitions(
     state: &Inner,
 ) -> Result<Vec<(String, IlluminantDefinition)>, ServiceError> {
-    let rows = sqlx::query("SELECT name, definition_json FROM illuminants ORDER BY created_at, name")
-        .fetch_all(&state.db)
-        .await?;
+    let rows =
+        sqlx::query("SELECT name, definition_json FROM illuminants ORDER BY created_at, name")
+            .fetch_all(&state.db)
+            .await?;
     let mut out = Vec::new();
     for r in rows {
         let name: String = r.try_get("name")?;
@@ -150,7 +155,10 @@ pub async fn get(
         .get(&name)
         .cloned()
         .ok_or_else(|| ServiceError::NotFound(format!("no illuminant named '{name}'")))?;
-    Ok(Json(entry_json(&e, users.contains(&e.name.to_ascii_lowercase()))))
+    Ok(Json(entry_json(
+        &e,
+        users.contains(&e.name.to_ascii_lowercase()),
+    )))
 }
 
 /// `PUT /v1/illuminants/{name}`: create or replace from a matrix, an SPD or a CCT.
@@ -173,7 +181,11 @@ pub async fn put(
             "D65 is the rendering target and cannot be replaced".into(),
         ));
     }
-    if lower.starts_with("cct:") || lower.starts_with("xy:") || lower.starts_with("csv:") || lower.starts_with("iset:") {
+    if lower.starts_with("cct:")
+        || lower.starts_with("xy:")
+        || lower.starts_with("csv:")
+        || lower.starts_with("iset:")
+    {
         return Err(ServiceError::BadRequest(format!(
             "illuminant name '{name}' uses a reserved prefix (cct:, xy:, csv:, iset:)"
         )));

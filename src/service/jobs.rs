@@ -41,7 +41,9 @@ pub fn parse_job_request(body: &[u8]) -> Result<(JobRequest, Value), ServiceErro
     let value: Value = serde_json::from_slice(body)
         .map_err(|e| bad(format!("the body is not valid JSON: {e}")))?;
     let Value::Object(mut map) = value.clone() else {
-        return Err(bad("the body must be a JSON object with the training spec".into()));
+        return Err(bad(
+            "the body must be a JSON object with the training spec".into()
+        ));
     };
     let activate = match map.remove("activate") {
         None => false,
@@ -57,8 +59,8 @@ pub fn parse_job_request(body: &[u8]) -> Result<(JobRequest, Value), ServiceErro
             )));
         }
         Some(v) => {
-            let d: SensorDesign = serde_json::from_value(v)
-                .map_err(|e| bad(format!("sensor: {e}")))?;
+            let d: SensorDesign =
+                serde_json::from_value(v).map_err(|e| bad(format!("sensor: {e}")))?;
             d.validate()
                 .map_err(|e| ServiceError::BadRequest(format!("sensor: {e}")))?;
             d
@@ -465,7 +467,16 @@ async fn run_job(state: &AppState, id: &str, request: &str) {
         .unwrap_or_else(|p| p.into_inner())
         .remove(id);
     let result = match outcome {
-        Err(_) => finish(state, id, "failed", Some("the training task was lost"), None).await,
+        Err(_) => {
+            finish(
+                state,
+                id,
+                "failed",
+                Some("the training task was lost"),
+                None,
+            )
+            .await
+        }
         Ok(Outcome::Canceled) if state.shutting_down.load(Ordering::SeqCst) => {
             tracing::info!(job = id, "training job interrupted by shutdown; re-queued");
             sqlx::query(

@@ -113,10 +113,7 @@ impl Metrics {
             "# HELP l3_training_jobs Training jobs by state.\n# TYPE l3_training_jobs gauge"
         );
         for state in super::jobs::JOB_STATES {
-            let n = jobs
-                .iter()
-                .find(|(s, _)| s == state)
-                .map_or(0, |(_, n)| *n);
+            let n = jobs.iter().find(|(s, _)| s == state).map_or(0, |(_, n)| *n);
             let _ = writeln!(out, "l3_training_jobs{{state=\"{state}\"}} {n}");
         }
         let _ = writeln!(

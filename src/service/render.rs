@@ -236,7 +236,9 @@ pub async fn render(
         }
     };
     if body.is_empty() {
-        return Err(ServiceError::InvalidImage("the request body is empty".into()));
+        return Err(ServiceError::InvalidImage(
+            "the request body is empty".into(),
+        ));
     }
     let white: WhiteLevel = match &q.white {
         None => WhiteLevel::Auto,
@@ -266,7 +268,9 @@ pub async fn render(
         ));
     }
     let active = state.active.load_full().ok_or_else(|| {
-        ServiceError::NotReady("no table is active yet (the default table may still be training; see /readyz)".into())
+        ServiceError::NotReady(
+            "no table is active yet (the default table may still be training; see /readyz)".into(),
+        )
     })?;
     if let Some(cfa) = &q.cfa {
         let table_cfa = active.table.meta.cfa.to_string();
@@ -277,15 +281,17 @@ pub async fn render(
         }
     }
     let entry = state.resolve_illuminant(q.illuminant.as_deref().unwrap_or("D65"))?;
-    let permit = state.render_slots.clone().try_acquire_owned().map_err(|_| {
-        ServiceError::Overloaded {
+    let permit = state
+        .render_slots
+        .clone()
+        .try_acquire_owned()
+        .map_err(|_| ServiceError::Overloaded {
             msg: format!(
                 "{} renders are already running; retry shortly",
                 state.config.server.render_concurrency
             ),
             retry_after_s: 1,
-        }
-    })?;
+        })?;
     let limits = Limits {
         max_pixels: state.config.server.max_pixels,
         ..Limits::default()
@@ -301,10 +307,11 @@ pub async fn render(
             let swing = active.table.meta.voltage_swing;
             let black = q.black_level.unwrap_or(0);
             let white_dn = q.white_level.unwrap_or(65535);
-            let to_volts = |frame: crate::io::RawFrame| -> Result<(Vec<f32>, usize, usize), ServiceError> {
-                let meta = RawMeta::new(frame.width, frame.height, "", black, white_dn, swing);
-                Ok((frame.to_volts(&meta)?, frame.width, frame.height))
-            };
+            let to_volts =
+                |frame: crate::io::RawFrame| -> Result<(Vec<f32>, usize, usize), ServiceError> {
+                    let meta = RawMeta::new(frame.width, frame.height, "", black, white_dn, swing);
+                    Ok((frame.to_volts(&meta)?, frame.width, frame.height))
+                };
             let (volts, w, h) = if raw {
                 let (w, h) = (q.width.unwrap_or(0), q.height.unwrap_or(0));
                 to_volts(decode_raw_u16_le(&body, w, h, &limits)?)?

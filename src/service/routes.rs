@@ -94,7 +94,9 @@ async fn readyz(State(state): State<AppState>) -> Result<Response, ServiceError>
             .await?;
             Err(ServiceError::NotReady(match job {
                 Some(j) => format!("no table is active yet; training job {j} will provide one"),
-                None => "no table is active; train one (POST /v1/training-jobs) and activate it".into(),
+                None => {
+                    "no table is active; train one (POST /v1/training-jobs) and activate it".into()
+                }
             }))
         }
     }
@@ -121,7 +123,11 @@ async fn openapi() -> Response {
 }
 
 async fn not_found(req: Request) -> ServiceError {
-    ServiceError::NotFound(format!("no route for {} {}", req.method(), req.uri().path()))
+    ServiceError::NotFound(format!(
+        "no route for {} {}",
+        req.method(),
+        req.uri().path()
+    ))
 }
 
 async fn method_not_allowed(req: Request) -> ServiceError {
@@ -149,8 +155,15 @@ async fn guard(State(state): State<AppState>, req: Request, next: Next) -> Respo
             .and_then(|v| v.to_str().ok())
             .and_then(|v| v.strip_prefix("Bearer "))
             .is_some_and(|t| constant_time_eq(t.trim().as_bytes(), token.as_bytes()));
-        if ok { None } else {
-            Some(ServiceError::Unauthorized("this endpoint needs Authorization: Bearer <token>".into()).into_response())
+        if ok {
+            None
+        } else {
+            Some(
+                ServiceError::Unauthorized(
+                    "this endpoint needs Authorization: Bearer <token>".into(),
+                )
+                .into_response(),
+            )
         }
     } else {
         None
@@ -188,7 +201,9 @@ struct Counter(std::sync::Arc<AtomicU64>);
 impl MakeRequestId for Counter {
     fn make_request_id<B>(&mut self, _req: &axum::http::Request<B>) -> Option<RequestId> {
         let n = self.0.fetch_add(1, Ordering::Relaxed);
-        HeaderValue::from_str(&format!("req-{n}")).ok().map(RequestId::new)
+        HeaderValue::from_str(&format!("req-{n}"))
+            .ok()
+            .map(RequestId::new)
     }
 }
 

@@ -27,6 +27,9 @@ pub struct ActiveTable {
     pub table: L3Table,
 }
 
+/// Fused kernels by (table id, lower-case illuminant name).
+pub type KernelCache = HashMap<(String, String), Arc<Vec<f32>>>;
+
 /// Everything the handlers share (cheap to clone).
 #[derive(Clone)]
 pub struct AppState(pub Arc<Inner>);
@@ -49,7 +52,7 @@ pub struct Inner {
     pub registry: Mutex<IlluminantRegistry>,
     pub active: ArcSwapOption<ActiveTable>,
     /// Fused kernels per (table id, lower-case illuminant name).
-    pub kernel_cache: Mutex<HashMap<(String, String), Arc<Vec<f32>>>>,
+    pub kernel_cache: Mutex<KernelCache>,
     pub render_slots: Arc<Semaphore>,
     pub metrics: Metrics,
     pub tables_dir: PathBuf,
@@ -83,7 +86,9 @@ impl Inner {
         };
         let lower = spec.to_ascii_lowercase();
         if lower.starts_with("csv:") || lower.starts_with("iset:") {
-            return Err(unknown("file-based illuminant specs are not accepted over HTTP".into()));
+            return Err(unknown(
+                "file-based illuminant specs are not accepted over HTTP".into(),
+            ));
         }
         let mut reg = self.registry();
         if let Some(e) = reg.get(spec) {

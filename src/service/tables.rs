@@ -36,7 +36,8 @@ pub fn write_table_file(dir: &Path, table: &L3Table) -> Result<StoredTable, Serv
     let id = format!("tbl_{}", &sha256[..16]);
     let path = dir.join(format!("{id}.safetensors"));
     let tmp = dir.join(format!(".{id}.safetensors.tmp"));
-    let werr = |e: std::io::Error| ServiceError::Internal(format!("cannot write {}: {e}", path.display()));
+    let werr =
+        |e: std::io::Error| ServiceError::Internal(format!("cannot write {}: {e}", path.display()));
     {
         let mut f = std::fs::File::create(&tmp).map_err(werr)?;
         f.write_all(&bytes).map_err(werr)?;
@@ -65,7 +66,13 @@ pub async fn insert_table(
          VALUES ($1, $2, $3, $4, $5, $6, $7, $8) ON CONFLICT (id) DO NOTHING",
     )
     .bind(&stored.id)
-    .bind(stored.path.file_name().and_then(|n| n.to_str()).unwrap_or_default())
+    .bind(
+        stored
+            .path
+            .file_name()
+            .and_then(|n| n.to_str())
+            .unwrap_or_default(),
+    )
     .bind(&stored.sha256)
     .bind(stored.size_bytes as i64)
     .bind(table.meta.kind.to_string())
@@ -144,7 +151,11 @@ pub async fn recorded_active(state: &Inner) -> Result<Option<String>, ServiceErr
     )
 }
 
-fn row_json(state: &Inner, row: &sqlx::sqlite::SqliteRow, full: bool) -> Result<Value, ServiceError> {
+fn row_json(
+    state: &Inner,
+    row: &sqlx::sqlite::SqliteRow,
+    full: bool,
+) -> Result<Value, ServiceError> {
     let id: String = row.try_get("id")?;
     let meta: Value = serde_json::from_str(&row.try_get::<String, _>("meta_json")?)
         .map_err(|e| ServiceError::Internal(format!("stored metadata of {id}: {e}")))?;

@@ -65,7 +65,11 @@ pub fn test_config(data: &Path, iset: Option<&IsetData>) -> ServiceConfig {
 }
 
 /// A started server with the tiny table imported and active.
-pub async fn server_with_table(data: &Path, iset: Option<&IsetData>, cfg: Option<ServiceConfig>) -> (Server, String) {
+pub async fn server_with_table(
+    data: &Path,
+    iset: Option<&IsetData>,
+    cfg: Option<ServiceConfig>,
+) -> (Server, String) {
     let cfg = cfg.unwrap_or_else(|| test_config(data, iset));
     let server = l3::service::start(cfg).await.expect("start server");
     let table = tiny_table(iset).clone();
@@ -86,16 +90,16 @@ pub fn client() -> reqwest::Client {
 /// Parses a JSON body.
 pub async fn json(resp: reqwest::Response) -> serde_json::Value {
     let bytes = resp.bytes().await.expect("body");
-    serde_json::from_slice(&bytes).unwrap_or_else(|e| {
-        panic!("not JSON ({e}): {}", String::from_utf8_lossy(&bytes))
-    })
+    serde_json::from_slice(&bytes)
+        .unwrap_or_else(|e| panic!("not JSON ({e}): {}", String::from_utf8_lossy(&bytes)))
 }
 
 /// Asserts a problem+json answer with `status` and `code`, and returns its detail.
 pub async fn problem(resp: reqwest::Response, status: u16, code: &str) -> String {
     assert_eq!(resp.status().as_u16(), status, "status");
     assert_eq!(
-        resp.headers()["content-type"], "application/problem+json",
+        resp.headers()["content-type"],
+        "application/problem+json",
         "content type"
     );
     let v = json(resp).await;
@@ -116,7 +120,13 @@ pub async fn wait_job(
     let c = client();
     let deadline = std::time::Instant::now() + std::time::Duration::from_secs_f64(secs);
     loop {
-        let j = json(c.get(url(server, &format!("/v1/training-jobs/{id}"))).send().await.unwrap()).await;
+        let j = json(
+            c.get(url(server, &format!("/v1/training-jobs/{id}")))
+                .send()
+                .await
+                .unwrap(),
+        )
+        .await;
         if done(&j) || std::time::Instant::now() > deadline {
             return j;
         }
