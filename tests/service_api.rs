@@ -1008,13 +1008,48 @@ async fn readyz_is_503_until_a_table_is_active() {
         .unwrap();
     assert!(text.contains("l3_ready 0"));
     server.shutdown().await.unwrap();
-    // a restart picks the stored table up again
+    // a restart picks the stored table and the user's illuminants up again
     let (server, id) = server_with_table(data.path(), iset.as_ref(), None).await;
+    let r = c
+        .put(url(&server, "/v1/illuminants/Stage"))
+        .json(&serde_json::json!({"cct": 3300}))
+        .send()
+        .await
+        .unwrap();
+    assert_eq!(r.status(), 201);
     server.shutdown().await.unwrap();
     let server = l3::service::start(test_config(data.path(), iset.as_ref()))
         .await
         .unwrap();
     let v = json(c.get(url(&server, "/readyz")).send().await.unwrap()).await;
     assert_eq!(v["table_id"], id.as_str());
+    let v = json(
+        c.get(url(&server, "/v1/illuminants/stage"))
+            .send()
+            .await
+            .unwrap(),
+    )
+    .await;
+    assert_eq!(v["cct"], 3300.0);
+    assert_eq!(v["user_defined"], true);
+    server.shutdown().await.unwrap();
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_request_over_the_time_limit_gets_504() {
+    let iset = IsetData::for_tests();
+    let data = tempfile::tempdir().unwrap();
+    let mut cfg = test_config(data.path(), iset.as_ref());
+    cfg.server.request_timeout_s = 0.02;
+    let (server, _) = server_with_table(data.path(), iset.as_ref(), Some(cfg)).await;
+    // a full-size chart evaluation takes far longer than 20 ms
+    let r = client()
+        .post(url(&server, "/v1/evaluations"))
+        .json(&serde_json::json!({"acquisition_illuminant": "A", "patch_px": 64}))
+        .send()
+        .await
+        .unwrap();
+    let d = problem(r, 504, "request_timeout").await;
+    assert!(d.contains("0.02 s"), "{d}");
     server.shutdown().await.unwrap();
 }

@@ -456,6 +456,9 @@ async fn run_job(state: &AppState, id: &str, request: &str) {
             .bind(id)
             .execute(&state.db)
             .await;
+            if *stage != last_stage {
+                tracing::info!(job = id, stage = %stage, progress = format!("{:.0} %", f * 100.0), "training");
+            }
             last_stage = stage.clone();
             last_write = Instant::now();
             pending = None;

@@ -160,6 +160,7 @@ pub async fn start_with(
     let default_spec = default_training_spec(&cfg, iset.as_ref())?;
     let state = AppState(Arc::new(Inner {
         render_slots: Arc::new(Semaphore::new(cfg.server.render_concurrency)),
+        cpu_gate: Arc::new(Semaphore::new((rayon::current_num_threads() / 2).max(1))),
         config: cfg.clone(),
         db,
         iset,

@@ -292,6 +292,16 @@ pub async fn render(
             ),
             retry_after_s: 1,
         })?;
+    // renders execute in arrival order, a few at a time (each one is parallel inside), so
+    // latency under load grows evenly instead of in a long tail
+    let queued = Instant::now();
+    let gate = state
+        .cpu_gate
+        .clone()
+        .acquire_owned()
+        .await
+        .map_err(|_| ServiceError::Internal("the render gate is closed".into()))?;
+    let queue_ms = queued.elapsed().as_secs_f64() * 1e3;
     let limits = Limits {
         max_pixels: state.config.server.max_pixels,
         ..Limits::default()
@@ -301,7 +311,6 @@ pub async fn render(
     let table_id = active.id.clone();
     let (tx, rx) = tokio::sync::oneshot::channel();
     rayon::spawn(move || {
-        let _permit = permit;
         let run = || -> Result<Rendered, ServiceError> {
             let t0 = Instant::now();
             let swing = active.table.meta.voltage_swing;
@@ -386,7 +395,11 @@ pub async fn render(
                 encode_ms: ms(t2, t3),
             })
         };
-        let _ = tx.send(run());
+        let result = run();
+        // free the slots before answering, so a client's next request finds them free
+        drop(gate);
+        drop(permit);
+        let _ = tx.send(result);
     });
     let r = rx
         .await
@@ -409,6 +422,7 @@ pub async fn render(
     put("x-l3-width", r.width.to_string());
     put("x-l3-height", r.height.to_string());
     put("x-l3-input-pixels", (r.in_width * r.in_height).to_string());
+    put("x-l3-queue-ms", format!("{queue_ms:.3}"));
     put("x-l3-decode-ms", format!("{:.3}", r.decode_ms));
     put("x-l3-render-ms", format!("{:.3}", r.render_ms));
     put("x-l3-encode-ms", format!("{:.3}", r.encode_ms));
@@ -419,7 +433,7 @@ pub async fn render(
     put(
         "server-timing",
         format!(
-            "decode;dur={:.3}, render;dur={:.3}, encode;dur={:.3}",
+            "queue;dur={queue_ms:.3}, decode;dur={:.3}, render;dur={:.3}, encode;dur={:.3}",
             r.decode_ms, r.render_ms, r.encode_ms
         ),
     );

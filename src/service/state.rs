@@ -53,7 +53,10 @@ pub struct Inner {
     pub active: ArcSwapOption<ActiveTable>,
     /// Fused kernels per (table id, lower-case illuminant name).
     pub kernel_cache: Mutex<KernelCache>,
+    /// Admission: renders accepted at once (`render_concurrency`); excess gets 503.
     pub render_slots: Arc<Semaphore>,
+    /// Execution: renders running on rayon at once (FIFO); the rest of the admitted wait.
+    pub cpu_gate: Arc<Semaphore>,
     pub metrics: Metrics,
     pub tables_dir: PathBuf,
     /// Wakes the job workers when a job is queued.
