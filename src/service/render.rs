@@ -2,14 +2,18 @@
 //! Decoding, rendering and encoding run on rayon; the answer carries timings and class
 //! statistics in headers. The result equals `l3 render` on the same input bit for bit.
 
+use std::sync::{Arc, Mutex};
 use std::time::Instant;
 
+use axum::Extension;
 use axum::body::Bytes;
 use axum::extract::rejection::{BytesRejection, QueryRejection};
-use axum::extract::{Query, State};
+use axum::extract::{Query, Request, State};
 use axum::http::{HeaderMap, HeaderName, HeaderValue, StatusCode, header};
+use axum::middleware::Next;
 use axum::response::{IntoResponse, Response};
 use serde::Deserialize;
+use tokio::sync::OwnedSemaphorePermit;
 
 use super::ServiceError;
 use super::state::AppState;
@@ -211,9 +215,34 @@ struct Rendered {
     encode_ms: f64,
 }
 
+/// A render slot taken by [`admit`] before the body is read.
+#[derive(Clone)]
+pub struct RenderSlot(Arc<Mutex<Option<OwnedSemaphorePermit>>>);
+
+/// Admission of renders: takes a slot before the body is read, or answers 503 with
+/// Retry-After at once (an overloaded service reads no bodies).
+pub async fn admit(State(state): State<AppState>, mut req: Request, next: Next) -> Response {
+    match state.render_slots.clone().try_acquire_owned() {
+        Ok(p) => {
+            req.extensions_mut()
+                .insert(RenderSlot(Arc::new(Mutex::new(Some(p)))));
+            next.run(req).await
+        }
+        Err(_) => ServiceError::Overloaded {
+            msg: format!(
+                "{} renders are already running; retry shortly",
+                state.config.server.render_concurrency
+            ),
+            retry_after_s: 1,
+        }
+        .into_response(),
+    }
+}
+
 /// `POST /v1/render`
 pub async fn render(
     State(state): State<AppState>,
+    Extension(permit): Extension<RenderSlot>,
     headers: HeaderMap,
     query: Result<Query<RenderQuery>, QueryRejection>,
     body: Result<Bytes, BytesRejection>,
@@ -281,17 +310,12 @@ pub async fn render(
         }
     }
     let entry = state.resolve_illuminant(q.illuminant.as_deref().unwrap_or("D65"))?;
-    let permit = state
-        .render_slots
-        .clone()
-        .try_acquire_owned()
-        .map_err(|_| ServiceError::Overloaded {
-            msg: format!(
-                "{} renders are already running; retry shortly",
-                state.config.server.render_concurrency
-            ),
-            retry_after_s: 1,
-        })?;
+    let permit = permit
+        .0
+        .lock()
+        .unwrap_or_else(|p| p.into_inner())
+        .take()
+        .ok_or_else(|| ServiceError::Internal("render slot missing".into()))?;
     // renders execute in arrival order, a few at a time (each one is parallel inside), so
     // latency under load grows evenly instead of in a long tail
     let queued = Instant::now();

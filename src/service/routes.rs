@@ -211,7 +211,11 @@ impl MakeRequestId for Counter {
 pub fn router(state: AppState) -> Router {
     let mut r: Router<AppState> = Router::new();
     for (m, p) in ROUTES {
-        if let Some(h) = handler(m, p) {
+        if let Some(mut h) = handler(m, p) {
+            if *p == "/v1/render" {
+                // render slots are taken before the body is read
+                h = h.route_layer(middleware::from_fn_with_state(state.clone(), render::admit));
+            }
             r = r.route(p, h);
         } else {
             tracing::error!("route {m} {p} has no handler");
