@@ -9,7 +9,8 @@
 //!   [`l3`] (classification, training, tables, rendering, illuminant correction),
 //!   [`eval`] (ΔE2000 reports, the paper's Table 1);
 //! - file formats in [`io`];
-//! - the command line in [`cli`], which only calls the core.
+//! - the command line in [`cli`], which only calls the core;
+//! - the HTTP render service in [`service`], which depends on the core (never the reverse).
 
 // Index loops read best in numeric kernels.
 #![allow(clippy::needless_range_loop)]
@@ -21,5 +22,6 @@ pub mod eval;
 pub mod io;
 pub mod l3;
 pub mod scene;
+pub mod service;
 pub mod spectral;
 pub mod training;

@@ -2,6 +2,7 @@
 
 mod eval;
 mod render;
+mod serve;
 mod simulate;
 mod train;
 
@@ -34,6 +35,8 @@ pub enum Command {
     Render(render::RenderArgs),
     /// ΔE2000 evaluation on the Natural-100 chart; `--paper-table` for Table 1.
     Eval(eval::EvalArgs),
+    /// Run the HTTP render service (config/default.toml, --config FILE, L3_* variables).
+    Serve(serve::ServeArgs),
 }
 
 /// Errors of the CLI: any layer's error, shown with its message.
@@ -101,6 +104,7 @@ pub fn main() -> ExitCode {
         Command::Train(a) => train::run(&cli, a),
         Command::Render(a) => render::run(&cli, a),
         Command::Eval(a) => eval::run(&cli, a),
+        Command::Serve(a) => serve::run(&cli, a),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,

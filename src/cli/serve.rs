@@ -1,0 +1,64 @@
+use std::path::PathBuf;
+
+use clap::Args;
+
+use super::{Cli, CliError};
+use crate::service::{ServiceConfig, start_with};
+
+#[derive(Args, Debug)]
+pub struct ServeArgs {
+    /// Configuration file (TOML) over config/default.toml; L3_* variables override both.
+    #[arg(long)]
+    pub config: Option<PathBuf>,
+}
+
+async fn shutdown_signal() {
+    let ctrl_c = async {
+        let _ = tokio::signal::ctrl_c().await;
+    };
+    #[cfg(unix)]
+    let term = async {
+        match tokio::signal::unix::signal(tokio::signal::unix::SignalKind::terminate()) {
+            Ok(mut s) => {
+                s.recv().await;
+            }
+            Err(_) => std::future::pending::<()>().await,
+        }
+    };
+    #[cfg(not(unix))]
+    let term = std::future::pending::<()>();
+    tokio::select! {
+        _ = ctrl_c => {}
+        _ = term => {}
+    }
+    tracing::info!("shutting down: finishing in-flight requests");
+}
+
+pub fn run(cli: &Cli, a: &ServeArgs) -> Result<(), CliError> {
+    let mut cfg =
+        ServiceConfig::load(a.config.as_deref()).map_err(|e| CliError::Usage(e.to_string()))?;
+    if let Some(d) = &cli.iset_dir {
+        cfg.data.iset_dir = Some(d.clone());
+    }
+    let filter = tracing_subscriber::EnvFilter::try_from_env("L3_LOG")
+        .unwrap_or_else(|_| tracing_subscriber::EnvFilter::new("info,sqlx=warn"));
+    let builder = tracing_subscriber::fmt().with_env_filter(filter);
+    if cfg.server.log_format == "json" {
+        let _ = builder.json().try_init();
+    } else {
+        let _ = builder.try_init();
+    }
+    let rt = tokio::runtime::Builder::new_multi_thread()
+        .enable_all()
+        .build()
+        .map_err(|e| CliError::Usage(format!("cannot start the async runtime: {e}")))?;
+    rt.block_on(async move {
+        let server = start_with(cfg, shutdown_signal())
+            .await
+            .map_err(|e| CliError::Usage(e.to_string()))?;
+        server
+            .wait()
+            .await
+            .map_err(|e| CliError::Usage(e.to_string()))
+    })
+}

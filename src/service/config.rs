@@ -1,0 +1,218 @@
+//! Service configuration: `config/default.toml` (embedded), an optional file given with
+//! `--config`, then `L3_*` environment variables, each overriding the one before.
+
+use std::net::SocketAddr;
+use std::path::{Path, PathBuf};
+
+use serde::Deserialize;
+
+use super::ServiceError;
+
+/// The embedded defaults (the committed `config/default.toml`).
+pub const DEFAULT_CONFIG_TOML: &str = include_str!("../../config/default.toml");
+
+/// The whole service configuration.
+#[derive(Clone, Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct ServiceConfig {
+    pub server: ServerConfig,
+    pub data: DataConfig,
+    pub training: TrainingConfig,
+}
+
+/// `[server]`: listener, limits and authentication.
+#[derive(Clone, Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct ServerConfig {
+    pub bind: SocketAddr,
+    pub max_body_bytes: usize,
+    pub max_pixels: usize,
+    pub render_concurrency: usize,
+    pub request_timeout_s: f64,
+    /// Empty: mutating endpoints need no token.
+    #[serde(default)]
+    pub bearer_token: String,
+    #[serde(default = "default_log_format")]
+    pub log_format: String,
+}
+
+fn default_log_format() -> String {
+    "text".into()
+}
+
+/// `[data]`: where the database and the table files live.
+#[derive(Clone, Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct DataConfig {
+    pub dir: PathBuf,
+    /// ISET data folder; when it does not exist the built-in data is used.
+    #[serde(default)]
+    pub iset_dir: Option<PathBuf>,
+}
+
+/// `[training]`: the job runner and the default table.
+#[derive(Clone, Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct TrainingConfig {
+    pub auto_train_default: bool,
+    pub max_concurrent_jobs: usize,
+    /// TrainingSpec fields of the default table (validated when used).
+    #[serde(default)]
+    pub default_spec: toml::Table,
+}
+
+fn merge(base: &mut toml::Table, over: toml::Table) {
+    for (k, v) in over {
+        match (base.get_mut(&k), v) {
+            (Some(toml::Value::Table(b)), toml::Value::Table(o)) => merge(b, o),
+            (_, v) => {
+                base.insert(k, v);
+            }
+        }
+    }
+}
+
+fn bad(msg: String) -> ServiceError {
+    ServiceError::Config(msg)
+}
+
+impl ServiceConfig {
+    /// Defaults, then `file` if given, then the process environment.
+    pub fn load(file: Option<&Path>) -> Result<Self, ServiceError> {
+        let env: Vec<(String, String)> = std::env::vars().collect();
+        Self::load_with_env(file, &env)
+    }
+
+    /// [`load`](Self::load) with an explicit environment (for tests).
+    pub fn load_with_env(
+        file: Option<&Path>,
+        env: &[(String, String)],
+    ) -> Result<Self, ServiceError> {
+        let mut base: toml::Table = DEFAULT_CONFIG_TOML
+            .parse()
+            .map_err(|e| bad(format!("embedded config/default.toml: {e}")))?;
+        if let Some(path) = file {
+            let text = std::fs::read_to_string(path)
+                .map_err(|e| bad(format!("cannot read {}: {e}", path.display())))?;
+            let over: toml::Table = text
+                .parse()
+                .map_err(|e| bad(format!("{}: {e}", path.display())))?;
+            merge(&mut base, over);
+        }
+        let mut cfg: ServiceConfig = toml::Value::Table(base)
+            .try_into()
+            .map_err(|e| bad(format!("configuration: {e}")))?;
+        for (k, v) in env {
+            cfg.apply_env(k, v)?;
+        }
+        cfg.validate()?;
+        Ok(cfg)
+    }
+
+    fn apply_env(&mut self, key: &str, value: &str) -> Result<(), ServiceError> {
+        fn num<T: std::str::FromStr>(key: &str, v: &str) -> Result<T, ServiceError> {
+            v.trim()
+                .parse()
+                .map_err(|_| bad(format!("{key}={v:?} is not a valid number")))
+        }
+        match key {
+            "L3_BIND" => {
+                self.server.bind = value.parse().map_err(|_| {
+                    bad(format!(
+                        "L3_BIND={value:?} is not an address like 127.0.0.1:8080"
+                    ))
+                })?
+            }
+            "L3_DATA_DIR" => self.data.dir = PathBuf::from(value),
+            "L3_ISET_DIR" => self.data.iset_dir = Some(PathBuf::from(value)),
+            "L3_MAX_BODY_BYTES" => self.server.max_body_bytes = num(key, value)?,
+            "L3_MAX_PIXELS" => self.server.max_pixels = num(key, value)?,
+            "L3_RENDER_CONCURRENCY" => self.server.render_concurrency = num(key, value)?,
+            "L3_REQUEST_TIMEOUT_S" => self.server.request_timeout_s = num(key, value)?,
+            "L3_BEARER_TOKEN" => self.server.bearer_token = value.to_string(),
+            "L3_LOG_FORMAT" => self.server.log_format = value.to_string(),
+            "L3_AUTO_TRAIN" => {
+                self.training.auto_train_default = match value.trim() {
+                    "1" | "true" | "yes" => true,
+                    "0" | "false" | "no" => false,
+                    _ => {
+                        return Err(bad(format!(
+                            "L3_AUTO_TRAIN={value:?}: expected true or false"
+                        )));
+                    }
+                }
+            }
+            "L3_MAX_CONCURRENT_JOBS" => self.training.max_concurrent_jobs = num(key, value)?,
+            _ => {}
+        }
+        Ok(())
+    }
+
+    /// Checks ranges that would make the service unusable.
+    pub fn validate(&self) -> Result<(), ServiceError> {
+        let s = &self.server;
+        if s.max_body_bytes < 1024 {
+            return Err(bad(format!(
+                "max_body_bytes {} (at least 1024)",
+                s.max_body_bytes
+            )));
+        }
+        if s.max_pixels == 0 {
+            return Err(bad("max_pixels must be at least 1".into()));
+        }
+        if s.render_concurrency == 0 {
+            return Err(bad("render_concurrency must be at least 1".into()));
+        }
+        if !(s.request_timeout_s.is_finite() && s.request_timeout_s > 0.0) {
+            return Err(bad(format!(
+                "request_timeout_s {} (a positive number of seconds)",
+                s.request_timeout_s
+            )));
+        }
+        if !["text", "json"].contains(&s.log_format.as_str()) {
+            return Err(bad(format!("log_format {:?}: text or json", s.log_format)));
+        }
+        if self.training.max_concurrent_jobs == 0 {
+            return Err(bad("max_concurrent_jobs must be at least 1".into()));
+        }
+        Ok(())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn defaults_file_and_env_layer() {
+        let c = ServiceConfig::load_with_env(None, &[]).unwrap();
+        assert_eq!(c.server.bind.to_string(), "127.0.0.1:8080");
+        assert_eq!(c.data.dir, PathBuf::from("./data"));
+        assert!(c.training.auto_train_default);
+        let dir = tempfile::tempdir().unwrap();
+        let f = dir.path().join("c.toml");
+        std::fs::write(&f, "[server]\nmax_pixels = 1000\n[data]\ndir = \"/x\"\n").unwrap();
+        let env = vec![
+            ("L3_BIND".to_string(), "0.0.0.0:9000".to_string()),
+            ("L3_AUTO_TRAIN".to_string(), "false".to_string()),
+        ];
+        let c = ServiceConfig::load_with_env(Some(&f), &env).unwrap();
+        assert_eq!(c.server.max_pixels, 1000);
+        assert_eq!(c.server.render_concurrency, 4);
+        assert_eq!(c.data.dir, PathBuf::from("/x"));
+        assert_eq!(c.server.bind.to_string(), "0.0.0.0:9000");
+        assert!(!c.training.auto_train_default);
+    }
+
+    #[test]
+    fn bad_values_are_clear_errors() {
+        let env = vec![("L3_MAX_PIXELS".to_string(), "lots".to_string())];
+        let e = ServiceConfig::load_with_env(None, &env).unwrap_err();
+        assert!(e.to_string().contains("L3_MAX_PIXELS"), "{e}");
+        let dir = tempfile::tempdir().unwrap();
+        let f = dir.path().join("c.toml");
+        std::fs::write(&f, "[server]\nbogus = 1\n").unwrap();
+        let e = ServiceConfig::load_with_env(Some(&f), &[]).unwrap_err();
+        assert!(e.to_string().contains("bogus"), "{e}");
+    }
+}

@@ -1,0 +1,312 @@
+//! ΔE2000 evaluations: simulate the chart through a table's sensor, render it, compare with the
+//! ideal XYZ; the report is persisted and listed.
+
+use axum::Json;
+use axum::body::Bytes;
+use axum::extract::rejection::BytesRejection;
+use axum::extract::{Path as UrlPath, State};
+use axum::http::{HeaderMap, HeaderValue, StatusCode, header};
+use axum::response::{IntoResponse, Response};
+use serde::Deserialize;
+use serde_json::{Value, json};
+use sqlx::Row;
+
+use super::ServiceError;
+use super::state::{AppState, new_id, now_ms};
+use crate::camera::{Camera, SensorDesign};
+use crate::eval::{ChartSetup, Method, evaluate_method, fit_baseline_matrix};
+use crate::l3::L3Table;
+use crate::spectral::WavelengthGrid;
+
+/// Charts an evaluation can use.
+pub const CHARTS: [&str; 1] = ["natural100"];
+
+/// The body of `POST /v1/evaluations`.
+#[derive(Debug, Clone, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct EvaluationRequest {
+    /// Table to evaluate (default: the active one). Ignored by `baseline`.
+    #[serde(default)]
+    pub table_id: Option<String>,
+    /// `l3` (default) or `baseline` (bilinear + 3×3 matrix fitted under D65, then T).
+    #[serde(default = "default_method")]
+    pub method: String,
+    #[serde(default = "default_chart")]
+    pub chart: String,
+    /// Illuminant the chart is captured under (default Tungsten).
+    #[serde(default = "default_acq")]
+    pub acquisition_illuminant: String,
+    #[serde(default = "default_seed")]
+    pub seed: u64,
+    #[serde(default = "default_true")]
+    pub noise: bool,
+    /// Side of each chart patch in pixels (8–64, default 24).
+    #[serde(default = "default_patch_px")]
+    pub patch_px: usize,
+}
+
+fn default_method() -> String {
+    "l3".into()
+}
+fn default_chart() -> String {
+    "natural100".into()
+}
+fn default_acq() -> String {
+    "Tungsten".into()
+}
+fn default_seed() -> u64 {
+    7
+}
+fn default_true() -> bool {
+    true
+}
+fn default_patch_px() -> usize {
+    24
+}
+
+fn table_sensor(table: &L3Table) -> Result<SensorDesign, ServiceError> {
+    let d: SensorDesign = serde_json::from_value(table.meta.sensor.clone()).map_err(|e| {
+        ServiceError::Unprocessable(format!("the table's sensor description is unreadable: {e}"))
+    })?;
+    d.validate()
+        .map_err(|e| ServiceError::Unprocessable(format!("the table's sensor: {e}")))?;
+    Ok(d)
+}
+
+fn evaluation_json(row: &sqlx::sqlite::SqliteRow) -> Result<Value, ServiceError> {
+    let id: String = row.try_get("id")?;
+    let report: Value = serde_json::from_str(&row.try_get::<String, _>("report_json")?)
+        .map_err(|e| ServiceError::Internal(format!("stored report {id}: {e}")))?;
+    let request: Value =
+        serde_json::from_str(&row.try_get::<String, _>("request_json")?).unwrap_or(Value::Null);
+    Ok(json!({
+        "id": id,
+        "table_id": row.try_get::<Option<String>, _>("table_id")?,
+        "method": row.try_get::<String, _>("method")?,
+        "chart": row.try_get::<String, _>("chart")?,
+        "acquisition_illuminant": row.try_get::<String, _>("acquisition_illuminant")?,
+        "mean_delta_e": row.try_get::<f64, _>("mean_delta_e")?,
+        "created_at_ms": row.try_get::<i64, _>("created_at")?,
+        "request": request,
+        "report": report,
+        "links": { "self": format!("/v1/evaluations/{id}") },
+    }))
+}
+
+async fn evaluation_row(
+    state: &AppState,
+    id: &str,
+) -> Result<sqlx::sqlite::SqliteRow, ServiceError> {
+    sqlx::query("SELECT * FROM evaluations WHERE id = $1")
+        .bind(id)
+        .fetch_optional(&state.db)
+        .await?
+        .ok_or_else(|| ServiceError::NotFound(format!("no evaluation with id '{id}'")))
+}
+
+/// `POST /v1/evaluations`: runs the evaluation (on rayon) and answers 201 with the ΔE JSON.
+pub async fn create(
+    State(state): State<AppState>,
+    headers: HeaderMap,
+    body: Result<Bytes, BytesRejection>,
+) -> Result<Response, ServiceError> {
+    super::render::require_json(&headers)?;
+    let body = super::render::body_bytes(body, state.config.server.max_body_bytes)?;
+    let req: EvaluationRequest = serde_json::from_slice(&body)
+        .map_err(|e| ServiceError::InvalidJson(format!("evaluation request: {e}")))?;
+    if !CHARTS.contains(&req.chart.as_str()) {
+        return Err(ServiceError::BadRequest(format!(
+            "chart '{}': one of {}",
+            req.chart,
+            CHARTS.join(", ")
+        )));
+    }
+    if !(8..=64).contains(&req.patch_px) {
+        return Err(ServiceError::BadRequest(format!(
+            "patch_px {}: 8 to 64",
+            req.patch_px
+        )));
+    }
+    let is_l3 = match req.method.as_str() {
+        "l3" => true,
+        "baseline" => false,
+        other => {
+            return Err(ServiceError::BadRequest(format!(
+                "method '{other}': l3 or baseline"
+            )));
+        }
+    };
+    let lower = req.acquisition_illuminant.to_ascii_lowercase();
+    if lower.starts_with("csv:") || lower.starts_with("iset:") || lower.starts_with("xy:") {
+        return Err(ServiceError::UnknownIlluminant(format!(
+            "acquisition illuminant '{}': use a named illuminant or cct:K (its spectrum is needed to simulate the chart)",
+            req.acquisition_illuminant
+        )));
+    }
+    let correction = state.resolve_illuminant(&req.acquisition_illuminant)?;
+    let table = if is_l3 {
+        match &req.table_id {
+            Some(id) => {
+                if state.active.load().as_ref().is_some_and(|a| &a.id == id) {
+                    state.active.load_full()
+                } else {
+                    // load through activation's checks without activating
+                    let row = sqlx::query("SELECT path, sha256 FROM l3_tables WHERE id = $1")
+                        .bind(id)
+                        .fetch_optional(&state.db)
+                        .await?
+                        .ok_or_else(|| {
+                            ServiceError::NotFound(format!("no table with id '{id}'"))
+                        })?;
+                    let path = state.tables_dir.join(row.try_get::<String, _>("path")?);
+                    let sha: String = row.try_get("sha256")?;
+                    let id2 = id.clone();
+                    let t = tokio::task::spawn_blocking(move || {
+                        let bytes = std::fs::read(&path).map_err(|e| {
+                            ServiceError::Internal(format!("cannot read {}: {e}", path.display()))
+                        })?;
+                        if super::state::sha256_hex(&bytes) != sha {
+                            return Err(ServiceError::Internal(format!(
+                                "table file {} is corrupt",
+                                path.display()
+                            )));
+                        }
+                        L3Table::from_bytes(&bytes, &path.display().to_string())
+                            .map_err(|e| ServiceError::Internal(e.to_string()))
+                    })
+                    .await
+                    .map_err(|e| ServiceError::Internal(format!("table loader: {e}")))??;
+                    Some(std::sync::Arc::new(super::state::ActiveTable {
+                        id: id2,
+                        sha256: String::new(),
+                        table: t,
+                    }))
+                }
+            }
+            None => Some(state.active.load_full().ok_or_else(|| {
+                ServiceError::NotReady("no table is active yet and no table_id was given".into())
+            })?),
+        }
+    } else {
+        None
+    };
+    let table_id = table.as_ref().map(|t| t.id.clone());
+    let iset = state.iset.clone();
+    let r2 = req.clone();
+    let (tx, rx) = tokio::sync::oneshot::channel();
+    rayon::spawn(move || {
+        let run = || -> Result<crate::eval::DeltaEReport, ServiceError> {
+            let grid = WavelengthGrid::default();
+            let design = match &table {
+                Some(t) => table_sensor(&t.table)?,
+                None => SensorDesign::paper_default(),
+            };
+            let camera = Camera::new(&design, grid, iset.as_ref())
+                .map_err(|e| ServiceError::Unprocessable(e.to_string()))?;
+            let chart = ChartSetup {
+                seed: r2.seed,
+                noise: r2.noise,
+                patch_px: r2.patch_px,
+                ..ChartSetup::default()
+            };
+            let eval_err = |e: crate::eval::EvalError| ServiceError::Unprocessable(e.to_string());
+            let mut report = match &table {
+                Some(t) => {
+                    let name = format!(
+                        "L3 {} ({})",
+                        t.table.meta.kind,
+                        t.table.meta.train_illuminants.join("+")
+                    );
+                    evaluate_method(
+                        &camera,
+                        &Method::Table(&t.table),
+                        &name,
+                        &r2.acquisition_illuminant,
+                        &correction,
+                        iset.as_ref(),
+                        &chart,
+                    )
+                    .map_err(eval_err)?
+                }
+                None => {
+                    let m = fit_baseline_matrix(&camera, &["D65".to_string()], iset.as_ref())
+                        .map_err(eval_err)?;
+                    evaluate_method(
+                        &camera,
+                        &Method::Baseline(&m),
+                        "Baseline+T",
+                        &r2.acquisition_illuminant,
+                        &correction,
+                        iset.as_ref(),
+                        &chart,
+                    )
+                    .map_err(eval_err)?
+                }
+            };
+            if let Value::Object(m) = &mut report.context {
+                m.insert(
+                    "table_id".into(),
+                    json!(table.as_ref().map(|t| t.id.clone())),
+                );
+            }
+            Ok(report)
+        };
+        let _ = tx.send(run());
+    });
+    let report = rx
+        .await
+        .map_err(|_| ServiceError::Internal("the evaluation task was lost".into()))??;
+    let id = new_id("eval");
+    let report_json = serde_json::to_string(&report)
+        .map_err(|e| ServiceError::Internal(format!("report: {e}")))?;
+    let request_json = String::from_utf8_lossy(&body).to_string();
+    sqlx::query(
+        "INSERT INTO evaluations (id, table_id, method, chart, acquisition_illuminant, mean_delta_e, request_json, report_json, created_at)
+         VALUES ($1, $2, $3, $4, $5, $6, $7, $8, $9)",
+    )
+    .bind(&id)
+    .bind(&table_id)
+    .bind(&req.method)
+    .bind(&req.chart)
+    .bind(&req.acquisition_illuminant)
+    .bind(report.summary.mean)
+    .bind(request_json)
+    .bind(report_json)
+    .bind(now_ms())
+    .execute(&state.db)
+    .await?;
+    let row = evaluation_row(&state, &id).await?;
+    let mut resp = (StatusCode::CREATED, Json(evaluation_json(&row)?)).into_response();
+    if let Ok(v) = HeaderValue::from_str(&format!("/v1/evaluations/{id}")) {
+        resp.headers_mut().insert(header::LOCATION, v);
+    }
+    Ok(resp)
+}
+
+/// `GET /v1/evaluations`
+pub async fn list(State(state): State<AppState>) -> Result<Json<Value>, ServiceError> {
+    let rows = sqlx::query("SELECT * FROM evaluations ORDER BY created_at DESC, id LIMIT 1000")
+        .fetch_all(&state.db)
+        .await?;
+    let items = rows
+        .iter()
+        .map(|r| {
+            evaluation_json(r).map(|mut v| {
+                // the list omits the per-patch detail
+                if let Some(rep) = v.get_mut("report").and_then(Value::as_object_mut) {
+                    rep.remove("patches");
+                }
+                v
+            })
+        })
+        .collect::<Result<Vec<_>, _>>()?;
+    Ok(Json(json!({ "items": items })))
+}
+
+/// `GET /v1/evaluations/{id}`
+pub async fn get(
+    State(state): State<AppState>,
+    UrlPath(id): UrlPath<String>,
+) -> Result<Json<Value>, ServiceError> {
+    Ok(Json(evaluation_json(&evaluation_row(&state, &id).await?)?))
+}

@@ -1,0 +1,252 @@
+//! Illuminants: the registry of corrections T (built-ins plus the user's, persisted).
+
+use axum::Json;
+use axum::body::Bytes;
+use axum::extract::rejection::BytesRejection;
+use axum::extract::{Path as UrlPath, State};
+use axum::http::{HeaderMap, StatusCode};
+use axum::response::{IntoResponse, Response};
+use serde::{Deserialize, Serialize};
+use serde_json::{Value, json};
+use sqlx::Row;
+
+use super::ServiceError;
+use super::state::{AppState, Inner, now_ms};
+use crate::l3::{CorrectionSource, IlluminantEntry, IlluminantRegistry, Mat3};
+use crate::spectral::Samples;
+
+/// A user illuminant's definition: exactly one of a matrix, an SPD or a CCT.
+#[derive(Debug, Clone, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct IlluminantDefinition {
+    /// XYZ under the illuminant → XYZ under D65 (row-major 3×3).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub matrix: Option<Mat3>,
+    /// A spectral power distribution.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub spd: Option<SpdSamples>,
+    /// A correlated colour temperature, kelvin (blackbody below 4000 K, daylight above).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub cct: Option<f64>,
+}
+
+/// SPD samples: wavelengths (nm, increasing) and relative power.
+#[derive(Debug, Clone, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct SpdSamples {
+    pub wavelengths_nm: Vec<f64>,
+    pub values: Vec<f64>,
+}
+
+/// Applies a definition to a registry.
+pub fn apply(
+    reg: &mut IlluminantRegistry,
+    name: &str,
+    def: &IlluminantDefinition,
+) -> Result<IlluminantEntry, ServiceError> {
+    let bad = |e: String| ServiceError::BadRequest(format!("illuminant '{name}': {e}"));
+    let given = usize::from(def.matrix.is_some())
+        + usize::from(def.spd.is_some())
+        + usize::from(def.cct.is_some());
+    if given != 1 {
+        return Err(bad(format!(
+            "give exactly one of \"matrix\", \"spd\" or \"cct\" ({given} given)"
+        )));
+    }
+    let r = if let Some(m) = def.matrix {
+        reg.insert_matrix(name, m)
+    } else if let Some(s) = &def.spd {
+        if s.wavelengths_nm.len() != s.values.len() || s.values.len() < 2 {
+            return Err(bad(format!(
+                "spd has {} wavelengths and {} values; equal counts of at least 2 expected",
+                s.wavelengths_nm.len(),
+                s.values.len()
+            )));
+        }
+        if s.values
+            .iter()
+            .chain(&s.wavelengths_nm)
+            .any(|v| !v.is_finite())
+        {
+            return Err(bad("spd has non-finite numbers".into()));
+        }
+        let samples = Samples::new(s.wavelengths_nm.clone(), s.values.clone())
+            .map_err(|e| bad(e.to_string()))?;
+        reg.insert_spd(name, &samples, CorrectionSource::Spd)
+    } else {
+        let k = def.cct.unwrap_or(0.0);
+        if !(k.is_finite() && (1000.0..=25_000.0).contains(&k)) {
+            return Err(bad(format!("cct {k}: 1000 to 25000 K")));
+        }
+        reg.insert_cct(name, k)
+    };
+    r.cloned().map_err(|e| bad(e.to_string()))
+}
+
+/// The persisted user illuminants, in creation order.
+pub async fn user_definitions(
+    state: &Inner,
+) -> Result<Vec<(String, IlluminantDefinition)>, ServiceError> {
+    let rows =
+        sqlx::query("SELECT name, definition_json FROM illuminants ORDER BY created_at, name")
+            .fetch_all(&state.db)
+            .await?;
+    let mut out = Vec::new();
+    for r in rows {
+        let name: String = r.try_get("name")?;
+        match serde_json::from_str(&r.try_get::<String, _>("definition_json")?) {
+            Ok(d) => out.push((name, d)),
+            Err(e) => tracing::warn!("stored illuminant {name} is unreadable: {e}"),
+        }
+    }
+    Ok(out)
+}
+
+/// Rebuilds the registry: built-ins, then the user's definitions.
+pub async fn rebuild_registry(state: &Inner) -> Result<IlluminantRegistry, ServiceError> {
+    let mut reg = state.default_registry.clone();
+    for (name, def) in user_definitions(state).await? {
+        if let Err(e) = apply(&mut reg, &name, &def) {
+            tracing::warn!("stored illuminant {name} skipped: {e}");
+        }
+    }
+    Ok(reg)
+}
+
+fn entry_json(e: &IlluminantEntry, user: bool) -> Value {
+    json!({
+        "name": e.name,
+        "matrix": e.t,
+        "white_xy": e.white_xy,
+        "cct": e.cct,
+        "source": e.source,
+        "user_defined": user,
+        "deletable": user,
+    })
+}
+
+async fn user_names(state: &Inner) -> Result<Vec<String>, ServiceError> {
+    Ok(user_definitions(state)
+        .await?
+        .into_iter()
+        .map(|(n, _)| n.to_ascii_lowercase())
+        .collect())
+}
+
+/// `GET /v1/illuminants`
+pub async fn list(State(state): State<AppState>) -> Result<Json<Value>, ServiceError> {
+    let users = user_names(&state).await?;
+    let items: Vec<Value> = state
+        .registry()
+        .entries()
+        .map(|e| entry_json(e, users.contains(&e.name.to_ascii_lowercase())))
+        .collect();
+    Ok(Json(json!({ "items": items })))
+}
+
+/// `GET /v1/illuminants/{name}`
+pub async fn get(
+    State(state): State<AppState>,
+    UrlPath(name): UrlPath<String>,
+) -> Result<Json<Value>, ServiceError> {
+    let users = user_names(&state).await?;
+    let e = state
+        .registry()
+        .get(&name)
+        .cloned()
+        .ok_or_else(|| ServiceError::NotFound(format!("no illuminant named '{name}'")))?;
+    Ok(Json(entry_json(
+        &e,
+        users.contains(&e.name.to_ascii_lowercase()),
+    )))
+}
+
+/// `PUT /v1/illuminants/{name}`: create or replace from a matrix, an SPD or a CCT.
+pub async fn put(
+    State(state): State<AppState>,
+    UrlPath(name): UrlPath<String>,
+    headers: HeaderMap,
+    body: Result<Bytes, BytesRejection>,
+) -> Result<Response, ServiceError> {
+    super::render::require_json(&headers)?;
+    let body = super::render::body_bytes(body, state.config.server.max_body_bytes)?;
+    let def: IlluminantDefinition = serde_json::from_slice(&body).map_err(|e| {
+        ServiceError::InvalidJson(format!(
+            "illuminant definition: {e} (expected {{\"matrix\": [[..],[..],[..]]}}, {{\"spd\": {{\"wavelengths_nm\": [..], \"values\": [..]}}}} or {{\"cct\": K}})"
+        ))
+    })?;
+    let lower = name.to_ascii_lowercase();
+    if lower == "d65" {
+        return Err(ServiceError::Conflict(
+            "D65 is the rendering target and cannot be replaced".into(),
+        ));
+    }
+    if lower.starts_with("cct:")
+        || lower.starts_with("xy:")
+        || lower.starts_with("csv:")
+        || lower.starts_with("iset:")
+    {
+        return Err(ServiceError::BadRequest(format!(
+            "illuminant name '{name}' uses a reserved prefix (cct:, xy:, csv:, iset:)"
+        )));
+    }
+    // validate on a copy before persisting
+    let mut copy = state.registry().clone();
+    let entry = apply(&mut copy, &name, &def)?;
+    let existed = user_names(&state).await?.contains(&lower);
+    let text = serde_json::to_string(&def)
+        .map_err(|e| ServiceError::Internal(format!("illuminant definition: {e}")))?;
+    sqlx::query(
+        "INSERT INTO illuminants (name, definition_json, created_at) VALUES ($1, $2, $3)
+         ON CONFLICT (name) DO UPDATE SET definition_json = excluded.definition_json",
+    )
+    .bind(&entry.name)
+    .bind(text)
+    .bind(now_ms())
+    .execute(&state.db)
+    .await?;
+    *state.registry() = copy;
+    state.forget_illuminant(&entry.name);
+    let status = if existed {
+        StatusCode::OK
+    } else {
+        StatusCode::CREATED
+    };
+    Ok((status, Json(entry_json(&entry, true))).into_response())
+}
+
+/// `DELETE /v1/illuminants/{name}`: user illuminants only (a built-in it replaced returns).
+pub async fn delete(
+    State(state): State<AppState>,
+    UrlPath(name): UrlPath<String>,
+) -> Result<StatusCode, ServiceError> {
+    let lower = name.to_ascii_lowercase();
+    if lower == "d65" {
+        return Err(ServiceError::Conflict(
+            "D65 is the rendering target and cannot be deleted".into(),
+        ));
+    }
+    let stored = sqlx::query("SELECT name FROM illuminants")
+        .fetch_all(&state.db)
+        .await?
+        .into_iter()
+        .filter_map(|r| r.try_get::<String, _>("name").ok())
+        .find(|n| n.eq_ignore_ascii_case(&name));
+    let Some(stored) = stored else {
+        return Err(if state.registry().get(&name).is_some() {
+            ServiceError::Conflict(format!(
+                "'{name}' is a built-in illuminant and cannot be deleted"
+            ))
+        } else {
+            ServiceError::NotFound(format!("no illuminant named '{name}'"))
+        });
+    };
+    sqlx::query("DELETE FROM illuminants WHERE name = $1")
+        .bind(&stored)
+        .execute(&state.db)
+        .await?;
+    let reg = rebuild_registry(&state).await?;
+    *state.registry() = reg;
+    state.forget_illuminant(&stored);
+    Ok(StatusCode::NO_CONTENT)
+}

@@ -1,0 +1,292 @@
+//! The render service over HTTP (DESIGN.md §8): render, training jobs, tables, illuminants,
+//! ΔE evaluations, health, metrics and the OpenAPI document. It depends on the numeric core;
+//! the core knows nothing of it. CPU work runs on rayon, never on the async runtime's threads.
+
+mod config;
+mod error;
+mod evaluations;
+mod illuminants;
+mod jobs;
+mod metrics;
+mod render;
+mod routes;
+mod state;
+mod tables;
+
+use std::collections::HashMap;
+use std::net::SocketAddr;
+use std::path::Path;
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::{Arc, Mutex};
+use std::time::Duration;
+
+use arc_swap::ArcSwapOption;
+use sqlx::sqlite::{SqliteConnectOptions, SqliteJournalMode, SqlitePoolOptions};
+use tokio::sync::{Notify, Semaphore};
+
+pub use config::{DEFAULT_CONFIG_TOML, DataConfig, ServerConfig, ServiceConfig, TrainingConfig};
+pub use error::ServiceError;
+pub use jobs::{JOB_STATES, JobRequest, parse_job_request};
+pub use render::{OutputFormat, negotiate};
+pub use routes::{OPENAPI_YAML, ROUTES};
+pub use state::{ActiveTable, AppState, Inner, sha256_hex};
+pub use tables::{StoredTable, write_table_file};
+
+use crate::l3::IlluminantRegistry;
+use crate::spectral::{IsetData, WavelengthGrid};
+use crate::training::TrainingSpec;
+
+/// A running server: its address, and a handle to stop it.
+pub struct Server {
+    addr: SocketAddr,
+    state: AppState,
+    shutdown: Option<tokio::sync::oneshot::Sender<()>>,
+    task: tokio::task::JoinHandle<Result<(), ServiceError>>,
+    workers: Vec<tokio::task::JoinHandle<()>>,
+}
+
+impl Server {
+    /// The bound address (useful with port 0).
+    pub fn addr(&self) -> SocketAddr {
+        self.addr
+    }
+
+    /// The shared state (for tests and embedding).
+    pub fn state(&self) -> &AppState {
+        &self.state
+    }
+
+    /// Graceful shutdown: stop accepting, let in-flight requests finish, interrupt the running
+    /// training jobs (they are re-queued and resume at the next start).
+    pub async fn shutdown(mut self) -> Result<(), ServiceError> {
+        begin_shutdown(&self.state);
+        if let Some(tx) = self.shutdown.take() {
+            let _ = tx.send(());
+        }
+        for w in self.workers.drain(..) {
+            let _ = w.await;
+        }
+        self.task
+            .await
+            .map_err(|e| ServiceError::Internal(format!("server task: {e}")))?
+    }
+
+    /// Runs until the server stops (after [`begin_shutdown`] or a signal given to `start_with`).
+    pub async fn wait(mut self) -> Result<(), ServiceError> {
+        let r = (&mut self.task)
+            .await
+            .map_err(|e| ServiceError::Internal(format!("server task: {e}")))?;
+        begin_shutdown(&self.state);
+        for w in self.workers.drain(..) {
+            let _ = w.await;
+        }
+        r
+    }
+}
+
+fn begin_shutdown(state: &AppState) {
+    state.shutting_down.store(true, Ordering::SeqCst);
+    state.shutdown_notify.notify_waiters();
+    for f in state
+        .running_jobs
+        .lock()
+        .unwrap_or_else(|p| p.into_inner())
+        .values()
+    {
+        f.store(true, Ordering::SeqCst);
+    }
+}
+
+/// The default table's training spec: the config's `[training.default_spec]` fields over the
+/// TrainingSpec defaults, with the SI ensemble D65 + Tungsten + Fluorescent (ISET data present)
+/// or D65 + A + F11 when no illuminants are given.
+pub fn default_training_spec(
+    cfg: &ServiceConfig,
+    iset: Option<&IsetData>,
+) -> Result<TrainingSpec, ServiceError> {
+    let mut t = cfg.training.default_spec.clone();
+    if !t.contains_key("illuminants") {
+        let ills: Vec<toml::Value> = if iset.is_some() {
+            ["D65", "Tungsten", "Fluorescent"]
+        } else {
+            ["D65", "A", "F11"]
+        }
+        .iter()
+        .map(|s| toml::Value::String(s.to_string()))
+        .collect();
+        t.insert("illuminants".into(), toml::Value::Array(ills));
+    }
+    let spec: TrainingSpec = toml::Value::Table(t)
+        .try_into()
+        .map_err(|e| ServiceError::Config(format!("[training.default_spec]: {e}")))?;
+    spec.validate()
+        .map_err(|e| ServiceError::Config(format!("[training.default_spec]: {e}")))?;
+    Ok(spec)
+}
+
+fn locate_iset(cfg: &ServiceConfig) -> Option<IsetData> {
+    if let Some(d) = &cfg.data.iset_dir
+        && d.is_dir()
+    {
+        match IsetData::at(d) {
+            Ok(i) => return Some(i),
+            Err(e) => tracing::warn!("ISET data at {}: {e}", d.display()),
+        }
+    }
+    IsetData::locate()
+}
+
+/// Starts the service: data dir, database and migrations, illuminants, the active table (or
+/// the default table's training job), job workers, and the HTTP listener. `signal` ends the
+/// server gracefully when it completes (in addition to [`Server::shutdown`]).
+pub async fn start_with(
+    cfg: ServiceConfig,
+    signal: impl std::future::Future<Output = ()> + Send + 'static,
+) -> Result<Server, ServiceError> {
+    let data = cfg.data.dir.clone();
+    let tables_dir = data.join("tables");
+    std::fs::create_dir_all(&tables_dir).map_err(|e| {
+        ServiceError::Config(format!("cannot create {}: {e}", tables_dir.display()))
+    })?;
+    let db = connect(&data.join("l3.sqlite")).await?;
+    sqlx::migrate!("./migrations").run(&db).await?;
+    let iset = locate_iset(&cfg);
+    if iset.is_none() {
+        tracing::warn!("ISET data not found; using the built-in spectral data only");
+    }
+    let grid = WavelengthGrid::default();
+    let defaults = IlluminantRegistry::with_defaults(grid, iset.as_ref())
+        .map_err(|e| ServiceError::Internal(format!("default illuminants: {e}")))?;
+    let default_spec = default_training_spec(&cfg, iset.as_ref())?;
+    let state = AppState(Arc::new(Inner {
+        render_slots: Arc::new(Semaphore::new(cfg.server.render_concurrency)),
+        cpu_gate: Arc::new(Semaphore::new((rayon::current_num_threads() / 2).max(1))),
+        config: cfg.clone(),
+        db,
+        iset,
+        registry: Mutex::new(defaults.clone()),
+        default_registry: defaults,
+        active: ArcSwapOption::empty(),
+        kernel_cache: Mutex::new(HashMap::new()),
+        metrics: metrics::Metrics::default(),
+        tables_dir,
+        job_notify: Notify::new(),
+        running_jobs: Mutex::new(HashMap::new()),
+        shutting_down: AtomicBool::new(false),
+        shutdown_notify: Notify::new(),
+    }));
+    let reg = illuminants::rebuild_registry(&state).await?;
+    *state.registry() = reg;
+    let requeued = jobs::requeue_interrupted(&state).await?;
+    if requeued > 0 {
+        tracing::info!("{requeued} interrupted training job(s) re-queued");
+    }
+    // the active table: the recorded one, else the newest stored one
+    let mut candidates = Vec::new();
+    if let Some(id) = tables::recorded_active(&state).await? {
+        candidates.push(id);
+    }
+    if let Some(id) = sqlx::query_scalar::<_, String>(
+        "SELECT id FROM l3_tables ORDER BY created_at DESC, id LIMIT 1",
+    )
+    .fetch_optional(&state.db)
+    .await?
+    {
+        candidates.push(id);
+    }
+    for id in candidates {
+        match tables::activate_table(&state, &id).await {
+            Ok(()) => break,
+            Err(e) => tracing::error!(table = id, "cannot activate: {e}"),
+        }
+    }
+    if state.active.load().is_none() && cfg.training.auto_train_default {
+        let pending: i64 = sqlx::query_scalar(
+            "SELECT COUNT(*) FROM training_jobs WHERE status IN ('queued', 'running') AND activate = 1",
+        )
+        .fetch_one(&state.db)
+        .await?;
+        if pending == 0 {
+            let mut v = serde_json::to_value(&default_spec)
+                .map_err(|e| ServiceError::Internal(format!("default spec: {e}")))?;
+            v["activate"] = serde_json::Value::Bool(true);
+            let id = jobs::enqueue(&state, &v, true, None).await?;
+            tracing::info!(
+                job = id,
+                "no table yet: training the default table ({}); /readyz is 503 until it is active",
+                default_spec.illuminants.join("+")
+            );
+        }
+    }
+    let workers = (0..cfg.training.max_concurrent_jobs)
+        .map(|_| tokio::spawn(jobs::worker(state.clone())))
+        .collect();
+    let listener = tokio::net::TcpListener::bind(cfg.server.bind)
+        .await
+        .map_err(|e| ServiceError::Config(format!("cannot listen on {}: {e}", cfg.server.bind)))?;
+    let addr = listener
+        .local_addr()
+        .map_err(|e| ServiceError::Internal(format!("local address: {e}")))?;
+    let app = routes::router(state.clone());
+    let (tx, rx) = tokio::sync::oneshot::channel::<()>();
+    let st = state.clone();
+    let task = tokio::spawn(async move {
+        axum::serve(listener, app)
+            .with_graceful_shutdown(async move {
+                tokio::select! {
+                    _ = rx => {}
+                    _ = signal => {}
+                }
+                begin_shutdown(&st);
+            })
+            .await
+            .map_err(|e| ServiceError::Internal(format!("server: {e}")))
+    });
+    tracing::info!("l3 service listening on http://{addr}");
+    Ok(Server {
+        addr,
+        state,
+        shutdown: Some(tx),
+        task,
+        workers,
+    })
+}
+
+/// [`start_with`] without an external signal.
+pub async fn start(cfg: ServiceConfig) -> Result<Server, ServiceError> {
+    start_with(cfg, std::future::pending()).await
+}
+
+async fn connect(path: &Path) -> Result<sqlx::SqlitePool, ServiceError> {
+    let opts = SqliteConnectOptions::new()
+        .filename(path)
+        .create_if_missing(true)
+        .journal_mode(SqliteJournalMode::Wal)
+        .busy_timeout(Duration::from_secs(10));
+    Ok(SqlitePoolOptions::new()
+        .max_connections(8)
+        .connect_with(opts)
+        .await?)
+}
+
+/// Stores a table in the service (file written atomically, checksum recorded) and optionally
+/// activates it; returns its id. Used to seed a data directory and by tests.
+pub async fn import_table(
+    state: &AppState,
+    table: &crate::l3::L3Table,
+    activate: bool,
+) -> Result<String, ServiceError> {
+    table
+        .validate()
+        .map_err(|e| ServiceError::Unprocessable(e.to_string()))?;
+    let dir = state.tables_dir.clone();
+    let t = table.clone();
+    let stored = tokio::task::spawn_blocking(move || write_table_file(&dir, &t))
+        .await
+        .map_err(|e| ServiceError::Internal(format!("table writer: {e}")))??;
+    tables::insert_table(state, &stored, table, None).await?;
+    if activate {
+        tables::activate_table(state, &stored.id).await?;
+    }
+    Ok(stored.id)
+}

@@ -1,0 +1,501 @@
+//! `POST /v1/render`: a raw mosaic in, an sRGB PNG, a TIFF or f32 XYZ out (by `Accept`).
+//! Decoding, rendering and encoding run on rayon; the answer carries timings and class
+//! statistics in headers. The result equals `l3 render` on the same input bit for bit.
+
+use std::sync::{Arc, Mutex};
+use std::time::Instant;
+
+use axum::Extension;
+use axum::body::Bytes;
+use axum::extract::rejection::{BytesRejection, QueryRejection};
+use axum::extract::{Query, Request, State};
+use axum::http::{HeaderMap, HeaderName, HeaderValue, StatusCode, header};
+use axum::middleware::Next;
+use axum::response::{IntoResponse, Response};
+use serde::Deserialize;
+use tokio::sync::OwnedSemaphorePermit;
+
+use super::ServiceError;
+use super::state::AppState;
+use crate::io::{
+    DecodedMosaic, Limits, PngCompression, RawMeta, decode_mosaic, decode_raw_u16_le,
+    encode_png_rgb8, encode_tiff_f32_rgb, encode_tiff_rgb16,
+};
+use crate::l3::{WhiteLevel, render_reference, white_y, xyz_to_srgb8, xyz_to_srgb16};
+
+/// Query parameters of a render.
+#[derive(Debug, Default, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct RenderQuery {
+    /// Frame size (required for `application/octet-stream` bodies).
+    pub width: Option<usize>,
+    pub height: Option<usize>,
+    /// CFA of the input, e.g. `RG/WB`; must match the table's when given.
+    pub cfa: Option<String>,
+    /// DN levels of integer input (default 0 and 65535).
+    pub black_level: Option<u16>,
+    pub white_level: Option<u16>,
+    /// Acquisition illuminant (default D65).
+    pub illuminant: Option<String>,
+    /// Output white: `auto` (default) or the Y that maps to white.
+    pub white: Option<String>,
+    /// TIFF output: `xyz` (float, default) or `srgb16`.
+    pub tiff: Option<String>,
+    /// Crop of the output: `x,y,width,height`.
+    pub region: Option<String>,
+    /// Integer preview downscale (box average), 1–16.
+    pub preview: Option<usize>,
+}
+
+/// Output formats a client can ask for.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum OutputFormat {
+    Png,
+    Tiff,
+    F32,
+}
+
+impl OutputFormat {
+    fn content_type(self) -> &'static str {
+        match self {
+            OutputFormat::Png => "image/png",
+            OutputFormat::Tiff => "image/tiff",
+            OutputFormat::F32 => "application/octet-stream",
+        }
+    }
+}
+
+/// Chooses the output from an `Accept` header (q-values honoured; none or `*/*` → PNG).
+pub fn negotiate(accept: Option<&str>) -> Result<OutputFormat, ServiceError> {
+    let Some(accept) = accept.map(str::trim).filter(|a| !a.is_empty()) else {
+        return Ok(OutputFormat::Png);
+    };
+    let mut best: Option<(f64, OutputFormat)> = None;
+    for item in accept.split(',') {
+        let mut parts = item.split(';');
+        let media = parts.next().unwrap_or("").trim().to_ascii_lowercase();
+        let mut q = 1.0;
+        for p in parts {
+            if let Some(v) = p.trim().strip_prefix("q=") {
+                q = v.trim().parse().unwrap_or(0.0);
+            }
+        }
+        let fmt = match media.as_str() {
+            "image/png" | "image/*" | "*/*" => OutputFormat::Png,
+            "image/tiff" => OutputFormat::Tiff,
+            "application/octet-stream" => OutputFormat::F32,
+            _ => continue,
+        };
+        if q > 0.0 && best.is_none_or(|(bq, _)| q > bq) {
+            best = Some((q, fmt));
+        }
+    }
+    best.map(|(_, f)| f).ok_or_else(|| {
+        ServiceError::NotAcceptable(format!(
+            "Accept '{accept}' allows none of image/png, image/tiff, application/octet-stream"
+        ))
+    })
+}
+
+/// The request body, or a problem saying why it could not be read.
+pub fn body_bytes(body: Result<Bytes, BytesRejection>, max: usize) -> Result<Bytes, ServiceError> {
+    body.map_err(|e| {
+        if e.status() == StatusCode::PAYLOAD_TOO_LARGE {
+            ServiceError::PayloadTooLarge(format!(
+                "the request body is larger than the limit of {max} bytes"
+            ))
+        } else {
+            ServiceError::BadRequest(format!("cannot read the request body: {}", e.body_text()))
+        }
+    })
+}
+
+fn content_type(headers: &HeaderMap) -> Option<String> {
+    headers
+        .get(header::CONTENT_TYPE)
+        .and_then(|v| v.to_str().ok())
+        .map(|v| {
+            v.split(';')
+                .next()
+                .unwrap_or("")
+                .trim()
+                .to_ascii_lowercase()
+        })
+}
+
+/// Requires `Content-Type: application/json`.
+pub fn require_json(headers: &HeaderMap) -> Result<(), ServiceError> {
+    match content_type(headers).as_deref() {
+        Some("application/json") => Ok(()),
+        Some(other) => Err(ServiceError::UnsupportedMediaType(format!(
+            "Content-Type is '{other}'; application/json is expected"
+        ))),
+        None => Err(ServiceError::UnsupportedMediaType(
+            "Content-Type is missing; application/json is expected".into(),
+        )),
+    }
+}
+
+const IMAGE_TYPES: [&str; 6] = [
+    "image/png",
+    "image/tiff",
+    "image/x-portable-graymap",
+    "image/x-portable-anymap",
+    "image/pgm",
+    "image/x-pgm",
+];
+
+/// A crop `x,y,width,height`.
+fn parse_region(s: &str, w: usize, h: usize) -> Result<(usize, usize, usize, usize), ServiceError> {
+    let v: Vec<usize> = s
+        .split(',')
+        .map(|p| p.trim().parse::<usize>())
+        .collect::<Result<_, _>>()
+        .map_err(|_| {
+            ServiceError::BadRequest(format!(
+                "region '{s}': expected x,y,width,height (non-negative integers)"
+            ))
+        })?;
+    let [x, y, rw, rh] = v[..] else {
+        return Err(ServiceError::BadRequest(format!(
+            "region '{s}': expected four numbers x,y,width,height"
+        )));
+    };
+    if rw == 0 || rh == 0 || x.saturating_add(rw) > w || y.saturating_add(rh) > h {
+        return Err(ServiceError::BadRequest(format!(
+            "region {x},{y},{rw}×{rh} is empty or not inside the {w}×{h} frame"
+        )));
+    }
+    Ok((x, y, rw, rh))
+}
+
+/// Interleaved XYZ cropped to a region.
+fn crop(xyz: &[f32], w: usize, (x, y, rw, rh): (usize, usize, usize, usize)) -> Vec<f32> {
+    let mut out = Vec::with_capacity(rw * rh * 3);
+    for r in y..y + rh {
+        out.extend_from_slice(&xyz[(r * w + x) * 3..(r * w + x + rw) * 3]);
+    }
+    out
+}
+
+/// Box-average downscale by `k` (partial edge blocks dropped).
+fn downscale(xyz: &[f32], w: usize, h: usize, k: usize) -> (Vec<f32>, usize, usize) {
+    let (ow, oh) = (w / k, h / k);
+    let mut out = vec![0f32; ow * oh * 3];
+    let n = (k * k) as f64;
+    for oy in 0..oh {
+        for ox in 0..ow {
+            let mut acc = [0f64; 3];
+            for dy in 0..k {
+                let row = (oy * k + dy) * w;
+                for dx in 0..k {
+                    let p = (row + ox * k + dx) * 3;
+                    for c in 0..3 {
+                        acc[c] += f64::from(xyz[p + c]);
+                    }
+                }
+            }
+            for c in 0..3 {
+                out[(oy * ow + ox) * 3 + c] = (acc[c] / n) as f32;
+            }
+        }
+    }
+    (out, ow, oh)
+}
+
+struct Rendered {
+    bytes: Vec<u8>,
+    width: usize,
+    height: usize,
+    in_width: usize,
+    in_height: usize,
+    stats: crate::l3::RenderStats,
+    decode_ms: f64,
+    render_ms: f64,
+    encode_ms: f64,
+}
+
+/// A render slot taken by [`admit`] before the body is read.
+#[derive(Clone)]
+pub struct RenderSlot(Arc<Mutex<Option<OwnedSemaphorePermit>>>);
+
+/// Admission of renders: takes a slot before the body is read, or answers 503 with
+/// Retry-After at once (an overloaded service reads no bodies).
+pub async fn admit(State(state): State<AppState>, mut req: Request, next: Next) -> Response {
+    match state.render_slots.clone().try_acquire_owned() {
+        Ok(p) => {
+            req.extensions_mut()
+                .insert(RenderSlot(Arc::new(Mutex::new(Some(p)))));
+            next.run(req).await
+        }
+        Err(_) => ServiceError::Overloaded {
+            msg: format!(
+                "{} renders are already running; retry shortly",
+                state.config.server.render_concurrency
+            ),
+            retry_after_s: 1,
+        }
+        .into_response(),
+    }
+}
+
+/// `POST /v1/render`
+pub async fn render(
+    State(state): State<AppState>,
+    Extension(permit): Extension<RenderSlot>,
+    headers: HeaderMap,
+    query: Result<Query<RenderQuery>, QueryRejection>,
+    body: Result<Bytes, BytesRejection>,
+) -> Result<Response, ServiceError> {
+    let Query(q) = query.map_err(|e| ServiceError::BadRequest(e.body_text()))?;
+    let body = body_bytes(body, state.config.server.max_body_bytes)?;
+    let format = negotiate(headers.get(header::ACCEPT).and_then(|v| v.to_str().ok()))?;
+    let ctype = content_type(&headers).ok_or_else(|| {
+        ServiceError::UnsupportedMediaType(
+            "Content-Type is missing; send application/octet-stream (raw little-endian u16 with width and height) or image/png, image/tiff, image/x-portable-graymap".into(),
+        )
+    })?;
+    let raw = match ctype.as_str() {
+        "application/octet-stream" => true,
+        t if IMAGE_TYPES.contains(&t) => false,
+        other => {
+            return Err(ServiceError::UnsupportedMediaType(format!(
+                "Content-Type '{other}' is not a mosaic; send application/octet-stream (raw little-endian u16) or image/png, image/tiff, image/x-portable-graymap"
+            )));
+        }
+    };
+    if body.is_empty() {
+        return Err(ServiceError::InvalidImage(
+            "the request body is empty".into(),
+        ));
+    }
+    let white: WhiteLevel = match &q.white {
+        None => WhiteLevel::Auto,
+        Some(s) => s
+            .parse()
+            .map_err(|e: crate::l3::L3Error| ServiceError::BadRequest(e.to_string()))?,
+    };
+    let tiff_srgb16 = match q.tiff.as_deref() {
+        None | Some("xyz") => false,
+        Some("srgb16") => true,
+        Some(other) => {
+            return Err(ServiceError::BadRequest(format!(
+                "tiff '{other}': expected xyz or srgb16"
+            )));
+        }
+    };
+    let preview = q.preview.unwrap_or(1);
+    if !(1..=16).contains(&preview) {
+        return Err(ServiceError::BadRequest(format!(
+            "preview {preview}: an integer downscale factor from 1 to 16"
+        )));
+    }
+    if raw && (q.width.is_none() || q.height.is_none()) {
+        return Err(ServiceError::BadRequest(
+            "a raw application/octet-stream body needs the width and height query parameters"
+                .into(),
+        ));
+    }
+    let active = state.active.load_full().ok_or_else(|| {
+        ServiceError::NotReady(
+            "no table is active yet (the default table may still be training; see /readyz)".into(),
+        )
+    })?;
+    if let Some(cfa) = &q.cfa {
+        let table_cfa = active.table.meta.cfa.to_string();
+        if !cfa.trim().eq_ignore_ascii_case(&table_cfa) {
+            return Err(ServiceError::Unprocessable(format!(
+                "cfa '{cfa}' does not match the active table's CFA '{table_cfa}'"
+            )));
+        }
+    }
+    let entry = state.resolve_illuminant(q.illuminant.as_deref().unwrap_or("D65"))?;
+    let permit = permit
+        .0
+        .lock()
+        .unwrap_or_else(|p| p.into_inner())
+        .take()
+        .ok_or_else(|| ServiceError::Internal("render slot missing".into()))?;
+    // renders execute in arrival order, a few at a time (each one is parallel inside), so
+    // latency under load grows evenly instead of in a long tail
+    let queued = Instant::now();
+    let gate = state
+        .cpu_gate
+        .clone()
+        .acquire_owned()
+        .await
+        .map_err(|_| ServiceError::Internal("the render gate is closed".into()))?;
+    let queue_ms = queued.elapsed().as_secs_f64() * 1e3;
+    let limits = Limits {
+        max_pixels: state.config.server.max_pixels,
+        ..Limits::default()
+    };
+    let st = state.clone();
+    let entry_name = entry.name.clone();
+    let table_id = active.id.clone();
+    let (tx, rx) = tokio::sync::oneshot::channel();
+    rayon::spawn(move || {
+        let run = || -> Result<Rendered, ServiceError> {
+            let t0 = Instant::now();
+            let swing = active.table.meta.voltage_swing;
+            let black = q.black_level.unwrap_or(0);
+            let white_dn = q.white_level.unwrap_or(65535);
+            let to_volts =
+                |frame: crate::io::RawFrame| -> Result<(Vec<f32>, usize, usize), ServiceError> {
+                    let meta = RawMeta::new(frame.width, frame.height, "", black, white_dn, swing);
+                    Ok((frame.to_volts(&meta)?, frame.width, frame.height))
+                };
+            let (volts, w, h) = if raw {
+                let (w, h) = (q.width.unwrap_or(0), q.height.unwrap_or(0));
+                to_volts(decode_raw_u16_le(&body, w, h, &limits)?)?
+            } else {
+                let m = decode_mosaic(&body, &limits)?;
+                let (mw, mh) = m.dims();
+                if q.width.is_some_and(|w| w != mw) || q.height.is_some_and(|h| h != mh) {
+                    return Err(ServiceError::InvalidImage(format!(
+                        "the image is {mw}×{mh} but the query says {}×{}",
+                        q.width.map_or("?".into(), |v| v.to_string()),
+                        q.height.map_or("?".into(), |v| v.to_string())
+                    )));
+                }
+                match m {
+                    DecodedMosaic::U16(frame) => to_volts(frame)?,
+                    DecodedMosaic::F32 {
+                        width,
+                        height,
+                        data,
+                    } => (data, width, height),
+                }
+            };
+            let region = q
+                .region
+                .as_deref()
+                .map(|s| parse_region(s, w, h))
+                .transpose()?;
+            let t1 = Instant::now();
+            let kernels = st.kernels_for(&active, &entry);
+            let (xyz, stats) = render_reference(&active.table, &kernels, &volts, w, h)
+                .map_err(|e| ServiceError::InvalidImage(e.to_string()))?;
+            let t2 = Instant::now();
+            let wy = match format {
+                OutputFormat::F32 => 1.0,
+                OutputFormat::Tiff if !tiff_srgb16 => 1.0,
+                _ => white_y(&xyz, white),
+            };
+            let (mut out, mut ow, mut oh) = (xyz, w, h);
+            if let Some(r) = region {
+                out = crop(&out, w, r);
+                (ow, oh) = (r.2, r.3);
+            }
+            if preview > 1 {
+                if ow / preview == 0 || oh / preview == 0 {
+                    return Err(ServiceError::BadRequest(format!(
+                        "preview {preview} leaves nothing of a {ow}×{oh} image"
+                    )));
+                }
+                (out, ow, oh) = downscale(&out, ow, oh, preview);
+            }
+            let bytes = match format {
+                OutputFormat::Png => {
+                    encode_png_rgb8(ow, oh, &xyz_to_srgb8(&out, wy), PngCompression::Fast)?
+                }
+                OutputFormat::Tiff if tiff_srgb16 => {
+                    encode_tiff_rgb16(ow, oh, &xyz_to_srgb16(&out, wy))?
+                }
+                OutputFormat::Tiff => encode_tiff_f32_rgb(ow, oh, &out)?,
+                OutputFormat::F32 => out.iter().flat_map(|v| v.to_le_bytes()).collect(),
+            };
+            let t3 = Instant::now();
+            let ms = |a: Instant, b: Instant| (b - a).as_secs_f64() * 1e3;
+            Ok(Rendered {
+                bytes,
+                width: ow,
+                height: oh,
+                in_width: w,
+                in_height: h,
+                stats,
+                decode_ms: ms(t0, t1),
+                render_ms: ms(t1, t2),
+                encode_ms: ms(t2, t3),
+            })
+        };
+        let result = run();
+        // free the slots before answering, so a client's next request finds them free
+        drop(gate);
+        drop(permit);
+        let _ = tx.send(result);
+    });
+    let r = rx
+        .await
+        .map_err(|_| ServiceError::Internal("the render task was lost".into()))??;
+    state.metrics.rendered((r.in_width * r.in_height) as u64);
+    let mut resp = r.bytes.into_response();
+    let h = resp.headers_mut();
+    h.insert(
+        header::CONTENT_TYPE,
+        HeaderValue::from_static(format.content_type()),
+    );
+    h.insert(header::VARY, HeaderValue::from_static("Accept"));
+    let mut put = |name: &'static str, v: String| {
+        if let Ok(v) = HeaderValue::from_str(&v) {
+            h.insert(HeaderName::from_static(name), v);
+        }
+    };
+    put("x-l3-table", table_id);
+    put("x-l3-illuminant", entry_name);
+    put("x-l3-width", r.width.to_string());
+    put("x-l3-height", r.height.to_string());
+    put("x-l3-input-pixels", (r.in_width * r.in_height).to_string());
+    put("x-l3-queue-ms", format!("{queue_ms:.3}"));
+    put("x-l3-decode-ms", format!("{:.3}", r.decode_ms));
+    put("x-l3-render-ms", format!("{:.3}", r.render_ms));
+    put("x-l3-encode-ms", format!("{:.3}", r.encode_ms));
+    put("x-l3-saturated-pixels", r.stats.saturated.to_string());
+    put("x-l3-texture-pixels", r.stats.texture.to_string());
+    put("x-l3-fallback-pixels", r.stats.fallback.to_string());
+    put("x-l3-clamped-pixels", r.stats.clamped.to_string());
+    put(
+        "server-timing",
+        format!(
+            "queue;dur={queue_ms:.3}, decode;dur={:.3}, render;dur={:.3}, encode;dur={:.3}",
+            r.decode_ms, r.render_ms, r.encode_ms
+        ),
+    );
+    Ok(resp)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn accept_negotiation() {
+        assert_eq!(negotiate(None).unwrap(), OutputFormat::Png);
+        assert_eq!(negotiate(Some("*/*")).unwrap(), OutputFormat::Png);
+        assert_eq!(negotiate(Some("image/tiff")).unwrap(), OutputFormat::Tiff);
+        assert_eq!(
+            negotiate(Some("image/png;q=0.5, application/octet-stream")).unwrap(),
+            OutputFormat::F32
+        );
+        assert_eq!(
+            negotiate(Some("text/html, image/tiff;q=0.1")).unwrap(),
+            OutputFormat::Tiff
+        );
+        assert_eq!(negotiate(Some("text/html")).unwrap_err().status(), 406);
+    }
+
+    #[test]
+    fn region_and_preview() {
+        assert!(parse_region("0,0,2,2", 4, 4).is_ok());
+        assert!(parse_region("3,0,2,2", 4, 4).is_err());
+        assert!(parse_region("0,0,0,2", 4, 4).is_err());
+        assert!(parse_region("a,b", 4, 4).is_err());
+        let xyz: Vec<f32> = (0..4 * 2 * 3).map(|v| v as f32).collect();
+        let c = crop(&xyz, 4, (1, 1, 2, 1));
+        assert_eq!(c, vec![15.0, 16.0, 17.0, 18.0, 19.0, 20.0]);
+        let (d, w, h) = downscale(&xyz, 4, 2, 2);
+        assert_eq!((w, h), (2, 1));
+        // mean of pixels 0,1,4,5 channel 0: (0+3+12+15)/4
+        assert_eq!(d[0], 7.5);
+    }
+}

@@ -1,0 +1,256 @@
+//! The router: the route list (one const, checked against openapi.yaml by a test), health,
+//! readiness, metrics, the OpenAPI document, and the middleware (auth, timeout, metrics,
+//! tracing, request ids, body limit).
+
+use std::sync::atomic::{AtomicU64, Ordering};
+use std::time::{Duration, Instant};
+
+use axum::Router;
+use axum::extract::{DefaultBodyLimit, MatchedPath, Request, State};
+use axum::http::{HeaderValue, Method, header};
+use axum::middleware::{self, Next};
+use axum::response::{IntoResponse, Response};
+use axum::routing::{MethodRouter, delete, get, post, put};
+use serde_json::json;
+use tower_http::request_id::{
+    MakeRequestId, PropagateRequestIdLayer, RequestId, SetRequestIdLayer,
+};
+use tower_http::trace::TraceLayer;
+
+use super::state::AppState;
+use super::{ServiceError, evaluations, illuminants, jobs, render, tables};
+
+/// Every served route as (method, path); openapi.yaml documents exactly these.
+pub const ROUTES: &[(&str, &str)] = &[
+    ("POST", "/v1/render"),
+    ("POST", "/v1/training-jobs"),
+    ("GET", "/v1/training-jobs"),
+    ("GET", "/v1/training-jobs/{id}"),
+    ("POST", "/v1/training-jobs/{id}/cancel"),
+    ("GET", "/v1/tables"),
+    ("GET", "/v1/tables/{id}"),
+    ("GET", "/v1/tables/{id}/download"),
+    ("POST", "/v1/tables/{id}/activate"),
+    ("GET", "/v1/illuminants"),
+    ("GET", "/v1/illuminants/{name}"),
+    ("PUT", "/v1/illuminants/{name}"),
+    ("DELETE", "/v1/illuminants/{name}"),
+    ("POST", "/v1/evaluations"),
+    ("GET", "/v1/evaluations"),
+    ("GET", "/v1/evaluations/{id}"),
+    ("GET", "/healthz"),
+    ("GET", "/readyz"),
+    ("GET", "/metrics"),
+    ("GET", "/openapi.yaml"),
+];
+
+/// The committed OpenAPI document, served at `/openapi.yaml`.
+pub const OPENAPI_YAML: &str = include_str!("../../openapi.yaml");
+
+/// Routes that change nothing (no bearer token needed even when one is configured).
+fn is_mutating(method: &Method, path: &str) -> bool {
+    !(method == Method::GET || method == Method::HEAD || path == "/v1/render")
+}
+
+fn handler(method: &str, path: &str) -> Option<MethodRouter<AppState>> {
+    Some(match (method, path) {
+        ("POST", "/v1/render") => post(render::render),
+        ("POST", "/v1/training-jobs") => post(jobs::submit),
+        ("GET", "/v1/training-jobs") => get(jobs::list),
+        ("GET", "/v1/training-jobs/{id}") => get(jobs::get),
+        ("POST", "/v1/training-jobs/{id}/cancel") => post(jobs::cancel),
+        ("GET", "/v1/tables") => get(tables::list),
+        ("GET", "/v1/tables/{id}") => get(tables::get),
+        ("GET", "/v1/tables/{id}/download") => get(tables::download),
+        ("POST", "/v1/tables/{id}/activate") => post(tables::activate),
+        ("GET", "/v1/illuminants") => get(illuminants::list),
+        ("GET", "/v1/illuminants/{name}") => get(illuminants::get),
+        ("PUT", "/v1/illuminants/{name}") => put(illuminants::put),
+        ("DELETE", "/v1/illuminants/{name}") => delete(illuminants::delete),
+        ("POST", "/v1/evaluations") => post(evaluations::create),
+        ("GET", "/v1/evaluations") => get(evaluations::list),
+        ("GET", "/v1/evaluations/{id}") => get(evaluations::get),
+        ("GET", "/healthz") => get(healthz),
+        ("GET", "/readyz") => get(readyz),
+        ("GET", "/metrics") => get(metrics),
+        ("GET", "/openapi.yaml") => get(openapi),
+        _ => return None,
+    })
+}
+
+async fn healthz() -> impl IntoResponse {
+    axum::Json(json!({ "status": "ok", "version": env!("CARGO_PKG_VERSION") }))
+}
+
+async fn readyz(State(state): State<AppState>) -> Result<Response, ServiceError> {
+    match state.active.load_full() {
+        Some(a) => Ok(axum::Json(json!({ "status": "ready", "table_id": a.id })).into_response()),
+        None => {
+            let job = sqlx::query_scalar::<_, String>(
+                "SELECT id FROM training_jobs WHERE status IN ('queued', 'running') AND activate = 1
+                 ORDER BY created_at LIMIT 1",
+            )
+            .fetch_optional(&state.db)
+            .await?;
+            Err(ServiceError::NotReady(match job {
+                Some(j) => format!("no table is active yet; training job {j} will provide one"),
+                None => {
+                    "no table is active; train one (POST /v1/training-jobs) and activate it".into()
+                }
+            }))
+        }
+    }
+}
+
+async fn metrics(State(state): State<AppState>) -> Result<Response, ServiceError> {
+    let counts = jobs::counts(&state).await?;
+    let text = state.metrics.render(&counts, state.active.load().is_some());
+    let mut r = text.into_response();
+    r.headers_mut().insert(
+        header::CONTENT_TYPE,
+        HeaderValue::from_static("text/plain; version=0.0.4; charset=utf-8"),
+    );
+    Ok(r)
+}
+
+async fn openapi() -> Response {
+    let mut r = OPENAPI_YAML.into_response();
+    r.headers_mut().insert(
+        header::CONTENT_TYPE,
+        HeaderValue::from_static("application/yaml"),
+    );
+    r
+}
+
+async fn not_found(req: Request) -> ServiceError {
+    ServiceError::NotFound(format!(
+        "no route for {} {}",
+        req.method(),
+        req.uri().path()
+    ))
+}
+
+async fn method_not_allowed(req: Request) -> ServiceError {
+    ServiceError::MethodNotAllowed(format!(
+        "method {} is not allowed on {}",
+        req.method(),
+        req.uri().path()
+    ))
+}
+
+/// Bearer token check, request timeout and metrics around every request.
+async fn guard(State(state): State<AppState>, req: Request, next: Next) -> Response {
+    let started = Instant::now();
+    let method = req.method().clone();
+    let route = req
+        .extensions()
+        .get::<MatchedPath>()
+        .map(|p| p.as_str().to_string())
+        .unwrap_or_else(|| "unmatched".into());
+    let token = &state.config.server.bearer_token;
+    let resp = if !token.is_empty() && is_mutating(&method, req.uri().path()) {
+        let ok = req
+            .headers()
+            .get(header::AUTHORIZATION)
+            .and_then(|v| v.to_str().ok())
+            .and_then(|v| v.strip_prefix("Bearer "))
+            .is_some_and(|t| constant_time_eq(t.trim().as_bytes(), token.as_bytes()));
+        if ok {
+            None
+        } else {
+            Some(
+                ServiceError::Unauthorized(
+                    "this endpoint needs Authorization: Bearer <token>".into(),
+                )
+                .into_response(),
+            )
+        }
+    } else {
+        None
+    };
+    let resp = match resp {
+        Some(r) => r,
+        None => {
+            let limit = Duration::from_secs_f64(state.config.server.request_timeout_s);
+            match tokio::time::timeout(limit, next.run(req)).await {
+                Ok(r) => r,
+                Err(_) => ServiceError::Timeout(format!(
+                    "the request took longer than the {} s limit",
+                    state.config.server.request_timeout_s
+                ))
+                .into_response(),
+            }
+        }
+    };
+    state.metrics.observe(
+        method.as_str(),
+        &route,
+        resp.status().as_u16(),
+        started.elapsed().as_secs_f64(),
+    );
+    resp
+}
+
+fn constant_time_eq(a: &[u8], b: &[u8]) -> bool {
+    a.len() == b.len() && a.iter().zip(b).fold(0u8, |acc, (x, y)| acc | (x ^ y)) == 0
+}
+
+#[derive(Clone, Default)]
+struct Counter(std::sync::Arc<AtomicU64>);
+
+impl MakeRequestId for Counter {
+    fn make_request_id<B>(&mut self, _req: &axum::http::Request<B>) -> Option<RequestId> {
+        let n = self.0.fetch_add(1, Ordering::Relaxed);
+        HeaderValue::from_str(&format!("req-{n}"))
+            .ok()
+            .map(RequestId::new)
+    }
+}
+
+/// The application router with all middleware.
+pub fn router(state: AppState) -> Router {
+    let mut r: Router<AppState> = Router::new();
+    for (m, p) in ROUTES {
+        if let Some(mut h) = handler(m, p) {
+            if *p == "/v1/render" {
+                // render slots are taken before the body is read
+                h = h.route_layer(middleware::from_fn_with_state(state.clone(), render::admit));
+            }
+            r = r.route(p, h);
+        } else {
+            tracing::error!("route {m} {p} has no handler");
+        }
+    }
+    let body_limit = state.config.server.max_body_bytes;
+    r.fallback(not_found)
+        .method_not_allowed_fallback(method_not_allowed)
+        .route_layer(middleware::from_fn_with_state(state.clone(), guard))
+        .layer(DefaultBodyLimit::max(body_limit))
+        // 5xx are logged by ServiceError (500 at ERROR); overload 503s would flood the log
+        .layer(TraceLayer::new_for_http().on_failure(()))
+        .layer(PropagateRequestIdLayer::x_request_id())
+        .layer(SetRequestIdLayer::x_request_id(Counter::default()))
+        .with_state(state)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn every_route_has_a_handler() {
+        for (m, p) in ROUTES {
+            assert!(handler(m, p).is_some(), "{m} {p}");
+        }
+    }
+
+    #[test]
+    fn mutating_routes() {
+        assert!(is_mutating(&Method::POST, "/v1/training-jobs"));
+        assert!(is_mutating(&Method::DELETE, "/v1/illuminants/x"));
+        assert!(!is_mutating(&Method::POST, "/v1/render"));
+        assert!(!is_mutating(&Method::GET, "/v1/tables"));
+        assert!(constant_time_eq(b"abc", b"abc"));
+        assert!(!constant_time_eq(b"abc", b"abd"));
+    }
+}

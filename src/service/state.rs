@@ -1,0 +1,192 @@
+//! Shared state of a running service: database, illuminant registry, the active table, the
+//! fused-kernel cache, render slots, metrics and the job runner's handles.
+
+use std::collections::HashMap;
+use std::path::PathBuf;
+use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
+use std::sync::{Arc, Mutex};
+use std::time::{SystemTime, UNIX_EPOCH};
+
+use arc_swap::ArcSwapOption;
+use sha2::{Digest, Sha256};
+use sqlx::sqlite::SqlitePool;
+use tokio::sync::{Notify, Semaphore};
+
+use super::ServiceError;
+use super::config::ServiceConfig;
+use super::metrics::Metrics;
+use crate::l3::{IlluminantEntry, IlluminantRegistry, L3Table, TableKind, fuse_kernels};
+use crate::spectral::IsetData;
+
+/// The table renders use, with its id. Renders hold an `Arc` of it, so an activation never
+/// pulls a table from under a render in flight.
+#[derive(Debug)]
+pub struct ActiveTable {
+    pub id: String,
+    pub sha256: String,
+    pub table: L3Table,
+}
+
+/// Fused kernels by (table id, lower-case illuminant name).
+pub type KernelCache = HashMap<(String, String), Arc<Vec<f32>>>;
+
+/// Everything the handlers share (cheap to clone).
+#[derive(Clone)]
+pub struct AppState(pub Arc<Inner>);
+
+impl std::ops::Deref for AppState {
+    type Target = Inner;
+    fn deref(&self) -> &Inner {
+        &self.0
+    }
+}
+
+/// The shared state behind [`AppState`].
+pub struct Inner {
+    pub config: ServiceConfig,
+    pub db: SqlitePool,
+    pub iset: Option<IsetData>,
+    /// The built-in illuminants (D65, D50, A, F2, F11 and the ISET lights).
+    pub default_registry: IlluminantRegistry,
+    /// Built-ins plus the user's illuminants from the database.
+    pub registry: Mutex<IlluminantRegistry>,
+    pub active: ArcSwapOption<ActiveTable>,
+    /// Fused kernels per (table id, lower-case illuminant name).
+    pub kernel_cache: Mutex<KernelCache>,
+    /// Admission: renders accepted at once (`render_concurrency`); excess gets 503.
+    pub render_slots: Arc<Semaphore>,
+    /// Execution: renders running on rayon at once (FIFO); the rest of the admitted wait.
+    pub cpu_gate: Arc<Semaphore>,
+    pub metrics: Metrics,
+    pub tables_dir: PathBuf,
+    /// Wakes the job workers when a job is queued.
+    pub job_notify: Notify,
+    /// Cancel flags of the running jobs.
+    pub running_jobs: Mutex<HashMap<String, Arc<AtomicBool>>>,
+    pub shutting_down: AtomicBool,
+    pub shutdown_notify: Notify,
+}
+
+/// Largest number of cached fused-kernel sets (each is the size of a table's kernels).
+const KERNEL_CACHE_ENTRIES: usize = 32;
+
+impl Inner {
+    /// Locks the registry (a poisoned lock is still usable: the registry has no invariants a
+    /// panic could break half-way).
+    pub fn registry(&self) -> std::sync::MutexGuard<'_, IlluminantRegistry> {
+        self.registry.lock().unwrap_or_else(|p| p.into_inner())
+    }
+
+    /// Resolves a request's illuminant: a registered name, `cct:K`, `xy:x,y` (the CCT of that
+    /// chromaticity), or a CIE standard illuminant name. Files (`csv:`) and `iset:` paths are
+    /// refused over HTTP.
+    pub fn resolve_illuminant(&self, spec: &str) -> Result<IlluminantEntry, ServiceError> {
+        let spec = spec.trim();
+        let unknown = |why: String| {
+            ServiceError::UnknownIlluminant(format!(
+                "illuminant '{spec}': {why}; use a registered name (GET /v1/illuminants), cct:K or xy:x,y"
+            ))
+        };
+        let lower = spec.to_ascii_lowercase();
+        if lower.starts_with("csv:") || lower.starts_with("iset:") {
+            return Err(unknown(
+                "file-based illuminant specs are not accepted over HTTP".into(),
+            ));
+        }
+        let mut reg = self.registry();
+        if let Some(e) = reg.get(spec) {
+            return Ok(e.clone());
+        }
+        if let Some(rest) = lower.strip_prefix("xy:") {
+            let parts: Vec<f64> = rest
+                .split(',')
+                .map(|p| p.trim().parse::<f64>())
+                .collect::<Result<_, _>>()
+                .map_err(|_| unknown("expected xy:x,y with two numbers".into()))?;
+            let [x, y] = parts[..] else {
+                return Err(unknown("expected xy:x,y with two numbers".into()));
+            };
+            if !(x > 0.0 && y > 0.0 && x + y < 1.0) {
+                return Err(unknown(format!(
+                    "chromaticity ({x}, {y}) is not inside the spectrum locus triangle"
+                )));
+            }
+            let cct = crate::colour::cct_from_xy([x, y])
+                .map_err(|e| unknown(format!("no correlated colour temperature: {e}")))?;
+            if !(1000.0..=25_000.0).contains(&cct) {
+                return Err(unknown(format!(
+                    "its CCT {cct:.0} K is outside 1000–25000 K"
+                )));
+            }
+            // corrected as the illuminant of that CCT (blackbody below 4000 K, daylight above)
+            return reg
+                .resolve(&format!("cct:{}", cct.round()), self.iset.as_ref())
+                .map_err(|e| unknown(e.to_string()));
+        }
+        reg.resolve(spec, self.iset.as_ref())
+            .map_err(|e| unknown(e.to_string()))
+    }
+
+    /// The kernels to render `active` under `entry`: the table's own for cross-illuminant
+    /// tables, else the fused (kernel · T) set, cached per (table, illuminant).
+    pub fn kernels_for(&self, active: &ActiveTable, entry: &IlluminantEntry) -> Arc<Vec<f32>> {
+        if active.table.meta.kind == TableKind::CrossIlluminant {
+            let key = (active.id.clone(), String::from("\0own"));
+            return self.cached(key, || active.table.kernels.clone());
+        }
+        let key = (active.id.clone(), entry.name.to_ascii_lowercase());
+        self.cached(key, || fuse_kernels(&active.table, &entry.t))
+    }
+
+    fn cached(&self, key: (String, String), make: impl FnOnce() -> Vec<f32>) -> Arc<Vec<f32>> {
+        if let Some(k) = self
+            .kernel_cache
+            .lock()
+            .unwrap_or_else(|p| p.into_inner())
+            .get(&key)
+        {
+            return k.clone();
+        }
+        let k = Arc::new(make());
+        let mut cache = self.kernel_cache.lock().unwrap_or_else(|p| p.into_inner());
+        if cache.len() >= KERNEL_CACHE_ENTRIES {
+            cache.clear();
+        }
+        cache.insert(key, k.clone());
+        k
+    }
+
+    /// Drops cached kernels of an illuminant (after it was redefined or deleted).
+    pub fn forget_illuminant(&self, name: &str) {
+        let n = name.to_ascii_lowercase();
+        self.kernel_cache
+            .lock()
+            .unwrap_or_else(|p| p.into_inner())
+            .retain(|(_, ill), _| *ill != n);
+    }
+}
+
+/// Milliseconds since the Unix epoch.
+pub fn now_ms() -> i64 {
+    SystemTime::now()
+        .duration_since(UNIX_EPOCH)
+        .map(|d| d.as_millis() as i64)
+        .unwrap_or(0)
+}
+
+/// A new unique id with a prefix, e.g. `job_0192f3a4b5c6d7e8`.
+pub fn new_id(prefix: &str) -> String {
+    static COUNTER: AtomicU64 = AtomicU64::new(0);
+    let n = COUNTER.fetch_add(1, Ordering::Relaxed);
+    let nanos = SystemTime::now()
+        .duration_since(UNIX_EPOCH)
+        .map(|d| d.as_nanos())
+        .unwrap_or(0);
+    let h = Sha256::digest(format!("{nanos}:{n}:{}", std::process::id()).as_bytes());
+    format!("{prefix}_{}", hex::encode(&h[..8]))
+}
+
+/// Hex SHA-256 of bytes.
+pub fn sha256_hex(bytes: &[u8]) -> String {
+    hex::encode(Sha256::digest(bytes))
+}

@@ -1,0 +1,1055 @@
+//! The render service end to end on a real listener: render parity with `l3 render`, every
+//! table / illuminant / evaluation / health endpoint, limits, auth and hostile input.
+
+mod service_support;
+
+use std::path::Path;
+use std::process::Command;
+
+use l3::spectral::IsetData;
+use service_support::*;
+
+fn l3_cli(args: &[&str], dir: &Path) {
+    let out = Command::new(env!("CARGO_BIN_EXE_l3"))
+        .args(args)
+        .current_dir(dir)
+        .output()
+        .expect("run l3");
+    assert!(
+        out.status.success(),
+        "l3 {args:?} failed: {}{}",
+        String::from_utf8_lossy(&out.stdout),
+        String::from_utf8_lossy(&out.stderr)
+    );
+}
+
+/// A simple synthetic raw u16 frame (a gradient), little-endian bytes.
+fn gradient_raw(w: usize, h: usize) -> Vec<u8> {
+    (0..w * h)
+        .flat_map(|i| {
+            let (x, y) = (i % w, i / w);
+            let v = (2000 + (x * 40000 / w) + (y * 10000 / h)) as u16;
+            v.to_le_bytes()
+        })
+        .collect()
+}
+
+fn decode_png(bytes: &[u8]) -> image::RgbImage {
+    image::load_from_memory_with_format(bytes, image::ImageFormat::Png)
+        .expect("png")
+        .to_rgb8()
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn render_of_a_tungsten_frame_equals_l3_render_bit_for_bit() {
+    let Some(iset) = IsetData::for_tests() else {
+        return;
+    };
+    let tmp = tempfile::tempdir().unwrap();
+    let d = tmp.path();
+    let root = std::fs::canonicalize(iset.root())
+        .unwrap()
+        .display()
+        .to_string();
+    l3_cli(
+        &[
+            "--iset-dir",
+            &root,
+            "simulate",
+            "--scene",
+            "macbeth",
+            "--illuminant",
+            "Tungsten",
+            "--seed",
+            "3",
+            "--out",
+            "sim",
+        ],
+        d,
+    );
+    let table_path = d.join("table.safetensors");
+    tiny_table(Some(&iset)).save(&table_path).unwrap();
+    for out in ["cli.tiff", "cli.raw", "cli.png"] {
+        l3_cli(
+            &[
+                "--iset-dir",
+                &root,
+                "render",
+                "--table",
+                "table.safetensors",
+                "--in",
+                "sim/mosaic.raw",
+                "--illuminant",
+                "Tungsten",
+                "--out",
+                out,
+            ],
+            d,
+        );
+    }
+    let meta: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(d.join("sim/mosaic.json")).unwrap()).unwrap();
+    let (w, h) = (
+        meta["width"].as_u64().unwrap(),
+        meta["height"].as_u64().unwrap(),
+    );
+    let data = tempfile::tempdir().unwrap();
+    let (server, table_id) = server_with_table(data.path(), Some(&iset), None).await;
+    let c = client();
+    let raw = std::fs::read(d.join("sim/mosaic.raw")).unwrap();
+    let q = format!(
+        "/v1/render?width={w}&height={h}&cfa=RG/WB&black_level={}&white_level={}&illuminant=Tungsten",
+        meta["black_level"], meta["white_level"]
+    );
+    for (accept, file) in [
+        ("image/tiff", "cli.tiff"),
+        ("application/octet-stream", "cli.raw"),
+    ] {
+        let r = c
+            .post(url(&server, &q))
+            .header("content-type", "application/octet-stream")
+            .header("accept", accept)
+            .body(raw.clone())
+            .send()
+            .await
+            .unwrap();
+        assert_eq!(r.status(), 200, "{accept}");
+        assert_eq!(r.headers()["content-type"], accept);
+        assert_eq!(r.headers()["vary"], "Accept");
+        assert_eq!(r.headers()["x-l3-table"], table_id.as_str());
+        assert_eq!(r.headers()["x-l3-illuminant"], "Tungsten");
+        for hname in [
+            "x-l3-render-ms",
+            "x-l3-encode-ms",
+            "x-l3-decode-ms",
+            "x-l3-saturated-pixels",
+            "x-l3-texture-pixels",
+            "x-l3-fallback-pixels",
+            "x-l3-clamped-pixels",
+            "server-timing",
+        ] {
+            assert!(r.headers().contains_key(hname), "missing {hname}");
+        }
+        let body = r.bytes().await.unwrap();
+        let cli = std::fs::read(d.join(file)).unwrap();
+        assert_eq!(body.len(), cli.len(), "{file} size");
+        assert!(
+            body[..] == cli[..],
+            "{file}: service output differs from l3 render"
+        );
+    }
+    // the 16-bit PNG of the same frame gives the same float XYZ
+    let png = std::fs::read(d.join("sim/mosaic.png")).unwrap();
+    let r = c
+        .post(url(&server, "/v1/render?illuminant=Tungsten"))
+        .header("content-type", "image/png")
+        .header("accept", "image/tiff")
+        .body(png)
+        .send()
+        .await
+        .unwrap();
+    assert_eq!(r.status(), 200);
+    assert!(r.bytes().await.unwrap()[..] == std::fs::read(d.join("cli.tiff")).unwrap()[..]);
+    // PNG output: same pixels as the CLI's PNG (compression level differs)
+    let r = c
+        .post(url(&server, &q))
+        .header("content-type", "application/octet-stream")
+        .body(raw.clone())
+        .send()
+        .await
+        .unwrap();
+    assert_eq!(r.status(), 200);
+    assert_eq!(r.headers()["content-type"], "image/png");
+    let ours = decode_png(&r.bytes().await.unwrap());
+    let cli = decode_png(&std::fs::read(d.join("cli.png")).unwrap());
+    assert_eq!(ours.dimensions(), (w as u32, h as u32));
+    assert!(ours == cli, "PNG pixels differ from l3 render");
+    server.shutdown().await.unwrap();
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn every_read_endpoint_tables_illuminants_and_evaluations() {
+    let iset = IsetData::for_tests();
+    let data = tempfile::tempdir().unwrap();
+    let (server, table_id) = server_with_table(data.path(), iset.as_ref(), None).await;
+    let c = client();
+    // health, readiness, openapi
+    let v = json(c.get(url(&server, "/healthz")).send().await.unwrap()).await;
+    assert_eq!(v["status"], "ok");
+    let v = json(c.get(url(&server, "/readyz")).send().await.unwrap()).await;
+    assert_eq!(v["status"], "ready");
+    assert_eq!(v["table_id"], table_id.as_str());
+    let r = c.get(url(&server, "/openapi.yaml")).send().await.unwrap();
+    assert_eq!(r.status(), 200);
+    assert_eq!(r.text().await.unwrap(), l3::service::OPENAPI_YAML);
+
+    // a render (synthetic raw frame) with region and preview
+    let (w, h) = (64usize, 48usize);
+    let r = c
+        .post(url(
+            &server,
+            &format!("/v1/render?width={w}&height={h}&region=8,8,32,16&preview=2"),
+        ))
+        .header("content-type", "application/octet-stream")
+        .header("accept", "application/octet-stream")
+        .body(gradient_raw(w, h))
+        .send()
+        .await
+        .unwrap();
+    assert_eq!(r.status(), 200);
+    assert_eq!(r.headers()["x-l3-width"], "16");
+    assert_eq!(r.headers()["x-l3-height"], "8");
+    assert_eq!(r.headers()["x-l3-input-pixels"], (w * h).to_string());
+    assert_eq!(r.bytes().await.unwrap().len(), 16 * 8 * 12);
+    // srgb16 TIFF, cct: and xy: illuminants
+    for q in [
+        "tiff=srgb16&illuminant=cct:3200",
+        "illuminant=xy:0.4476,0.4074&white=0.5",
+    ] {
+        let r = c
+            .post(url(
+                &server,
+                &format!("/v1/render?width={w}&height={h}&{q}"),
+            ))
+            .header("content-type", "application/octet-stream")
+            .header("accept", "image/tiff")
+            .body(gradient_raw(w, h))
+            .send()
+            .await
+            .unwrap();
+        assert_eq!(r.status(), 200, "{q}");
+    }
+
+    // tables
+    let v = json(c.get(url(&server, "/v1/tables")).send().await.unwrap()).await;
+    assert_eq!(v["active_table_id"], table_id.as_str());
+    assert_eq!(v["items"][0]["id"], table_id.as_str());
+    assert_eq!(v["items"][0]["active"], true);
+    let v = json(
+        c.get(url(&server, &format!("/v1/tables/{table_id}")))
+            .send()
+            .await
+            .unwrap(),
+    )
+    .await;
+    assert_eq!(v["kind"], "si");
+    assert!(
+        v["meta"].is_object() && !v["training_report"].is_null(),
+        "{v}"
+    );
+    let sha = v["sha256"].as_str().unwrap().to_string();
+    let r = c
+        .get(url(&server, &format!("/v1/tables/{table_id}/download")))
+        .send()
+        .await
+        .unwrap();
+    assert_eq!(r.status(), 200);
+    assert_eq!(r.headers()["x-content-sha256"], sha.as_str());
+    let bytes = r.bytes().await.unwrap();
+    assert_eq!(l3::service::sha256_hex(&bytes), sha);
+    assert!(l3::l3::L3Table::from_bytes(&bytes, "download").is_ok());
+    let r = c
+        .post(url(&server, &format!("/v1/tables/{table_id}/activate")))
+        .send()
+        .await
+        .unwrap();
+    assert_eq!(r.status(), 200);
+    problem(
+        c.get(url(&server, "/v1/tables/tbl_nope"))
+            .send()
+            .await
+            .unwrap(),
+        404,
+        "not_found",
+    )
+    .await;
+    problem(
+        c.post(url(&server, "/v1/tables/tbl_nope/activate"))
+            .send()
+            .await
+            .unwrap(),
+        404,
+        "not_found",
+    )
+    .await;
+
+    // illuminants
+    let v = json(c.get(url(&server, "/v1/illuminants")).send().await.unwrap()).await;
+    let names: Vec<&str> = v["items"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|e| e["name"].as_str().unwrap())
+        .collect();
+    for n in ["D65", "D50", "A", "F2", "F11"] {
+        assert!(names.contains(&n), "{n} missing from {names:?}");
+    }
+    let v = json(
+        c.get(url(&server, "/v1/illuminants/d65"))
+            .send()
+            .await
+            .unwrap(),
+    )
+    .await;
+    assert_eq!(
+        v["matrix"],
+        serde_json::json!([[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]])
+    );
+    let defs = [
+        (
+            "Studio",
+            serde_json::json!({"matrix": [[1.1, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 0.8]]}),
+            "matrix",
+        ),
+        ("Warm", serde_json::json!({"cct": 2800}), "cct"),
+        (
+            "Flat",
+            serde_json::json!({"spd": {"wavelengths_nm": [380, 780], "values": [1.0, 1.0]}}),
+            "spd",
+        ),
+    ];
+    for (name, body, source) in &defs {
+        let r = c
+            .put(url(&server, &format!("/v1/illuminants/{name}")))
+            .json(body)
+            .send()
+            .await
+            .unwrap();
+        assert_eq!(r.status(), 201, "{name}");
+        let v = json(r).await;
+        assert_eq!(v["source"], *source);
+        assert_eq!(v["user_defined"], true);
+    }
+    // replace → 200; use in a render
+    let r = c
+        .put(url(&server, "/v1/illuminants/Warm"))
+        .json(&serde_json::json!({"cct": 3000}))
+        .send()
+        .await
+        .unwrap();
+    assert_eq!(r.status(), 200);
+    assert_eq!(json(r).await["cct"], 3000.0);
+    let r = c
+        .post(url(
+            &server,
+            &format!("/v1/render?width={w}&height={h}&illuminant=Studio"),
+        ))
+        .header("content-type", "application/octet-stream")
+        .body(gradient_raw(w, h))
+        .send()
+        .await
+        .unwrap();
+    assert_eq!(r.status(), 200);
+    assert_eq!(r.headers()["x-l3-illuminant"], "Studio");
+    problem(
+        c.delete(url(&server, "/v1/illuminants/D65"))
+            .send()
+            .await
+            .unwrap(),
+        409,
+        "conflict",
+    )
+    .await;
+    problem(
+        c.delete(url(&server, "/v1/illuminants/A"))
+            .send()
+            .await
+            .unwrap(),
+        409,
+        "conflict",
+    )
+    .await;
+    problem(
+        c.delete(url(&server, "/v1/illuminants/Nope"))
+            .send()
+            .await
+            .unwrap(),
+        404,
+        "not_found",
+    )
+    .await;
+    problem(
+        c.get(url(&server, "/v1/illuminants/Nope"))
+            .send()
+            .await
+            .unwrap(),
+        404,
+        "not_found",
+    )
+    .await;
+    let r = c
+        .delete(url(&server, "/v1/illuminants/Flat"))
+        .send()
+        .await
+        .unwrap();
+    assert_eq!(r.status(), 204);
+    problem(
+        c.get(url(&server, "/v1/illuminants/Flat"))
+            .send()
+            .await
+            .unwrap(),
+        404,
+        "not_found",
+    )
+    .await;
+
+    // evaluations
+    let acq = if iset.is_some() { "Tungsten" } else { "A" };
+    let r = c
+        .post(url(&server, "/v1/evaluations"))
+        .json(&serde_json::json!({"acquisition_illuminant": acq, "patch_px": 8, "noise": false}))
+        .send()
+        .await
+        .unwrap();
+    assert_eq!(r.status(), 201);
+    let loc = r.headers()["location"].to_str().unwrap().to_string();
+    let v = json(r).await;
+    for f in [
+        "id",
+        "table_id",
+        "method",
+        "chart",
+        "acquisition_illuminant",
+        "mean_delta_e",
+        "created_at_ms",
+        "request",
+        "report",
+        "links",
+    ] {
+        assert!(v.get(f).is_some(), "evaluation field {f} missing");
+    }
+    for f in [
+        "schema",
+        "chart",
+        "acquisition_illuminant",
+        "method",
+        "summary",
+        "per_pixel",
+        "per_category",
+        "white_patch",
+        "patches",
+        "context",
+    ] {
+        assert!(v["report"].get(f).is_some(), "report field {f} missing");
+    }
+    for f in ["n", "mean", "std", "median", "p90", "max"] {
+        assert!(v["report"]["summary"][f].is_number(), "summary.{f}");
+    }
+    for f in ["n", "mean", "p90"] {
+        assert!(v["report"]["per_pixel"][f].is_number(), "per_pixel.{f}");
+    }
+    assert_eq!(v["report"]["schema"], "l3.delta_e.v1");
+    assert_eq!(v["table_id"], table_id.as_str());
+    let mean = v["mean_delta_e"].as_f64().unwrap();
+    assert!(
+        mean.is_finite() && mean > 0.0 && mean < 50.0,
+        "mean ΔE {mean}"
+    );
+    let got = json(c.get(url(&server, &loc)).send().await.unwrap()).await;
+    assert_eq!(got["report"], v["report"]);
+    let list = json(c.get(url(&server, "/v1/evaluations")).send().await.unwrap()).await;
+    assert_eq!(list["items"][0]["id"], v["id"]);
+    assert!(list["items"][0]["report"].get("patches").is_none());
+    problem(
+        c.get(url(&server, "/v1/evaluations/eval_nope"))
+            .send()
+            .await
+            .unwrap(),
+        404,
+        "not_found",
+    )
+    .await;
+
+    // metrics after all that
+    let text = c
+        .get(url(&server, "/metrics"))
+        .send()
+        .await
+        .unwrap()
+        .text()
+        .await
+        .unwrap();
+    assert!(
+        text.contains(
+            "l3_http_requests_total{method=\"POST\",route=\"/v1/render\",status=\"200\"}"
+        ),
+        "{text}"
+    );
+    assert!(text.contains("l3_http_request_duration_seconds_bucket{method=\"GET\",route=\"/v1/tables\",status=\"200\",le=\"+Inf\"} 1"));
+    assert!(text.contains("l3_rendered_megapixels_total"));
+    assert!(text.contains("l3_training_jobs{state=\"queued\"} 0"));
+    assert!(text.contains("l3_ready 1"));
+    server.shutdown().await.unwrap();
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn hostile_input_gets_a_clear_4xx() {
+    let iset = IsetData::for_tests();
+    let data = tempfile::tempdir().unwrap();
+    let mut cfg = test_config(data.path(), iset.as_ref());
+    cfg.server.max_body_bytes = 64 * 1024;
+    cfg.server.max_pixels = 100_000;
+    let (server, _) = server_with_table(data.path(), iset.as_ref(), Some(cfg)).await;
+    let c = client();
+    let render = |q: &str, ctype: Option<&str>, body: Vec<u8>| {
+        let mut r = c.post(url(&server, &format!("/v1/render?{q}"))).body(body);
+        if let Some(t) = ctype {
+            r = r.header("content-type", t);
+        }
+        r.send()
+    };
+    let raw = "application/octet-stream";
+    let d = problem(
+        render("width=32&height=32", Some(raw), vec![0; 1000])
+            .await
+            .unwrap(),
+        400,
+        "invalid_image",
+    )
+    .await;
+    assert!(
+        d.contains("1000 bytes") && d.contains("2048 expected"),
+        "{d}"
+    );
+    let d = problem(
+        render("width=0&height=32", Some(raw), vec![0; 64])
+            .await
+            .unwrap(),
+        400,
+        "invalid_image",
+    )
+    .await;
+    assert!(d.contains("at least 1"), "{d}");
+    let d = problem(
+        render("width=100000&height=100000", Some(raw), vec![0; 64])
+            .await
+            .unwrap(),
+        400,
+        "invalid_image",
+    )
+    .await;
+    assert!(d.contains("at most"), "{d}");
+    let d = problem(
+        render("width=1000&height=1000", Some(raw), vec![0; 64])
+            .await
+            .unwrap(),
+        400,
+        "invalid_image",
+    )
+    .await;
+    assert!(d.contains("100000 pixels"), "{d}");
+    let d = problem(
+        render("width=-3&height=2", Some(raw), vec![0; 64])
+            .await
+            .unwrap(),
+        400,
+        "bad_request",
+    )
+    .await;
+    assert!(d.contains("width"), "{d}");
+    let d = problem(
+        render("", Some(raw), vec![0; 64]).await.unwrap(),
+        400,
+        "bad_request",
+    )
+    .await;
+    assert!(d.contains("width and height"), "{d}");
+    let d = problem(
+        render("width=2&height=2&bogus=1", Some(raw), vec![0; 8])
+            .await
+            .unwrap(),
+        400,
+        "bad_request",
+    )
+    .await;
+    assert!(d.contains("bogus"), "{d}");
+    // images: truncated and garbage PNG / TIFF / PGM
+    let frame =
+        l3::io::RawFrame::new(32, 32, (0..1024).map(|i| (i * 50) as u16).collect()).unwrap();
+    let png = l3::io::encode_png_gray16(&frame, l3::io::PngCompression::Fast).unwrap();
+    let tiff = l3::io::encode_tiff_gray16(&frame).unwrap();
+    let mut pgm = b"P5\n32 32\n65535\n".to_vec();
+    pgm.extend(frame.data.iter().flat_map(|v| v.to_be_bytes()));
+    for (ctype, good) in [
+        ("image/png", &png),
+        ("image/tiff", &tiff),
+        ("image/x-portable-graymap", &pgm),
+    ] {
+        let ok = render("", Some(ctype), good.clone()).await.unwrap();
+        assert_eq!(ok.status(), 200, "{ctype} valid input");
+        let d = problem(
+            render("", Some(ctype), good[..good.len() / 2].to_vec())
+                .await
+                .unwrap(),
+            400,
+            "invalid_image",
+        )
+        .await;
+        assert!(!d.is_empty(), "{ctype} truncated");
+        let mut garbage = good[..8.min(good.len())].to_vec();
+        garbage.extend((0..500u32).map(|i| (i.wrapping_mul(2654435761) >> 13) as u8));
+        problem(
+            render("", Some(ctype), garbage).await.unwrap(),
+            400,
+            "invalid_image",
+        )
+        .await;
+    }
+    let d = problem(
+        render("", Some("image/png"), b"hello world, not an image".to_vec())
+            .await
+            .unwrap(),
+        400,
+        "invalid_image",
+    )
+    .await;
+    assert!(d.contains("unrecognised image format"), "{d}");
+    let d = problem(
+        render("width=5&height=5", Some("image/png"), png.clone())
+            .await
+            .unwrap(),
+        400,
+        "invalid_image",
+    )
+    .await;
+    assert!(d.contains("32×32"), "{d}");
+    // NaN in float input
+    // (the encoder refuses NaN, so a marker value is patched to NaN in the encoded file)
+    let mut f = vec![0.1f32; 32 * 32];
+    f[37] = 0.123_456_7;
+    let mut ftiff = l3::io::encode_tiff_gray_f32(32, 32, &f).unwrap();
+    let marker = 0.123_456_7f32.to_le_bytes();
+    let pos = ftiff
+        .windows(4)
+        .position(|w| w == marker)
+        .expect("marker in the TIFF");
+    ftiff[pos..pos + 4].copy_from_slice(&f32::NAN.to_le_bytes());
+    let d = problem(
+        render("", Some("image/tiff"), ftiff).await.unwrap(),
+        400,
+        "invalid_image",
+    )
+    .await;
+    assert!(
+        d.contains("finite") && d.contains("x=5") && d.contains("y=1"),
+        "{d}"
+    );
+    // illuminants
+    let d = problem(
+        render(
+            "width=32&height=32&illuminant=Moonlight",
+            Some(raw),
+            vec![0; 2048],
+        )
+        .await
+        .unwrap(),
+        400,
+        "unknown_illuminant",
+    )
+    .await;
+    assert!(d.contains("Moonlight"), "{d}");
+    problem(
+        render(
+            "width=32&height=32&illuminant=csv:/etc/passwd",
+            Some(raw),
+            vec![0; 2048],
+        )
+        .await
+        .unwrap(),
+        400,
+        "unknown_illuminant",
+    )
+    .await;
+    problem(
+        render(
+            "width=32&height=32&illuminant=xy:2,3",
+            Some(raw),
+            vec![0; 2048],
+        )
+        .await
+        .unwrap(),
+        400,
+        "unknown_illuminant",
+    )
+    .await;
+    // other parameters
+    problem(
+        render("width=32&height=32&cfa=RG/GB", Some(raw), vec![0; 2048])
+            .await
+            .unwrap(),
+        422,
+        "unprocessable",
+    )
+    .await;
+    problem(
+        render("width=32&height=32&white=-1", Some(raw), vec![0; 2048])
+            .await
+            .unwrap(),
+        400,
+        "bad_request",
+    )
+    .await;
+    problem(
+        render(
+            "width=32&height=32&region=30,30,8,8",
+            Some(raw),
+            vec![0; 2048],
+        )
+        .await
+        .unwrap(),
+        400,
+        "bad_request",
+    )
+    .await;
+    problem(
+        render("width=32&height=32&preview=99", Some(raw), vec![0; 2048])
+            .await
+            .unwrap(),
+        400,
+        "bad_request",
+    )
+    .await;
+    problem(
+        render(
+            "width=32&height=32&black_level=70000",
+            Some(raw),
+            vec![0; 2048],
+        )
+        .await
+        .unwrap(),
+        400,
+        "bad_request",
+    )
+    .await;
+    let d = problem(
+        render(
+            "width=32&height=32&black_level=9&white_level=9",
+            Some(raw),
+            vec![0; 2048],
+        )
+        .await
+        .unwrap(),
+        400,
+        "invalid_image",
+    )
+    .await;
+    assert!(d.contains("black_level"), "{d}");
+    // size, types, negotiation
+    let d = problem(
+        render("width=256&height=256", Some(raw), vec![0; 256 * 256 * 2])
+            .await
+            .unwrap(),
+        413,
+        "payload_too_large",
+    )
+    .await;
+    assert!(d.contains("65536"), "{d}");
+    problem(
+        render("width=32&height=32", Some("text/plain"), vec![0; 2048])
+            .await
+            .unwrap(),
+        415,
+        "unsupported_media_type",
+    )
+    .await;
+    problem(
+        render("width=32&height=32", None, vec![0; 2048])
+            .await
+            .unwrap(),
+        415,
+        "unsupported_media_type",
+    )
+    .await;
+    problem(
+        render("width=32&height=32", Some(raw), vec![])
+            .await
+            .unwrap(),
+        400,
+        "invalid_image",
+    )
+    .await;
+    let r = c
+        .post(url(&server, "/v1/render?width=32&height=32"))
+        .header("content-type", raw)
+        .header("accept", "text/html")
+        .body(vec![0u8; 2048])
+        .send()
+        .await
+        .unwrap();
+    problem(r, 406, "not_acceptable").await;
+    // malformed job JSON
+    let job = |body: &'static str, ctype: &'static str| {
+        c.post(url(&server, "/v1/training-jobs"))
+            .header("content-type", ctype)
+            .body(body)
+            .send()
+    };
+    let d = problem(
+        job("{\"levels\": ", "application/json").await.unwrap(),
+        400,
+        "invalid_json",
+    )
+    .await;
+    assert!(d.contains("not valid JSON"), "{d}");
+    let d = problem(
+        job("{\"levles\": 5}", "application/json").await.unwrap(),
+        400,
+        "invalid_json",
+    )
+    .await;
+    assert!(d.contains("levles"), "{d}");
+    let d = problem(
+        job("{\"levels\": 1}", "application/json").await.unwrap(),
+        400,
+        "bad_request",
+    )
+    .await;
+    assert!(d.contains("levels 1"), "{d}");
+    let d = problem(
+        job("{\"illuminants\": [\"Moonlight\"]}", "application/json")
+            .await
+            .unwrap(),
+        400,
+        "bad_request",
+    )
+    .await;
+    assert!(d.contains("Moonlight"), "{d}");
+    problem(
+        job("{}", "text/plain").await.unwrap(),
+        415,
+        "unsupported_media_type",
+    )
+    .await;
+    // malformed evaluation and illuminant bodies
+    let r = c
+        .post(url(&server, "/v1/evaluations"))
+        .header("content-type", "application/json")
+        .body("{\"method\": 3}")
+        .send()
+        .await
+        .unwrap();
+    problem(r, 400, "invalid_json").await;
+    let r = c
+        .post(url(&server, "/v1/evaluations"))
+        .json(&serde_json::json!({"method": "magic"}))
+        .send()
+        .await
+        .unwrap();
+    problem(r, 400, "bad_request").await;
+    let r = c
+        .put(url(&server, "/v1/illuminants/Bad"))
+        .json(&serde_json::json!({"matrix": [[0,0,0],[0,0,0],[0,0,0]]}))
+        .send()
+        .await
+        .unwrap();
+    let d = problem(r, 400, "bad_request").await;
+    assert!(d.contains("singular"), "{d}");
+    let r = c
+        .put(url(&server, "/v1/illuminants/Bad"))
+        .json(&serde_json::json!({"cct": 3000, "matrix": [[1,0,0],[0,1,0],[0,0,1]]}))
+        .send()
+        .await
+        .unwrap();
+    problem(r, 400, "bad_request").await;
+    let r = c
+        .put(url(&server, "/v1/illuminants/Bad"))
+        .json(&serde_json::json!({"spd": {"wavelengths_nm": [400], "values": [1, 2]}}))
+        .send()
+        .await
+        .unwrap();
+    problem(r, 400, "bad_request").await;
+    let r = c
+        .put(url(&server, "/v1/illuminants/bad%20name"))
+        .json(&serde_json::json!({"cct": 3000}))
+        .send()
+        .await
+        .unwrap();
+    problem(r, 400, "bad_request").await;
+    let r = c
+        .put(url(&server, "/v1/illuminants/D65"))
+        .json(&serde_json::json!({"cct": 3000}))
+        .send()
+        .await
+        .unwrap();
+    problem(r, 409, "conflict").await;
+    // unknown routes and methods
+    problem(
+        c.get(url(&server, "/v2/nothing")).send().await.unwrap(),
+        404,
+        "not_found",
+    )
+    .await;
+    problem(
+        c.get(url(&server, "/v1/render")).send().await.unwrap(),
+        405,
+        "method_not_allowed",
+    )
+    .await;
+    // the service is still healthy
+    assert_eq!(
+        c.get(url(&server, "/healthz"))
+            .send()
+            .await
+            .unwrap()
+            .status(),
+        200
+    );
+    server.shutdown().await.unwrap();
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn overload_gets_503_with_retry_after_and_mutations_need_the_token() {
+    let iset = IsetData::for_tests();
+    let data = tempfile::tempdir().unwrap();
+    let mut cfg = test_config(data.path(), iset.as_ref());
+    cfg.server.render_concurrency = 2;
+    cfg.server.bearer_token = "s3cret".into();
+    let (server, _) = server_with_table(data.path(), iset.as_ref(), Some(cfg)).await;
+    let c = client();
+    // hold both render slots
+    let slots = server.state().render_slots.clone();
+    let held = slots.clone().try_acquire_many_owned(2).unwrap();
+    let r = c
+        .post(url(&server, "/v1/render?width=16&height=16"))
+        .header("content-type", "application/octet-stream")
+        .body(gradient_raw(16, 16))
+        .send()
+        .await
+        .unwrap();
+    assert_eq!(r.headers()["retry-after"], "1");
+    problem(r, 503, "overloaded").await;
+    drop(held);
+    let r = c
+        .post(url(&server, "/v1/render?width=16&height=16"))
+        .header("content-type", "application/octet-stream")
+        .body(gradient_raw(16, 16))
+        .send()
+        .await
+        .unwrap();
+    assert_eq!(r.status(), 200, "render needs no token");
+    // mutations need the bearer token; reads do not
+    let body = tiny_job_json(&["D65"], 1);
+    let r = c
+        .post(url(&server, "/v1/training-jobs"))
+        .json(&body)
+        .send()
+        .await
+        .unwrap();
+    assert_eq!(r.headers()["www-authenticate"], "Bearer");
+    problem(r, 401, "unauthorized").await;
+    let r = c
+        .post(url(&server, "/v1/training-jobs"))
+        .bearer_auth("wrong")
+        .json(&body)
+        .send()
+        .await
+        .unwrap();
+    problem(r, 401, "unauthorized").await;
+    let r = c
+        .put(url(&server, "/v1/illuminants/X"))
+        .json(&serde_json::json!({"cct": 3000}))
+        .send()
+        .await
+        .unwrap();
+    problem(r, 401, "unauthorized").await;
+    assert_eq!(
+        c.get(url(&server, "/v1/tables"))
+            .send()
+            .await
+            .unwrap()
+            .status(),
+        200
+    );
+    let r = c
+        .post(url(&server, "/v1/training-jobs"))
+        .bearer_auth("s3cret")
+        .json(&body)
+        .send()
+        .await
+        .unwrap();
+    assert_eq!(r.status(), 202);
+    let id = json(r).await["id"].as_str().unwrap().to_string();
+    let r = c
+        .post(url(&server, &format!("/v1/training-jobs/{id}/cancel")))
+        .bearer_auth("s3cret")
+        .send()
+        .await
+        .unwrap();
+    assert_eq!(r.status(), 200);
+    server.shutdown().await.unwrap();
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn readyz_is_503_until_a_table_is_active() {
+    let iset = IsetData::for_tests();
+    let data = tempfile::tempdir().unwrap();
+    let server = l3::service::start(test_config(data.path(), iset.as_ref()))
+        .await
+        .unwrap();
+    let c = client();
+    let r = c.get(url(&server, "/readyz")).send().await.unwrap();
+    assert!(r.headers().contains_key("retry-after"));
+    problem(r, 503, "not_ready").await;
+    let r = c
+        .post(url(&server, "/v1/render?width=16&height=16"))
+        .header("content-type", "application/octet-stream")
+        .body(gradient_raw(16, 16))
+        .send()
+        .await
+        .unwrap();
+    problem(r, 503, "not_ready").await;
+    let text = c
+        .get(url(&server, "/metrics"))
+        .send()
+        .await
+        .unwrap()
+        .text()
+        .await
+        .unwrap();
+    assert!(text.contains("l3_ready 0"));
+    server.shutdown().await.unwrap();
+    // a restart picks the stored table and the user's illuminants up again
+    let (server, id) = server_with_table(data.path(), iset.as_ref(), None).await;
+    let r = c
+        .put(url(&server, "/v1/illuminants/Stage"))
+        .json(&serde_json::json!({"cct": 3300}))
+        .send()
+        .await
+        .unwrap();
+    assert_eq!(r.status(), 201);
+    server.shutdown().await.unwrap();
+    let server = l3::service::start(test_config(data.path(), iset.as_ref()))
+        .await
+        .unwrap();
+    let v = json(c.get(url(&server, "/readyz")).send().await.unwrap()).await;
+    assert_eq!(v["table_id"], id.as_str());
+    let v = json(
+        c.get(url(&server, "/v1/illuminants/stage"))
+            .send()
+            .await
+            .unwrap(),
+    )
+    .await;
+    assert_eq!(v["cct"], 3300.0);
+    assert_eq!(v["user_defined"], true);
+    server.shutdown().await.unwrap();
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_request_over_the_time_limit_gets_504() {
+    let iset = IsetData::for_tests();
+    let data = tempfile::tempdir().unwrap();
+    let mut cfg = test_config(data.path(), iset.as_ref());
+    cfg.server.request_timeout_s = 0.02;
+    let (server, _) = server_with_table(data.path(), iset.as_ref(), Some(cfg)).await;
+    // a full-size chart evaluation takes far longer than 20 ms
+    let r = client()
+        .post(url(&server, "/v1/evaluations"))
+        .json(&serde_json::json!({"acquisition_illuminant": "A", "patch_px": 64}))
+        .send()
+        .await
+        .unwrap();
+    let d = problem(r, 504, "request_timeout").await;
+    assert!(d.contains("0.02 s"), "{d}");
+    server.shutdown().await.unwrap();
+}

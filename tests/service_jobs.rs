@@ -1,0 +1,378 @@
+//! Training jobs over HTTP: submit (idempotent) → running with progress → succeeded →
+//! activated → used for a render; cancel; restart with a queued and a running job.
+
+mod service_support;
+
+use l3::spectral::IsetData;
+use service_support::*;
+
+fn gradient_raw(w: usize, h: usize) -> Vec<u8> {
+    (0..w * h)
+        .flat_map(|i| ((3000 + (i % w) * 30000 / w) as u16).to_le_bytes())
+        .collect()
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn job_runs_with_progress_succeeds_activates_and_renders() {
+    let iset = IsetData::for_tests();
+    let data = tempfile::tempdir().unwrap();
+    let server = l3::service::start(test_config(data.path(), iset.as_ref()))
+        .await
+        .unwrap();
+    let c = client();
+    let mut body = tiny_job_json(&["D65", "A"], 5);
+    body["scenes"] = 8.into();
+    body["activate"] = true.into();
+    let r = c
+        .post(url(&server, "/v1/training-jobs"))
+        .header("idempotency-key", "k-1")
+        .json(&body)
+        .send()
+        .await
+        .unwrap();
+    assert_eq!(r.status(), 202);
+    let loc = r.headers()["location"].to_str().unwrap().to_string();
+    let job = json(r).await;
+    let id = job["id"].as_str().unwrap().to_string();
+    assert_eq!(loc, format!("/v1/training-jobs/{id}"));
+    assert!(["queued", "running"].contains(&job["status"].as_str().unwrap()));
+    // the same key and body → the same job; another body → 409
+    let r = c
+        .post(url(&server, "/v1/training-jobs"))
+        .header("idempotency-key", "k-1")
+        .json(&body)
+        .send()
+        .await
+        .unwrap();
+    assert_eq!(r.status(), 200);
+    assert_eq!(json(r).await["id"], id.as_str());
+    let mut other = body.clone();
+    other["seed"] = 6.into();
+    let r = c
+        .post(url(&server, "/v1/training-jobs"))
+        .header("idempotency-key", "k-1")
+        .json(&other)
+        .send()
+        .await
+        .unwrap();
+    problem(r, 409, "conflict").await;
+    // observe it running with progress
+    let running = wait_job(&server, &id, 60.0, |j| {
+        j["status"] != "queued"
+            && (j["status"] != "running" || j["progress"].as_f64().unwrap() > 0.0)
+    })
+    .await;
+    assert_eq!(running["status"], "running", "{running}");
+    let p = running["progress"].as_f64().unwrap();
+    assert!(p > 0.0 && p <= 1.0, "{running}");
+    assert!(running["stage"].is_string());
+    let done = wait_job(&server, &id, 120.0, |j| j["status"] != "running").await;
+    assert_eq!(done["status"], "succeeded", "{done}");
+    assert_eq!(done["progress"], 1.0);
+    assert_eq!(done["attempts"], 1);
+    assert!(done["timings"]["running_ms"].as_i64().unwrap() >= 0);
+    let table_id = done["table_id"].as_str().unwrap().to_string();
+    // activated and used for a render
+    let v = json(c.get(url(&server, "/readyz")).send().await.unwrap()).await;
+    assert_eq!(v["table_id"], table_id.as_str());
+    let t = json(
+        c.get(url(&server, &format!("/v1/tables/{table_id}")))
+            .send()
+            .await
+            .unwrap(),
+    )
+    .await;
+    assert_eq!(t["job_id"], id.as_str());
+    assert_eq!(t["train_illuminants"], serde_json::json!(["D65", "A"]));
+    let r = c
+        .post(url(&server, "/v1/render?width=32&height=32&illuminant=A"))
+        .header("content-type", "application/octet-stream")
+        .body(gradient_raw(32, 32))
+        .send()
+        .await
+        .unwrap();
+    assert_eq!(r.status(), 200);
+    assert_eq!(r.headers()["x-l3-table"], table_id.as_str());
+    // listing and filtering
+    let v = json(
+        c.get(url(&server, "/v1/training-jobs?status=succeeded"))
+            .send()
+            .await
+            .unwrap(),
+    )
+    .await;
+    assert_eq!(v["items"].as_array().unwrap().len(), 1);
+    let v = json(
+        c.get(url(&server, "/v1/training-jobs?status=queued"))
+            .send()
+            .await
+            .unwrap(),
+    )
+    .await;
+    assert!(v["items"].as_array().unwrap().is_empty());
+    problem(
+        c.get(url(&server, "/v1/training-jobs?status=lost"))
+            .send()
+            .await
+            .unwrap(),
+        400,
+        "bad_request",
+    )
+    .await;
+    problem(
+        c.get(url(&server, "/v1/training-jobs/job_nope"))
+            .send()
+            .await
+            .unwrap(),
+        404,
+        "not_found",
+    )
+    .await;
+    let text = c
+        .get(url(&server, "/metrics"))
+        .send()
+        .await
+        .unwrap()
+        .text()
+        .await
+        .unwrap();
+    assert!(
+        text.contains("l3_training_jobs{state=\"succeeded\"} 1"),
+        "{text}"
+    );
+    // a finished job cannot be canceled
+    problem(
+        c.post(url(&server, &format!("/v1/training-jobs/{id}/cancel")))
+            .send()
+            .await
+            .unwrap(),
+        409,
+        "conflict",
+    )
+    .await;
+    server.shutdown().await.unwrap();
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn running_and_queued_jobs_are_canceled() {
+    let iset = IsetData::for_tests();
+    let data = tempfile::tempdir().unwrap();
+    let server = l3::service::start(test_config(data.path(), iset.as_ref()))
+        .await
+        .unwrap();
+    let c = client();
+    // a long job and one queued behind it
+    let mut long = tiny_job_json(&["D65"], 1);
+    long["scenes"] = 2000.into();
+    long["scene_size"] = 96.into();
+    let a = json(
+        c.post(url(&server, "/v1/training-jobs"))
+            .json(&long)
+            .send()
+            .await
+            .unwrap(),
+    )
+    .await;
+    let b = json(
+        c.post(url(&server, "/v1/training-jobs"))
+            .json(&tiny_job_json(&["D65"], 2))
+            .send()
+            .await
+            .unwrap(),
+    )
+    .await;
+    let (a, b) = (
+        a["id"].as_str().unwrap().to_string(),
+        b["id"].as_str().unwrap().to_string(),
+    );
+    let ja = wait_job(&server, &a, 30.0, |j| j["status"] == "running").await;
+    assert_eq!(ja["status"], "running");
+    // the queued one is canceled at once
+    let jb = json(
+        c.post(url(&server, &format!("/v1/training-jobs/{b}/cancel")))
+            .send()
+            .await
+            .unwrap(),
+    )
+    .await;
+    assert_eq!(jb["status"], "canceled");
+    // the running one within a second or so
+    let t0 = std::time::Instant::now();
+    let ja = json(
+        c.post(url(&server, &format!("/v1/training-jobs/{a}/cancel")))
+            .send()
+            .await
+            .unwrap(),
+    )
+    .await;
+    let waited = t0.elapsed().as_secs_f64();
+    assert_eq!(ja["status"], "canceled", "after {waited:.2} s: {ja}");
+    println!("running job canceled in {waited:.3} s");
+    assert!(ja["table_id"].is_null());
+    let v = json(
+        c.get(url(&server, "/v1/training-jobs?status=canceled"))
+            .send()
+            .await
+            .unwrap(),
+    )
+    .await;
+    assert_eq!(v["items"].as_array().unwrap().len(), 2);
+    let v = json(c.get(url(&server, "/v1/tables")).send().await.unwrap()).await;
+    assert!(v["items"].as_array().unwrap().is_empty());
+    server.shutdown().await.unwrap();
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_restart_resumes_a_running_and_a_queued_job() {
+    let iset = IsetData::for_tests();
+    let data = tempfile::tempdir().unwrap();
+    let server = l3::service::start(test_config(data.path(), iset.as_ref()))
+        .await
+        .unwrap();
+    let c = client();
+    let mut first = tiny_job_json(&["D65"], 11);
+    first["scenes"] = 40.into();
+    let a = json(
+        c.post(url(&server, "/v1/training-jobs"))
+            .json(&first)
+            .send()
+            .await
+            .unwrap(),
+    )
+    .await;
+    let b = json(
+        c.post(url(&server, "/v1/training-jobs"))
+            .json(&tiny_job_json(&["D65"], 12))
+            .send()
+            .await
+            .unwrap(),
+    )
+    .await;
+    let (a, b) = (
+        a["id"].as_str().unwrap().to_string(),
+        b["id"].as_str().unwrap().to_string(),
+    );
+    let ja = wait_job(&server, &a, 30.0, |j| j["status"] == "running").await;
+    assert_eq!(ja["status"], "running");
+    let jb = json(
+        c.get(url(&server, &format!("/v1/training-jobs/{b}")))
+            .send()
+            .await
+            .unwrap(),
+    )
+    .await;
+    assert_eq!(jb["status"], "queued");
+    server.shutdown().await.unwrap();
+    // simulate a crash in the middle of job a: the database says it is still running
+    {
+        let db = sqlx::SqlitePool::connect(&format!(
+            "sqlite://{}",
+            data.path().join("l3.sqlite").display()
+        ))
+        .await
+        .unwrap();
+        let st: String = sqlx::query_scalar("SELECT status FROM training_jobs WHERE id = $1")
+            .bind(&a)
+            .fetch_one(&db)
+            .await
+            .unwrap();
+        assert_eq!(
+            st, "queued",
+            "a graceful shutdown re-queues the running job"
+        );
+        sqlx::query("UPDATE training_jobs SET status = 'running' WHERE id = $1")
+            .bind(&a)
+            .execute(&db)
+            .await
+            .unwrap();
+        db.close().await;
+    }
+    let server = l3::service::start(test_config(data.path(), iset.as_ref()))
+        .await
+        .unwrap();
+    for id in [&a, &b] {
+        let j = wait_job(&server, id, 120.0, |j| {
+            !["queued", "running"].contains(&j["status"].as_str().unwrap())
+        })
+        .await;
+        assert_eq!(j["status"], "succeeded", "{j}");
+        assert!(j["table_id"].is_string());
+    }
+    let ja = json(
+        c.get(url(&server, &format!("/v1/training-jobs/{a}")))
+            .send()
+            .await
+            .unwrap(),
+    )
+    .await;
+    assert_eq!(ja["attempts"], 2, "{ja}");
+    let v = json(c.get(url(&server, "/v1/tables")).send().await.unwrap()).await;
+    assert_eq!(v["items"].as_array().unwrap().len(), 2);
+    server.shutdown().await.unwrap();
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn first_start_trains_and_activates_the_default_table() {
+    let iset = IsetData::for_tests();
+    let data = tempfile::tempdir().unwrap();
+    let mut cfg = test_config(data.path(), iset.as_ref());
+    cfg.training.auto_train_default = true;
+    // keep the default table tiny for the test
+    for (k, v) in [("scenes", 4), ("scene_size", 48), ("levels", 10)] {
+        cfg.training
+            .default_spec
+            .insert(k.into(), toml::Value::Integer(v));
+    }
+    let server = l3::service::start(cfg.clone()).await.unwrap();
+    let c = client();
+    let r = c.get(url(&server, "/readyz")).send().await.unwrap();
+    let status = r.status().as_u16();
+    if status == 503 {
+        let d = problem(r, 503, "not_ready").await;
+        assert!(d.contains("training job"), "{d}");
+    }
+    let jobs = json(
+        c.get(url(&server, "/v1/training-jobs"))
+            .send()
+            .await
+            .unwrap(),
+    )
+    .await;
+    let id = jobs["items"][0]["id"].as_str().unwrap().to_string();
+    let expect: Vec<&str> = if iset.is_some() {
+        vec!["D65", "Tungsten", "Fluorescent"]
+    } else {
+        vec!["D65", "A", "F11"]
+    };
+    assert_eq!(
+        jobs["items"][0]["request"]["illuminants"],
+        serde_json::json!(expect)
+    );
+    let j = wait_job(&server, &id, 120.0, |j| {
+        j["status"] == "succeeded" || j["status"] == "failed"
+    })
+    .await;
+    assert_eq!(j["status"], "succeeded", "{j}");
+    let v = json(c.get(url(&server, "/readyz")).send().await.unwrap()).await;
+    assert_eq!(v["table_id"], j["table_id"]);
+    server.shutdown().await.unwrap();
+    // the next start finds the table and trains nothing
+    let server = l3::service::start(cfg).await.unwrap();
+    let jobs = json(
+        c.get(url(&server, "/v1/training-jobs"))
+            .send()
+            .await
+            .unwrap(),
+    )
+    .await;
+    assert_eq!(jobs["items"].as_array().unwrap().len(), 1);
+    assert_eq!(
+        c.get(url(&server, "/readyz"))
+            .send()
+            .await
+            .unwrap()
+            .status(),
+        200
+    );
+    server.shutdown().await.unwrap();
+}

@@ -1,0 +1,135 @@
+//! Shared helpers of the service integration tests: a tiny trained table, a server on
+//! 127.0.0.1:0 with a temporary data directory, and an HTTP client.
+#![allow(dead_code)]
+
+use std::path::Path;
+use std::sync::OnceLock;
+use std::sync::atomic::AtomicBool;
+
+use l3::camera::SensorDesign;
+use l3::l3::L3Table;
+use l3::service::{Server, ServiceConfig};
+use l3::spectral::IsetData;
+use l3::training::{TrainingSpec, train_table};
+
+/// A small, quick training spec.
+pub fn tiny_spec(illuminants: &[&str]) -> TrainingSpec {
+    TrainingSpec {
+        illuminants: illuminants.iter().map(|s| s.to_string()).collect(),
+        scenes: 4,
+        scene_size: 48,
+        levels: 10,
+        ..TrainingSpec::default()
+    }
+}
+
+/// The tiny table JSON body for a training job.
+pub fn tiny_job_json(illuminants: &[&str], seed: u64) -> serde_json::Value {
+    serde_json::json!({
+        "illuminants": illuminants,
+        "scenes": 4,
+        "scene_size": 48,
+        "levels": 10,
+        "seed": seed,
+    })
+}
+
+/// A tiny SI table (trained once per test binary).
+pub fn tiny_table(iset: Option<&IsetData>) -> &'static L3Table {
+    static T: OnceLock<L3Table> = OnceLock::new();
+    T.get_or_init(|| {
+        let ills: &[&str] = if iset.is_some() {
+            &["D65", "Tungsten"]
+        } else {
+            &["D65", "A"]
+        };
+        train_table(
+            &SensorDesign::paper_default(),
+            &tiny_spec(ills),
+            iset,
+            &|_, _| {},
+            &AtomicBool::new(false),
+        )
+        .expect("train tiny table")
+    })
+}
+
+/// A config for tests: port 0, the given data dir, no auto-training.
+pub fn test_config(data: &Path, iset: Option<&IsetData>) -> ServiceConfig {
+    let mut c = ServiceConfig::load_with_env(None, &[]).expect("default config");
+    c.server.bind = "127.0.0.1:0".parse().unwrap();
+    c.data.dir = data.to_path_buf();
+    c.data.iset_dir = iset.map(|d| d.root().to_path_buf());
+    c.training.auto_train_default = false;
+    c
+}
+
+/// A started server with the tiny table imported and active.
+pub async fn server_with_table(
+    data: &Path,
+    iset: Option<&IsetData>,
+    cfg: Option<ServiceConfig>,
+) -> (Server, String) {
+    let cfg = cfg.unwrap_or_else(|| test_config(data, iset));
+    let server = l3::service::start(cfg).await.expect("start server");
+    let table = tiny_table(iset).clone();
+    let id = l3::service::import_table(server.state(), &table, true)
+        .await
+        .expect("import table");
+    (server, id)
+}
+
+pub fn url(server: &Server, path: &str) -> String {
+    format!("http://{}{}", server.addr(), path)
+}
+
+pub fn client() -> reqwest::Client {
+    reqwest::Client::new()
+}
+
+/// Parses a JSON body.
+pub async fn json(resp: reqwest::Response) -> serde_json::Value {
+    let bytes = resp.bytes().await.expect("body");
+    serde_json::from_slice(&bytes)
+        .unwrap_or_else(|e| panic!("not JSON ({e}): {}", String::from_utf8_lossy(&bytes)))
+}
+
+/// Asserts a problem+json answer with `status` and `code`, and returns its detail.
+pub async fn problem(resp: reqwest::Response, status: u16, code: &str) -> String {
+    assert_eq!(resp.status().as_u16(), status, "status");
+    assert_eq!(
+        resp.headers()["content-type"],
+        "application/problem+json",
+        "content type"
+    );
+    let v = json(resp).await;
+    assert_eq!(v["code"], code, "{v}");
+    assert_eq!(v["status"], status);
+    let d = v["detail"].as_str().unwrap_or_default().to_string();
+    assert!(!d.is_empty());
+    d
+}
+
+/// Polls a job until `done(job)` or the timeout (seconds); returns the last job JSON.
+pub async fn wait_job(
+    server: &Server,
+    id: &str,
+    secs: f64,
+    done: impl Fn(&serde_json::Value) -> bool,
+) -> serde_json::Value {
+    let c = client();
+    let deadline = std::time::Instant::now() + std::time::Duration::from_secs_f64(secs);
+    loop {
+        let j = json(
+            c.get(url(server, &format!("/v1/training-jobs/{id}")))
+                .send()
+                .await
+                .unwrap(),
+        )
+        .await;
+        if done(&j) || std::time::Instant::now() > deadline {
+            return j;
+        }
+        tokio::time::sleep(std::time::Duration::from_millis(20)).await;
+    }
+}
