@@ -7,7 +7,10 @@ use std::sync::atomic::AtomicBool;
 
 use criterion::{Criterion, Throughput, criterion_group, criterion_main};
 use l3::camera::{Camera, NoiseSwitches, SensorDesign, mosaic};
-use l3::l3::{IlluminantRegistry, fuse_kernels, render_reference, xyz_to_srgb8};
+use l3::l3::{
+    FastRenderer, IlluminantRegistry, Mosaic, WhiteLevel, fuse_kernels, render_reference,
+    xyz_to_srgb8,
+};
 use l3::scene::{DeadLeavesParams, SceneOptions, dead_leaves};
 use l3::spectral::{Extrapolation, WavelengthGrid, ces_reflectances, cie_illuminant};
 use l3::training::{TrainingSpec, train_table};
@@ -65,6 +68,36 @@ fn bench(c: &mut Criterion) {
             let (xyz, _) =
                 render_reference(&table, &kernels, black_box(&frame), W, H).expect("render");
             black_box(xyz_to_srgb8(&xyz, 1.0))
+        })
+    });
+    let fast = FastRenderer::new(&table, &kernels).expect("fast");
+    let dn: Vec<u16> = frame
+        .iter()
+        .map(|v| (v / 1.8 * 65535.0).round() as u16)
+        .collect();
+    let (_, st) = fast
+        .render_xyz(Mosaic::Volts(&frame), W, H, None)
+        .expect("render");
+    eprintln!("fast renderer: {st:?}, simd {}", fast.uses_simd());
+    let dn_frame = Mosaic::Dn {
+        data: &dn,
+        black: 0,
+        white: 65535,
+    };
+    g.bench_function("l3_fast_u16_to_srgb8_auto_white", |b| {
+        b.iter(|| {
+            black_box(
+                fast.render_srgb8(black_box(dn_frame), W, H, None, WhiteLevel::Auto)
+                    .expect("render"),
+            )
+        })
+    });
+    g.bench_function("l3_fast_f32_to_xyz", |b| {
+        b.iter(|| {
+            black_box(
+                fast.render_xyz(Mosaic::Volts(black_box(&frame)), W, H, None)
+                    .expect("render"),
+            )
         })
     });
     g.finish();

@@ -96,12 +96,12 @@ pub fn run(cli: &Cli, a: &RenderArgs) -> Result<(), CliError> {
         "png" => encode_png_rgb8(
             w,
             h,
-            &xyz_to_srgb8(&xyz, white_y(&xyz, white)),
+            &xyz_to_srgb8(&xyz, white_y(&xyz, w, h, white)),
             PngCompression::Default,
         )?,
         "tif" | "tiff" => match a.tiff.as_str() {
             "xyz" => encode_tiff_f32_rgb(w, h, &xyz)?,
-            "srgb16" => encode_tiff_rgb16(w, h, &xyz_to_srgb16(&xyz, white_y(&xyz, white)))?,
+            "srgb16" => encode_tiff_rgb16(w, h, &xyz_to_srgb16(&xyz, white_y(&xyz, w, h, white)))?,
             other => {
                 return Err(CliError::Usage(format!(
                     "--tiff '{other}': expected xyz or srgb16"

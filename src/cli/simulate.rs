@@ -100,7 +100,7 @@ pub fn run(cli: &Cli, a: &SimulateArgs) -> Result<(), CliError> {
     write_png_gray16(&a.out.join("mosaic.png"), &frame)?;
     let xyz = cap.ideal_xyz.as_slice().unwrap_or(&[]);
     write_tiff_f32_rgb(&a.out.join("ideal_xyz.tiff"), w, h, xyz)?;
-    let wy = white_y(xyz, WhiteLevel::Auto);
+    let wy = white_y(xyz, w, h, WhiteLevel::Auto);
     write_png_rgb8(
         &a.out.join("preview.png"),
         w,

@@ -192,6 +192,11 @@ impl PatchGeometry {
         &self.chan_of[pos]
     }
 
+    /// Midpoints between consecutive levels (the class boundaries).
+    pub fn level_edges(&self) -> &[f32] {
+        &self.level_edges
+    }
+
     /// Index of the nearest level.
     #[inline]
     pub fn level_of(&self, luminance: f32) -> usize {

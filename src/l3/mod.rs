@@ -5,6 +5,7 @@
 mod baseline;
 mod classify;
 mod correction;
+mod fast;
 mod normal_eq;
 mod output;
 mod params;
@@ -18,8 +19,12 @@ pub use correction::{
     CorrectionSource, IDENTITY, IlluminantEntry, IlluminantRegistry, Mat3, correction_matrix,
     default_reflectances,
 };
+pub use fast::{FastOptions, FastRenderer, Mosaic, Region};
 pub use normal_eq::{ChannelSumConstraint, ClassSolution, Gram, RidgeChoice, solve, solve_with};
-pub use output::{WhiteLevel, white_y, xyz_to_srgb8, xyz_to_srgb16};
+pub use output::{
+    WHITE_GRID, WhiteLevel, white_from_samples, white_sample_points, white_y, xyz_to_srgb8,
+    xyz_to_srgb16,
+};
 pub use params::{DEFAULT_LEVELS_1V8, L3Params};
 pub use render::{RenderStats, fuse_kernels, render_reference, resolve_sat_case};
 pub use table::{ClassReport, L3Table, TABLE_FORMAT_VERSION, TableKind, TableMeta};

@@ -32,27 +32,47 @@ impl std::str::FromStr for WhiteLevel {
     }
 }
 
-/// Resolve the white level of an interleaved XYZ image to a Y value > 0.
-pub fn white_y(xyz: &[f32], white: WhiteLevel) -> f64 {
+/// Pixels sampled for the automatic white level: a grid of at most
+/// [`WHITE_GRID`]² points, centred in its cells, row-major.
+pub fn white_sample_points(width: usize, height: usize) -> Vec<(usize, usize)> {
+    let step = |n: usize| n.div_ceil(WHITE_GRID).max(1);
+    let (sr, sc) = (step(height), step(width));
+    let mut pts = Vec::new();
+    for r in (sr / 2..height).step_by(sr) {
+        for c in (sc / 2..width).step_by(sc) {
+            pts.push((r, c));
+        }
+    }
+    pts
+}
+
+/// Grid side of [`white_sample_points`].
+pub const WHITE_GRID: usize = 128;
+
+/// The 99th percentile of sampled Y values (finite ones), or 1 when there is none > 0.
+pub fn white_from_samples(mut ys: Vec<f32>) -> f64 {
+    ys.retain(|v| v.is_finite());
+    if ys.is_empty() {
+        return 1.0;
+    }
+    let k = ((ys.len() - 1) as f64 * 0.99) as usize;
+    let (_, v, _) = ys.select_nth_unstable_by(k, f32::total_cmp);
+    let v = f64::from(*v);
+    if v > 0.0 { v } else { 1.0 }
+}
+
+/// Resolve the white level of an interleaved `width × height` XYZ image to a Y value > 0:
+/// the given Y, or the 99th percentile of Y over [`white_sample_points`] (robust to
+/// specular highlights, and cheap: the fast renderer renders only those pixels).
+pub fn white_y(xyz: &[f32], width: usize, height: usize, white: WhiteLevel) -> f64 {
     match white {
         WhiteLevel::Y(v) => v,
-        WhiteLevel::Auto => {
-            // subsample for speed on big frames
-            let step = (xyz.len() / 3 / 65_536).max(1);
-            let mut ys: Vec<f32> = xyz
-                .chunks_exact(3)
-                .step_by(step)
-                .map(|p| p[1])
-                .filter(|v| v.is_finite())
-                .collect();
-            if ys.is_empty() {
-                return 1.0;
-            }
-            let k = ((ys.len() - 1) as f64 * 0.99) as usize;
-            let (_, v, _) = ys.select_nth_unstable_by(k, f32::total_cmp);
-            let v = *v as f64;
-            if v > 0.0 { v } else { 1.0 }
-        }
+        WhiteLevel::Auto => white_from_samples(
+            white_sample_points(width, height)
+                .into_iter()
+                .filter_map(|(r, c)| xyz.get((r * width + c) * 3 + 1).copied())
+                .collect(),
+        ),
     }
 }
 
@@ -116,6 +136,9 @@ mod tests {
         assert!("-1".parse::<WhiteLevel>().is_err());
         assert!("nan".parse::<WhiteLevel>().is_err());
         let img: Vec<f32> = (0..300).map(|i| (i / 3) as f32 * 0.01).collect();
-        assert!((white_y(&img, WhiteLevel::Auto) - 0.98).abs() < 0.011);
+        assert!((white_y(&img, 100, 1, WhiteLevel::Auto) - 0.98).abs() < 0.011);
+        assert_eq!(white_sample_points(300, 2).len(), 2 * 100);
+        assert_eq!(white_sample_points(1, 1), vec![(0, 0)]);
+        assert_eq!(white_sample_points(4000, 3000).len(), 128 * 125);
     }
 }

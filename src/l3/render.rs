@@ -19,6 +19,9 @@ pub struct RenderStats {
     pub texture: u64,
     /// Input values clamped into [0, swing].
     pub clamped: u64,
+    /// Pixels the fast renderer classified with the reference code (a saturated
+    /// value in the patch, a value near a class boundary, or a CFA other than 2×2).
+    pub exact_path: u64,
 }
 
 impl std::ops::AddAssign for RenderStats {
@@ -28,6 +31,7 @@ impl std::ops::AddAssign for RenderStats {
         self.fallback += o.fallback;
         self.texture += o.texture;
         self.clamped += o.clamped;
+        self.exact_path += o.exact_path;
     }
 }
 
@@ -123,7 +127,7 @@ pub fn render_reference(
 /// Dot product with 8 independent partial sums (vectorises; a plain
 /// `iter().sum()` of f32 must keep its sequential order and cannot).
 #[inline]
-fn dot(a: &[f32], b: &[f32]) -> f32 {
+pub(super) fn dot(a: &[f32], b: &[f32]) -> f32 {
     let n = a.len().min(b.len());
     let mut acc = [0f32; 8];
     let full = n / 8 * 8;

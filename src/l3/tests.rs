@@ -210,3 +210,135 @@ fn hostile_render_inputs_are_errors_or_clamped() {
         assert!(o.iter().all(|x| x.is_finite()));
     }
 }
+
+/// Max |a − b| over two equally long slices.
+fn max_abs_diff(a: &[f32], b: &[f32]) -> f32 {
+    assert_eq!(a.len(), b.len());
+    a.iter()
+        .zip(b)
+        .map(|(x, y)| (x - y).abs())
+        .fold(0.0, f32::max)
+}
+
+#[test]
+fn fast_renderer_matches_the_reference() {
+    let table = train_synthetic(0.01);
+    let t = [[1.1, 0.05, -0.1], [0.02, 0.98, 0.01], [-0.03, 0.04, 1.4]];
+    let fused = fuse_kernels(&table, &t);
+    // blocks from dark to clipped, plus noise: every level and saturated patches
+    let mut f = synth_frame(11, 96, 1.6, 0.02, (0, 0));
+    f.volts[40 * 96 + 40] = 1.8;
+    for simd in [true, false] {
+        for kernels in [&table.kernels, &fused] {
+            let mut fast = FastRenderer::new(&table, kernels).unwrap();
+            fast.options.simd = simd;
+            for (w, h) in [(96, 96), (95, 61), (1, 1), (1, 9), (7, 1), (2, 3), (13, 5)] {
+                let v: Vec<f32> = f.volts[..w * h].to_vec();
+                let (want, ws) = render_reference(&table, kernels, &v, w, h).unwrap();
+                let (got, gs) = fast.render_xyz(Mosaic::Volts(&v), w, h, None).unwrap();
+                let d = max_abs_diff(&want, &got);
+                assert!(d <= 1e-5, "{w}×{h} simd {simd}: max diff {d}");
+                assert_eq!(
+                    (ws.pixels, ws.saturated, ws.fallback),
+                    (gs.pixels, gs.saturated, gs.fallback)
+                );
+            }
+            // a region equals the crop of the whole frame
+            let (all, _) = fast
+                .render_xyz(Mosaic::Volts(&f.volts), 96, 96, None)
+                .unwrap();
+            let reg = Region {
+                x: 7,
+                y: 30,
+                width: 41,
+                height: 19,
+            };
+            let (part, _) = fast
+                .render_xyz(Mosaic::Volts(&f.volts), 96, 96, Some(reg))
+                .unwrap();
+            for y in 0..reg.height {
+                let a = &all
+                    [((reg.y + y) * 96 + reg.x) * 3..((reg.y + y) * 96 + reg.x + reg.width) * 3];
+                assert_eq!(a, &part[y * reg.width * 3..(y + 1) * reg.width * 3]);
+            }
+        }
+    }
+}
+
+#[test]
+fn fast_srgb_and_dn_input_match_the_reference_pipeline() {
+    let table = train_synthetic(0.01);
+    let f = synth_frame(12, 64, 1.2, 0.01, (1, 1));
+    let dn: Vec<u16> = f
+        .volts
+        .iter()
+        .map(|v| (v / 1.8 * 4095.0).round() as u16 + 64)
+        .collect();
+    let volts: Vec<f32> = dn
+        .iter()
+        .map(|&d| ((f64::from(d) - 64.0) * 1.8 / (4159.0 - 64.0)).clamp(0.0, 1.8) as f32)
+        .collect();
+    let fast = FastRenderer::new(&table, &table.kernels).unwrap();
+    let (want, _) = render_reference(&table, &table.kernels, &volts, 64, 64).unwrap();
+    let (got, _) = fast
+        .render_xyz(
+            Mosaic::Dn {
+                data: &dn,
+                black: 64,
+                white: 4159,
+            },
+            64,
+            64,
+            None,
+        )
+        .unwrap();
+    assert!(max_abs_diff(&want, &got) <= 1e-5);
+    let wy = white_y(&want, 64, 64, WhiteLevel::Auto);
+    let srgb_ref = xyz_to_srgb8(&want, wy);
+    let (srgb, wy_fast, _) = fast
+        .render_srgb8(Mosaic::Volts(&volts), 64, 64, None, WhiteLevel::Auto)
+        .unwrap();
+    assert!((wy - wy_fast).abs() <= 1e-5 * wy, "{wy} {wy_fast}");
+    let off = srgb.iter().zip(&srgb_ref).filter(|(a, b)| a != b).count();
+    let worst = srgb
+        .iter()
+        .zip(&srgb_ref)
+        .map(|(a, b)| a.abs_diff(*b))
+        .max()
+        .unwrap();
+    assert!(
+        worst <= 1 && off * 100 <= srgb.len(),
+        "{off} codes differ, worst {worst}"
+    );
+    // errors
+    assert!(
+        fast.render_xyz(Mosaic::Volts(&volts[..10]), 64, 64, None)
+            .is_err()
+    );
+    let bad = Region {
+        x: 60,
+        y: 0,
+        width: 8,
+        height: 8,
+    };
+    assert!(
+        fast.render_xyz(Mosaic::Volts(&volts), 64, 64, Some(bad))
+            .is_err()
+    );
+    let mut nan = volts.clone();
+    nan[100] = f32::NAN;
+    assert!(fast.render_xyz(Mosaic::Volts(&nan), 64, 64, None).is_err());
+    assert!(
+        fast.render_xyz(
+            Mosaic::Dn {
+                data: &dn,
+                black: 9,
+                white: 9
+            },
+            64,
+            64,
+            None
+        )
+        .is_err()
+    );
+}

@@ -380,7 +380,7 @@ pub async fn render(
             let wy = match format {
                 OutputFormat::F32 => 1.0,
                 OutputFormat::Tiff if !tiff_srgb16 => 1.0,
-                _ => white_y(&xyz, white),
+                _ => white_y(&xyz, w, h, white),
             };
             let (mut out, mut ow, mut oh) = (xyz, w, h);
             if let Some(r) = region {

@@ -1,0 +1,1078 @@
+//! The fast renderer (DESIGN.md §9). Same classes and kernels as
+//! [`render_reference`](super::render_reference), organised for speed:
+//!
+//! - the frame is cut into bands of rows (one rayon task each) and column tiles
+//!   small enough for the core's cache; each tile copies its rows plus a halo
+//!   into an f32 buffer, converting u16 DN through a lookup table on the way
+//!   (no float copy of the frame);
+//! - on 2×2 CFAs the per-channel patch sums come from separable sums of the
+//!   four CFA phases, and the contrast from one vectorised pass per row;
+//! - a pixel whose patch holds no saturated value (most of them) is a plain
+//!   affine map of its patch rows: the kernels are laid out one 8-lane vector
+//!   per patch row and output, applied with FMA where the CPU has it;
+//! - the 3×3 output matrix (illuminant correction, XYZ → linear sRGB and the
+//!   white level) is fused into the kernels, so sRGB leaves through a lookup
+//!   table without an XYZ image;
+//! - work a tile does not need is skipped: saturation handling where no value
+//!   reaches the threshold, the contrast measure where no level's flat and
+//!   texture kernels differ, and everything outside the requested region.
+//!
+//! Pixels with a saturated value in their patch, pixels whose luminance or
+//! contrast lies within a rounding margin of a class boundary, and CFAs other
+//! than 2×2 take the reference classification, so both renderers put every
+//! pixel in the same class; outputs then differ by float rounding only.
+
+use rayon::prelude::*;
+
+use super::classify::sat_case_index;
+use super::output::{WhiteLevel, white_from_samples, white_sample_points};
+use super::render::dot;
+use super::{L3Error, L3Table, PatchGeometry, RenderStats};
+use crate::colour::{SrgbLut, XYZ_TO_LINEAR_SRGB};
+
+/// Rows per rayon task.
+const BAND_ROWS: usize = 16;
+/// Output columns per tile (the tile buffers stay in L2).
+const TILE_COLS: usize = 512;
+/// Lanes per kernel row in the SIMD layout.
+const LANES: usize = 8;
+/// Luminance (V) within this of a level boundary is classified by the reference code.
+const LUMINANCE_MARGIN: f32 = 2e-5;
+/// Contrast (V) within this of a class threshold is classified by the reference code.
+const CONTRAST_MARGIN: f32 = 1e-5;
+
+/// A mosaic to render: volts or integer DN, row-major.
+#[derive(Clone, Copy, Debug)]
+pub enum Mosaic<'a> {
+    /// Volts. Non-finite values are an error; values outside [0, swing] are clamped and counted.
+    Volts(&'a [f32]),
+    /// Integer DN: volts = (dn − black) / (white − black) × swing, clamped to [0, swing].
+    Dn {
+        data: &'a [u16],
+        black: u16,
+        white: u16,
+    },
+}
+
+/// A rectangle of the frame (output pixels).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct Region {
+    pub x: usize,
+    pub y: usize,
+    pub width: usize,
+    pub height: usize,
+}
+
+/// Switches for the optimisations, all on by default (turned off to measure them).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct FastOptions {
+    /// Skip the saturation tests in tiles where no value reaches the threshold.
+    pub skip_unsaturated_tiles: bool,
+    /// Skip the contrast measure for classes whose flat and texture kernels are equal.
+    pub skip_equal_contrast_kernels: bool,
+    /// Use AVX2 + FMA when the CPU has them.
+    pub simd: bool,
+}
+
+impl Default for FastOptions {
+    fn default() -> Self {
+        Self {
+            skip_unsaturated_tiles: true,
+            skip_equal_contrast_kernels: true,
+            simd: true,
+        }
+    }
+}
+
+/// One kernel set in both layouts.
+#[derive(Clone, Debug)]
+struct KernelSet {
+    /// The table's layout: class × 3 × n_features.
+    flat: Vec<f32>,
+    /// Values per class in `rows`.
+    stride: usize,
+    /// Per class: 3 outputs × `size` patch rows × [`LANES`] weights, then 4 biases.
+    rows: Vec<f32>,
+}
+
+/// A table prepared for fast rendering with one set of (possibly T-fused) XYZ kernels.
+#[derive(Clone, Debug)]
+pub struct FastRenderer {
+    geo: PatchGeometry,
+    n_features: usize,
+    n_levels: usize,
+    sat_cases: Vec<u32>,
+    contrast_thresholds: Vec<f32>,
+    /// Per group: do the flat and texture kernels differ?
+    contrast_matters: Vec<bool>,
+    sat_classes: bool,
+    contrast_classes: bool,
+    swing: f32,
+    xyz: KernelSet,
+    /// Per CFA position, the 4×4 map from phase sums to per-phase channel means,
+    /// and the luminance weights of the phase sums (2×2 CFAs only).
+    phases: Option<Vec<PhaseMap>>,
+    /// Set when every CFA phase holds its own channel at every position (RGBW).
+    uniform_phases: Option<UniformPhases>,
+    level_lut: LevelLut,
+    simd_available: bool,
+    pub options: FastOptions,
+}
+
+/// Position-free phase weights: `mean[p] = inv[p] · sum[p]`, `luminance = Σ lum[p] · sum[p]`.
+#[derive(Clone, Copy, Debug)]
+struct UniformPhases {
+    inv: [f32; 4],
+    lum: [f32; 4],
+}
+
+#[derive(Clone, Copy, Debug, PartialEq)]
+struct PhaseMap {
+    /// `mean[p] = Σ_q to_mean[p][q] · sum[q]` for phase p = 2·(row parity) + column parity.
+    to_mean: [[f32; 4]; 4],
+    /// `luminance = Σ_q lum[q] · sum[q]`.
+    lum: [f32; 4],
+}
+
+/// Reusable per-thread buffers.
+#[derive(Default)]
+struct Scratch {
+    buf: Vec<f32>,
+    he: Vec<f32>,
+    ho: Vec<f32>,
+    hmax: Vec<f32>,
+    sums: [Vec<f32>; 4],
+    means: [Vec<f32>; 4],
+    lum: Vec<f32>,
+    contrast: Vec<f32>,
+    sat: Vec<bool>,
+    class: Vec<u32>,
+    patch: Vec<f32>,
+    feat: Vec<f32>,
+}
+
+/// Where one pixel's output goes in its output row.
+trait Sink<T>: Sync {
+    fn put(&self, row: &mut [T], x: usize, v: [f32; 4]);
+}
+
+/// Interleaved f32 XYZ.
+struct XyzSink;
+impl Sink<f32> for XyzSink {
+    #[inline(always)]
+    fn put(&self, row: &mut [f32], x: usize, v: [f32; 4]) {
+        if let Some(o) = row.get_mut(3 * x..3 * x + 3) {
+            o.copy_from_slice(&v[..3]);
+        }
+    }
+}
+
+/// Interleaved 8-bit sRGB from linear sRGB (white = 1).
+struct Srgb8Sink<'a> {
+    lut: &'a SrgbLut,
+}
+impl Sink<u8> for Srgb8Sink<'_> {
+    #[inline(always)]
+    fn put(&self, row: &mut [u8], x: usize, v: [f32; 4]) {
+        if let Some(o) = row.get_mut(3 * x..3 * x + 3) {
+            o[0] = self.lut.encode(v[0]);
+            o[1] = self.lut.encode(v[1]);
+            o[2] = self.lut.encode(v[2]);
+        }
+    }
+}
+
+/// The frame being rendered, with its conversion to clamped volts.
+struct Source<'a> {
+    mosaic: Mosaic<'a>,
+    width: usize,
+    height: usize,
+    swing: f32,
+    dn_lut: Vec<f32>,
+}
+
+impl Source<'_> {
+    /// Clamped volts of frame row `r`, columns `c0..c0 + out.len()` (all inside the frame).
+    #[inline]
+    fn row_into(&self, r: usize, c0: usize, out: &mut [f32]) {
+        let start = r * self.width + c0;
+        let end = start + out.len();
+        match self.mosaic {
+            Mosaic::Volts(v) => {
+                for (o, &x) in out.iter_mut().zip(&v[start..end]) {
+                    *o = x.clamp(0.0, self.swing);
+                }
+            }
+            Mosaic::Dn { data, .. } => {
+                for (o, &d) in out.iter_mut().zip(&data[start..end]) {
+                    *o = self.dn_lut[d as usize];
+                }
+            }
+        }
+    }
+
+    #[inline]
+    fn at(&self, r: usize, c: usize) -> f32 {
+        let i = r * self.width + c;
+        match self.mosaic {
+            Mosaic::Volts(v) => v[i].clamp(0.0, self.swing),
+            Mosaic::Dn { data, .. } => self.dn_lut[data[i] as usize],
+        }
+    }
+}
+
+impl FastRenderer {
+    /// Prepare `table` with `kernels` (its own, or fused with a correction matrix
+    /// by [`fuse_kernels`](super::fuse_kernels)).
+    pub fn new(table: &L3Table, kernels: &[f32]) -> Result<Self, L3Error> {
+        if kernels.len() != table.kernels.len() {
+            return Err(L3Error::InvalidInput(
+                "kernel set does not match the table".into(),
+            ));
+        }
+        if kernels.iter().any(|v| !v.is_finite()) {
+            return Err(L3Error::Table("a kernel weight is not finite".into()));
+        }
+        let geo = table.geometry()?;
+        let nf = table.n_features();
+        let n_groups = table.n_classes() / 2;
+        let contrast_matters = (0..n_groups)
+            .map(|g| {
+                kernels[2 * g * 3 * nf..(2 * g + 1) * 3 * nf]
+                    != kernels[(2 * g + 1) * 3 * nf..(2 * g + 2) * 3 * nf]
+            })
+            .collect();
+        let phases = phase_maps(&geo);
+        let uniform_phases = phases.as_ref().and_then(|maps| uniform_phases(maps));
+        let level_lut = LevelLut::new(&geo, table.meta.voltage_swing as f32);
+        let xyz = KernelSet::new(kernels.to_vec(), geo.size);
+        Ok(Self {
+            n_features: nf,
+            n_levels: table.n_levels(),
+            sat_cases: table.meta.sat_cases.clone(),
+            contrast_thresholds: table.contrast_thresholds.clone(),
+            contrast_matters,
+            sat_classes: table.meta.params.saturation_classes,
+            contrast_classes: table.meta.params.contrast_classes,
+            swing: table.meta.voltage_swing as f32,
+            xyz,
+            phases,
+            uniform_phases,
+            level_lut,
+            simd_available: simd_available(),
+            geo,
+            options: FastOptions::default(),
+        })
+    }
+
+    /// Whether the AVX2 + FMA kernels will be used.
+    pub fn uses_simd(&self) -> bool {
+        self.simd_available && self.options.simd
+    }
+
+    /// Render `region` (default: the whole frame) of a `width × height` mosaic to
+    /// interleaved XYZ. Equals cropping [`render_reference`](super::render_reference)'s
+    /// output to the region, to float rounding.
+    pub fn render_xyz(
+        &self,
+        mosaic: Mosaic<'_>,
+        width: usize,
+        height: usize,
+        region: Option<Region>,
+    ) -> Result<(Vec<f32>, RenderStats), L3Error> {
+        let (src, clamped) = self.source(mosaic, width, height)?;
+        let reg = check_region(region, width, height)?;
+        let mut out = vec![0f32; reg.width * reg.height * 3];
+        let mut stats = self.run(&src, reg, &self.xyz, &mut out, &XyzSink);
+        stats.clamped = clamped;
+        Ok((out, stats))
+    }
+
+    /// Render `region` to 8-bit sRGB, `white` Y mapping to white (Auto: the 99th
+    /// percentile of Y over the frame's sample grid, as [`white_y`](super::white_y)).
+    /// Returns the pixels and the white Y used.
+    pub fn render_srgb8(
+        &self,
+        mosaic: Mosaic<'_>,
+        width: usize,
+        height: usize,
+        region: Option<Region>,
+        white: WhiteLevel,
+    ) -> Result<(Vec<u8>, f64, RenderStats), L3Error> {
+        let (src, clamped) = self.source(mosaic, width, height)?;
+        let reg = check_region(region, width, height)?;
+        let wy = self.white_of(&src, white);
+        let k = 1.0 / wy;
+        let m = XYZ_TO_LINEAR_SRGB.map(|r| r.map(|v| v * k));
+        let set = KernelSet::new(fuse3(&self.xyz.flat, &m, self.n_features), self.geo.size);
+        let lut = SrgbLut::new();
+        let mut out = vec![0u8; reg.width * reg.height * 3];
+        let mut stats = self.run(&src, reg, &set, &mut out, &Srgb8Sink { lut: &lut });
+        stats.clamped = clamped;
+        Ok((out, wy, stats))
+    }
+
+    /// The white level of a frame: `Y(v)` as is, or the 99th percentile of the
+    /// rendered Y over the sample grid of [`white_y`](super::white_y).
+    pub fn white_y(
+        &self,
+        mosaic: Mosaic<'_>,
+        width: usize,
+        height: usize,
+        white: WhiteLevel,
+    ) -> Result<f64, L3Error> {
+        let (src, _) = self.source(mosaic, width, height)?;
+        Ok(self.white_of(&src, white))
+    }
+
+    fn white_of(&self, src: &Source<'_>, white: WhiteLevel) -> f64 {
+        match white {
+            WhiteLevel::Y(v) => v,
+            WhiteLevel::Auto => {
+                let points = white_sample_points(src.width, src.height);
+                let ys: Vec<f32> = points
+                    .par_chunks(256)
+                    .flat_map_iter(|chunk| {
+                        let mut patch = vec![0f32; self.n_features - 1];
+                        let mut feat = vec![0f32; self.n_features];
+                        chunk
+                            .iter()
+                            .map(|&(r, c)| {
+                                gather_frame(&self.geo, src, r, c, &mut patch);
+                                let (class, sat, ..) = self.classify_exact(&patch, r, c);
+                                let pos = self.geo.position(r, c);
+                                self.geo
+                                    .features(&patch, pos, self.sat_cases[sat], &mut feat);
+                                let nf = self.n_features;
+                                let k = &self.xyz.flat[class * 3 * nf..(class + 1) * 3 * nf];
+                                dot(&k[nf..2 * nf], &feat)
+                            })
+                            .collect::<Vec<_>>()
+                    })
+                    .collect();
+                white_from_samples(ys)
+            }
+        }
+    }
+
+    /// The reference classification of a gathered patch: (class, sat case, fell back, texture).
+    #[inline]
+    fn classify_exact(&self, patch: &[f32], r: usize, c: usize) -> (usize, usize, bool, bool) {
+        let pos = self.geo.position(r, c);
+        let s = self.geo.stats(patch, pos);
+        let level = self.geo.level_of(s.luminance);
+        let (sat, fell_back) = if self.sat_classes && s.sat_mask != 0 {
+            sat_case_index(&self.sat_cases, s.sat_mask, &s.channel_means)
+        } else {
+            (0, false)
+        };
+        let group = self.group(pos, level, sat);
+        let texture = self.contrast_classes && s.contrast > self.contrast_thresholds[group];
+        (group * 2 + texture as usize, sat, fell_back, texture)
+    }
+
+    #[inline(always)]
+    fn group(&self, pos: usize, level: usize, sat: usize) -> usize {
+        (pos * self.n_levels + level) * self.sat_cases.len() + sat
+    }
+
+    /// Check the frame and build its converter; f32 input is scanned once for
+    /// non-finite values and counted for clamping, as the reference does.
+    fn source<'a>(
+        &self,
+        mosaic: Mosaic<'a>,
+        width: usize,
+        height: usize,
+    ) -> Result<(Source<'a>, u64), L3Error> {
+        if width == 0 || height == 0 {
+            return Err(L3Error::InvalidInput(format!("frame is {width}×{height}")));
+        }
+        let n = width
+            .checked_mul(height)
+            .ok_or_else(|| L3Error::InvalidInput(format!("frame {width}×{height} is too large")))?;
+        let swing = self.swing;
+        let (len, dn_lut, clamped) = match mosaic {
+            Mosaic::Volts(v) => {
+                if let Some(i) = v.par_iter().position_first(|x| !x.is_finite()) {
+                    return Err(L3Error::InvalidInput(format!(
+                        "input value at row {}, column {} is not finite",
+                        i / width,
+                        i % width
+                    )));
+                }
+                let clamped = v
+                    .par_chunks(1 << 16)
+                    .map(|ch| ch.iter().filter(|&&x| !(0.0..=swing).contains(&x)).count() as u64)
+                    .sum();
+                (v.len(), Vec::new(), clamped)
+            }
+            Mosaic::Dn { data, black, white } => {
+                if white <= black {
+                    return Err(L3Error::InvalidInput(format!(
+                        "white level {white} must exceed black level {black}"
+                    )));
+                }
+                let (b, s) = (f64::from(black), f64::from(swing));
+                let scale = s / (f64::from(white) - b);
+                let lut = (0..=u16::MAX)
+                    .map(|d| ((f64::from(d) - b) * scale).clamp(0.0, s) as f32)
+                    .collect();
+                (data.len(), lut, 0)
+            }
+        };
+        if len != n {
+            return Err(L3Error::InvalidInput(format!(
+                "{len} values for a {width}×{height} frame ({n} expected)"
+            )));
+        }
+        Ok((
+            Source {
+                mosaic,
+                width,
+                height,
+                swing,
+                dn_lut,
+            },
+            clamped,
+        ))
+    }
+
+    /// Render the region band by band into `out` (`chans` values per pixel).
+    fn run<T: Send, S: Sink<T>>(
+        &self,
+        src: &Source<'_>,
+        reg: Region,
+        set: &KernelSet,
+        out: &mut [T],
+        sink: &S,
+    ) -> RenderStats {
+        let chans = 3;
+        let row_len = reg.width * chans;
+        let simd = self.uses_simd();
+        out.par_chunks_mut(BAND_ROWS * row_len)
+            .enumerate()
+            .map_init(Scratch::default, |scratch, (b, band)| {
+                let y0 = reg.y + b * BAND_ROWS;
+                let rows = band.len() / row_len;
+                let mut st = RenderStats::default();
+                let mut x = 0;
+                while x < reg.width {
+                    let tw = TILE_COLS.min(reg.width - x);
+                    let tile = Tile {
+                        r0: y0,
+                        c0: reg.x + x,
+                        rows,
+                        cols: tw,
+                    };
+                    st += if simd {
+                        // SAFETY: `simd` is only true when the CPU reports AVX2 and FMA.
+                        unsafe {
+                            self.tile_avx2(src, set, tile, scratch, band, row_len, chans * x, sink)
+                        }
+                    } else {
+                        self.tile::<false, T, S>(
+                            src,
+                            set,
+                            tile,
+                            scratch,
+                            band,
+                            row_len,
+                            chans * x,
+                            sink,
+                        )
+                    };
+                    x += tw;
+                }
+                st
+            })
+            .reduce(RenderStats::default, |mut a, b| {
+                a += b;
+                a
+            })
+    }
+
+    #[cfg(target_arch = "x86_64")]
+    #[target_feature(enable = "avx2,fma")]
+    #[allow(clippy::too_many_arguments)]
+    unsafe fn tile_avx2<T, S: Sink<T>>(
+        &self,
+        src: &Source<'_>,
+        set: &KernelSet,
+        tile: Tile,
+        scratch: &mut Scratch,
+        band: &mut [T],
+        row_len: usize,
+        offset: usize,
+        sink: &S,
+    ) -> RenderStats {
+        self.tile::<true, T, S>(src, set, tile, scratch, band, row_len, offset, sink)
+    }
+
+    #[cfg(not(target_arch = "x86_64"))]
+    #[allow(clippy::too_many_arguments)]
+    unsafe fn tile_avx2<T, S: Sink<T>>(
+        &self,
+        src: &Source<'_>,
+        set: &KernelSet,
+        tile: Tile,
+        scratch: &mut Scratch,
+        band: &mut [T],
+        row_len: usize,
+        offset: usize,
+        sink: &S,
+    ) -> RenderStats {
+        self.tile::<false, T, S>(src, set, tile, scratch, band, row_len, offset, sink)
+    }
+
+    /// Render one tile: rows `r0..r0 + rows`, columns `c0..c0 + cols` of the
+    /// frame, into the band's rows at `offset`.
+    #[inline(always)]
+    #[allow(clippy::too_many_arguments)]
+    fn tile<const SIMD: bool, T, S: Sink<T>>(
+        &self,
+        src: &Source<'_>,
+        set: &KernelSet,
+        tile: Tile,
+        sc: &mut Scratch,
+        band: &mut [T],
+        row_len: usize,
+        offset: usize,
+        sink: &S,
+    ) -> RenderStats {
+        let s = self.geo.size;
+        let rad = self.geo.radius;
+        let nf = self.n_features;
+        let tw = tile.cols;
+        // scratch rows are padded to whole 8-lane chunks; the buffer has 8 more
+        // columns so every 8-wide read of a patch row stays inside it
+        let tw8 = tw.div_ceil(LANES) * LANES;
+        let stride = tw8 + LANES;
+        let brows = tile.rows + 2 * rad;
+        let thr = self.geo.sat_threshold();
+        // 1. the tile and its halo, clamped volts, mirrored at the frame's borders
+        sc.buf.clear();
+        sc.buf.resize(brows * stride, 0.0);
+        let mut peak = 0f32;
+        for j in 0..brows {
+            let r = super::mirror(tile.r0 as isize + j as isize - rad as isize, src.height);
+            let row = &mut sc.buf[j * stride..j * stride + tw + 2 * rad];
+            let first = tile.c0 as isize - rad as isize;
+            if first >= 0 && tile.c0 + tw + rad <= src.width {
+                src.row_into(r, first as usize, row);
+            } else {
+                for (i, v) in row.iter_mut().enumerate() {
+                    *v = src.at(r, super::mirror(first + i as isize, src.width));
+                }
+            }
+            peak = row.iter().fold(peak, |a, &v| a.max(v));
+        }
+        let any_sat = !self.options.skip_unsaturated_tiles || peak >= thr;
+        let use_contrast = self.contrast_classes
+            && (!self.options.skip_equal_contrast_kernels
+                || self.contrast_matters.iter().any(|&m| m));
+        let fast_classes = self.phases.is_some();
+        // 2. horizontal phase sums (and maxima where saturation is possible)
+        if fast_classes {
+            resize(&mut sc.he, brows * tw8);
+            resize(&mut sc.ho, brows * tw8);
+            for j in 0..brows {
+                let row = &sc.buf[j * stride..(j + 1) * stride];
+                let he = &mut sc.he[j * tw8..(j + 1) * tw8];
+                let ho = &mut sc.ho[j * tw8..(j + 1) * tw8];
+                he.fill(0.0);
+                ho.fill(0.0);
+                for d in 0..s {
+                    // offset d − rad: even offsets are the centre's column phase
+                    let dst = if (d + rad) % 2 == 0 {
+                        &mut *he
+                    } else {
+                        &mut *ho
+                    };
+                    add_into(dst, &row[d..d + tw8]);
+                }
+            }
+        }
+        if any_sat {
+            resize(&mut sc.hmax, brows * tw8);
+            for j in 0..brows {
+                let row = &sc.buf[j * stride..(j + 1) * stride];
+                let hm = &mut sc.hmax[j * tw8..(j + 1) * tw8];
+                hm.copy_from_slice(&row[..tw8]);
+                for d in 1..s {
+                    for (o, &v) in hm.iter_mut().zip(&row[d..d + tw8]) {
+                        *o = o.max(v);
+                    }
+                }
+            }
+        }
+        for v in sc.sums.iter_mut().chain(sc.means.iter_mut()) {
+            resize(v, tw8);
+        }
+        resize(&mut sc.lum, tw8);
+        resize(&mut sc.contrast, tw8);
+        sc.sat.clear();
+        sc.sat.resize(tw8, false);
+        sc.class.clear();
+        sc.class.resize(tw8, NO_CLASS);
+        resize(&mut sc.patch, s * s);
+        resize(&mut sc.feat, nf);
+        let inv_area = 1.0 / (s * s) as f32;
+        let n_sat = self.sat_cases.len();
+        let mut st = RenderStats::default();
+        for y in 0..tile.rows {
+            let r = tile.r0 + y;
+            // 3. which pixels see a saturated value
+            if any_sat {
+                for (i, f) in sc.sat.iter_mut().enumerate() {
+                    let mut m = 0f32;
+                    for dy in 0..s {
+                        m = m.max(sc.hmax[(y + dy) * tw8 + i]);
+                    }
+                    *f = m >= thr;
+                }
+            }
+            // 4. phase sums → per-phase means and luminance, then contrast and class
+            if let Some(maps) = &self.phases {
+                for v in sc.sums.iter_mut() {
+                    v.fill(0.0);
+                }
+                for dy in 0..s {
+                    let j = y + dy;
+                    let e = &sc.he[j * tw8..(j + 1) * tw8];
+                    let o = &sc.ho[j * tw8..(j + 1) * tw8];
+                    let [s0, s1, s2, s3] = &mut sc.sums;
+                    let (se, so) = if (dy + rad) % 2 == 0 {
+                        (s0, s1)
+                    } else {
+                        (s2, s3)
+                    };
+                    add_into(se, e);
+                    add_into(so, o);
+                }
+                let rpar = r % 2;
+                if let Some(u) = &self.uniform_phases {
+                    // every channel on its own phase: means and luminance are position-free
+                    let [s0, s1, s2, s3] = &sc.sums;
+                    let [m0, m1, m2, m3] = &mut sc.means;
+                    for i in 0..tw8 {
+                        let q = [s0[i], s1[i], s2[i], s3[i]];
+                        m0[i] = q[0] * u.inv[0];
+                        m1[i] = q[1] * u.inv[1];
+                        m2[i] = q[2] * u.inv[2];
+                        m3[i] = q[3] * u.inv[3];
+                        sc.lum[i] =
+                            q[0] * u.lum[0] + q[1] * u.lum[1] + q[2] * u.lum[2] + q[3] * u.lum[3];
+                    }
+                } else {
+                    let cpar = tile.c0 % 2;
+                    for i in 0..tw8 {
+                        let pm = &maps[(rpar * 2 + (cpar + i) % 2) % maps.len()];
+                        let q = [sc.sums[0][i], sc.sums[1][i], sc.sums[2][i], sc.sums[3][i]];
+                        let mut lum = 0f32;
+                        for k in 0..4 {
+                            lum += pm.lum[k] * q[k];
+                            let t = &pm.to_mean[k];
+                            sc.means[k][i] = t[0] * q[0] + t[1] * q[1] + t[2] * q[2] + t[3] * q[3];
+                        }
+                        sc.lum[i] = lum;
+                    }
+                }
+                if use_contrast {
+                    contrast_row(
+                        &sc.buf[y * stride..],
+                        stride,
+                        s,
+                        rad,
+                        &sc.means,
+                        inv_area,
+                        &mut sc.contrast,
+                    );
+                }
+                // classes of the pixels the fast path can take
+                let cpar = tile.c0 % 2;
+                for i in 0..tw {
+                    if sc.sat[i] {
+                        sc.class[i] = NO_CLASS;
+                        continue;
+                    }
+                    let Some(level) = self.level_lut.level(sc.lum[i]) else {
+                        sc.class[i] = NO_CLASS;
+                        continue;
+                    };
+                    let pos = rpar * 2 + (cpar + i) % 2;
+                    let group = (pos * self.n_levels + level) * n_sat;
+                    sc.class[i] = if !use_contrast
+                        || (self.options.skip_equal_contrast_kernels
+                            && !self.contrast_matters[group])
+                    {
+                        (group * 2) as u32
+                    } else {
+                        let cv = sc.contrast[i];
+                        let t = self.contrast_thresholds[group];
+                        if (cv - t).abs() >= CONTRAST_MARGIN {
+                            (group * 2 + (cv > t) as usize) as u32
+                        } else {
+                            // near the threshold, or NaN
+                            NO_CLASS
+                        }
+                    };
+                }
+            }
+            // 5. apply
+            let out_row = &mut band[y * row_len + offset..(y + 1) * row_len];
+            let rows = &sc.buf[y * stride..];
+            for i in 0..tw {
+                let class = sc.class[i];
+                let v = if class != NO_CLASS {
+                    let class = class as usize;
+                    st.texture += (class & 1) as u64;
+                    let k = &set.rows[class * set.stride..(class + 1) * set.stride];
+                    row_dot::<SIMD>(rows, stride, i, s, k)
+                } else {
+                    // the reference path
+                    let c = tile.c0 + i;
+                    for dy in 0..s {
+                        let o = dy * stride + i;
+                        sc.patch[dy * s..dy * s + s].copy_from_slice(&rows[o..o + s]);
+                    }
+                    let (class, sat, fell_back, texture) = self.classify_exact(&sc.patch, r, c);
+                    st.exact_path += 1;
+                    st.saturated += (sat != 0) as u64;
+                    st.fallback += fell_back as u64;
+                    st.texture += texture as u64;
+                    let pos = self.geo.position(r, c);
+                    self.geo
+                        .features(&sc.patch, pos, self.sat_cases[sat], &mut sc.feat);
+                    let k = &set.flat[class * 3 * nf..(class + 1) * 3 * nf];
+                    [
+                        dot(&k[..nf], &sc.feat),
+                        dot(&k[nf..2 * nf], &sc.feat),
+                        dot(&k[2 * nf..], &sc.feat),
+                        0.0,
+                    ]
+                };
+                sink.put(out_row, i, v);
+            }
+            st.pixels += tw as u64;
+        }
+        st
+    }
+}
+
+/// Marks a pixel for the reference path in the per-row class array.
+const NO_CLASS: u32 = u32::MAX;
+
+/// `dst[i] += src[i]`.
+#[inline(always)]
+fn add_into(dst: &mut [f32], src: &[f32]) {
+    for (o, &v) in dst.iter_mut().zip(src) {
+        *o += v;
+    }
+}
+
+/// Mean absolute deviation of each patch value from its phase's mean, for a
+/// row of pixels; `rows` starts at the patch's top row, `means[p]` are the
+/// per-pixel means of phase p. Accumulates 8 pixels at a time in registers.
+#[inline(always)]
+fn contrast_row(
+    rows: &[f32],
+    stride: usize,
+    s: usize,
+    rad: usize,
+    means: &[Vec<f32>; 4],
+    inv_area: f32,
+    out: &mut [f32],
+) {
+    let n = out.len();
+    // one bounds check for everything the loop below reads; NaN (never expected)
+    // sends the pixels to the reference path
+    if s == 0 || rows.len() < (s - 1) * stride + n + s - 1 || means.iter().any(|m| m.len() < n) {
+        out.fill(f32::NAN);
+        return;
+    }
+    for (ci, o) in out.chunks_exact_mut(LANES).enumerate() {
+        let i0 = ci * LANES;
+        let mut acc = [0f32; LANES];
+        for dy in 0..s {
+            let pr = (dy + rad) % 2;
+            let row = &rows[dy * stride + i0..dy * stride + i0 + s - 1 + LANES];
+            let ma: &[f32; LANES] = means[pr * 2 + rad % 2][i0..i0 + LANES]
+                .try_into()
+                .unwrap_or(&[0.0; LANES]);
+            let mb: &[f32; LANES] = means[pr * 2 + (1 + rad) % 2][i0..i0 + LANES]
+                .try_into()
+                .unwrap_or(&[0.0; LANES]);
+            for dx in 0..s {
+                let m = if dx % 2 == 0 { ma } else { mb };
+                let v: &[f32; LANES] = row[dx..dx + LANES].try_into().unwrap_or(&[0.0; LANES]);
+                for l in 0..LANES {
+                    acc[l] += (v[l] - m[l]).abs();
+                }
+            }
+        }
+        for l in 0..LANES {
+            o[l] = acc[l] * inv_area;
+        }
+    }
+}
+
+/// Luminance → level without a search: a table over [0, swing] whose bins
+/// lie wholly inside one level, farther than the margin from its edges;
+/// other bins (and values outside the table) go to the reference path.
+#[derive(Clone, Debug)]
+struct LevelLut {
+    scale: f32,
+    bins: Vec<u16>,
+}
+
+impl LevelLut {
+    const BINS: usize = 8192;
+    const AMBIGUOUS: u16 = u16::MAX;
+
+    fn new(geo: &PatchGeometry, swing: f32) -> Self {
+        let width = swing / Self::BINS as f32;
+        let edges = geo.level_edges();
+        let bins = (0..Self::BINS)
+            .map(|b| {
+                let lo = b as f32 * width - LUMINANCE_MARGIN;
+                let hi = (b + 1) as f32 * width + LUMINANCE_MARGIN;
+                let (l0, l1) = (geo.level_of(lo), geo.level_of(hi));
+                let clear = edges.iter().all(|&e| e < lo || e > hi);
+                if l0 == l1 && clear && l0 < usize::from(Self::AMBIGUOUS) {
+                    l0 as u16
+                } else {
+                    Self::AMBIGUOUS
+                }
+            })
+            .collect();
+        Self {
+            scale: 1.0 / width,
+            bins,
+        }
+    }
+
+    #[inline(always)]
+    fn level(&self, lum: f32) -> Option<usize> {
+        // `as usize` saturates (negative and NaN give 0, which is then range-checked by value)
+        if lum.is_nan() || lum < 0.0 {
+            return None;
+        }
+        let l = *self.bins.get((lum * self.scale) as usize)?;
+        (l != Self::AMBIGUOUS).then_some(l as usize)
+    }
+}
+
+#[derive(Clone, Copy, Debug)]
+struct Tile {
+    r0: usize,
+    c0: usize,
+    rows: usize,
+    cols: usize,
+}
+
+impl KernelSet {
+    fn new(flat: Vec<f32>, size: usize) -> Self {
+        let nf = size * size + 1;
+        let stride = 3 * size * LANES + 4;
+        let n_classes = flat.len() / (3 * nf);
+        let mut rows = vec![0f32; n_classes * stride];
+        for (src, dst) in flat.chunks_exact(3 * nf).zip(rows.chunks_exact_mut(stride)) {
+            for i in 0..3 {
+                for dy in 0..size {
+                    for dx in 0..size {
+                        dst[(i * size + dy) * LANES + dx] = src[i * nf + dy * size + dx];
+                    }
+                }
+                dst[3 * size * LANES + i] = src[i * nf + nf - 1];
+            }
+        }
+        Self { flat, stride, rows }
+    }
+}
+
+/// `y = M·x` applied to every class's 3 output rows.
+fn fuse3(kernels: &[f32], m: &[[f64; 3]; 3], nf: usize) -> Vec<f32> {
+    let mut out = vec![0f32; kernels.len()];
+    for (src, dst) in kernels
+        .chunks_exact(3 * nf)
+        .zip(out.chunks_exact_mut(3 * nf))
+    {
+        for i in 0..3 {
+            for j in 0..nf {
+                let v: f64 = (0..3).map(|k| m[i][k] * f64::from(src[k * nf + j])).sum();
+                dst[i * nf + j] = v as f32;
+            }
+        }
+    }
+    out
+}
+
+fn resize(v: &mut Vec<f32>, n: usize) {
+    if v.len() != n {
+        v.clear();
+        v.resize(n, 0.0);
+    }
+}
+
+/// Copy the patch around frame pixel (r, c) with mirrored borders.
+fn gather_frame(geo: &PatchGeometry, src: &Source<'_>, r: usize, c: usize, out: &mut [f32]) {
+    let s = geo.size;
+    let rad = geo.radius as isize;
+    for dy in 0..s {
+        let rr = super::mirror(r as isize + dy as isize - rad, src.height);
+        for dx in 0..s {
+            let cc = super::mirror(c as isize + dx as isize - rad, src.width);
+            out[dy * s + dx] = src.at(rr, cc);
+        }
+    }
+}
+
+fn check_region(region: Option<Region>, width: usize, height: usize) -> Result<Region, L3Error> {
+    let reg = region.unwrap_or(Region {
+        x: 0,
+        y: 0,
+        width,
+        height,
+    });
+    let inside = reg.width > 0
+        && reg.height > 0
+        && reg.x.checked_add(reg.width).is_some_and(|e| e <= width)
+        && reg.y.checked_add(reg.height).is_some_and(|e| e <= height);
+    if !inside {
+        return Err(L3Error::InvalidInput(format!(
+            "region {},{} {}×{} is empty or not inside the {width}×{height} frame",
+            reg.x, reg.y, reg.width, reg.height
+        )));
+    }
+    Ok(reg)
+}
+
+/// For 2×2 CFAs: per centre position, how phase sums give channel means and luminance.
+fn phase_maps(geo: &PatchGeometry) -> Option<Vec<PhaseMap>> {
+    if geo.cfa.rows != 2 || geo.cfa.cols != 2 || geo.size > LANES {
+        return None;
+    }
+    let s = geo.size;
+    let rad = geo.radius;
+    // pixels per phase: offsets −rad..=rad with the same (0) or other (1) parity
+    let n_even = (0..s).filter(|d| (d + rad) % 2 == 0).count();
+    let count = |p: usize| -> usize { if p == 0 { n_even } else { s - n_even } };
+    let n_ch = geo.n_channels();
+    let mut maps = Vec::with_capacity(4);
+    for pos in 0..4 {
+        let (pr, pc) = (pos / 2, pos % 2);
+        let chan = |p: usize| geo.cfa.channel_at(pr + p / 2, pc + p % 2);
+        let mut ch_count = vec![0usize; n_ch];
+        for p in 0..4 {
+            ch_count[chan(p)] += count(p / 2) * count(p % 2);
+        }
+        if ch_count.contains(&0) {
+            return None;
+        }
+        let mut to_mean = [[0f32; 4]; 4];
+        let mut lum = [0f32; 4];
+        for p in 0..4 {
+            for q in 0..4 {
+                if chan(p) == chan(q) {
+                    to_mean[p][q] = 1.0 / ch_count[chan(p)] as f32;
+                }
+            }
+            lum[p] = 1.0 / (n_ch * ch_count[chan(p)]) as f32;
+        }
+        maps.push(PhaseMap { to_mean, lum });
+    }
+    Some(maps)
+}
+
+/// The position-free form of the phase maps, when there is one.
+fn uniform_phases(maps: &[PhaseMap]) -> Option<UniformPhases> {
+    let first = maps.first()?;
+    let diagonal = (0..4).all(|p| (0..4).all(|q| p == q || first.to_mean[p][q] == 0.0));
+    if !diagonal || maps.iter().any(|m| m != first) {
+        return None;
+    }
+    Some(UniformPhases {
+        inv: [0, 1, 2, 3].map(|p| first.to_mean[p][p]),
+        lum: first.lum,
+    })
+}
+
+fn simd_available() -> bool {
+    #[cfg(target_arch = "x86_64")]
+    {
+        std::is_x86_feature_detected!("avx2") && std::is_x86_feature_detected!("fma")
+    }
+    #[cfg(not(target_arch = "x86_64"))]
+    {
+        false
+    }
+}
+
+/// The 3 outputs (+ a spare lane) of one pixel: its patch rows (8 values read
+/// from the tile buffer, weights beyond the patch are zero) against the class's row kernels.
+#[inline(always)]
+fn row_dot<const SIMD: bool>(
+    buf: &[f32],
+    stride: usize,
+    i: usize,
+    s: usize,
+    k: &[f32],
+) -> [f32; 4] {
+    #[cfg(target_arch = "x86_64")]
+    if SIMD {
+        // SAFETY: SIMD is only true inside `tile_avx2`, which runs when the CPU has
+        // AVX2 + FMA; every load is bounds-checked by the slicing below.
+        return unsafe { row_dot_avx2(buf, stride, i, s, k) };
+    }
+    let mut acc = [0f32; 4];
+    let bias = &k[3 * s * LANES..3 * s * LANES + 3];
+    for (o, a) in acc.iter_mut().take(3).enumerate() {
+        let mut lanes = [0f32; LANES];
+        for dy in 0..s {
+            let p = &buf[(dy * stride + i)..(dy * stride + i + LANES)];
+            let w = &k[(o * s + dy) * LANES..(o * s + dy + 1) * LANES];
+            for l in 0..LANES {
+                lanes[l] += p[l] * w[l];
+            }
+        }
+        *a = lanes.iter().sum::<f32>() + bias[o];
+    }
+    acc
+}
+
+#[cfg(target_arch = "x86_64")]
+#[inline(always)]
+/// # Safety
+/// The CPU must have AVX2 and FMA (callers run inside `tile_avx2`).
+unsafe fn row_dot_avx2(buf: &[f32], stride: usize, i: usize, s: usize, k: &[f32]) -> [f32; 4] {
+    use std::arch::x86_64::*;
+    let mut out = [0f32; 4];
+    let need_buf = (s - 1) * stride + i + LANES;
+    let need_k = 3 * s * LANES + 4;
+    if s == 0 || buf.len() < need_buf || k.len() < need_k {
+        return out;
+    }
+    // SAFETY: the features are present (see above), and the checks above keep
+    // every 8-lane load inside `buf` (rows 0..s at column i) and `k`.
+    unsafe {
+        let b = buf.as_ptr().add(i);
+        let kp = k.as_ptr();
+        let mut a0 = _mm256_setzero_ps();
+        let mut a1 = _mm256_setzero_ps();
+        let mut a2 = _mm256_setzero_ps();
+        for dy in 0..s {
+            let pv = _mm256_loadu_ps(b.add(dy * stride));
+            a0 = _mm256_fmadd_ps(pv, _mm256_loadu_ps(kp.add(dy * LANES)), a0);
+            a1 = _mm256_fmadd_ps(pv, _mm256_loadu_ps(kp.add((s + dy) * LANES)), a1);
+            a2 = _mm256_fmadd_ps(pv, _mm256_loadu_ps(kp.add((2 * s + dy) * LANES)), a2);
+        }
+        // [x y z z] from three 8-lane sums
+        let t01 = _mm256_hadd_ps(a0, a1);
+        let t22 = _mm256_hadd_ps(a2, a2);
+        let t = _mm256_hadd_ps(t01, t22);
+        let sum = _mm_add_ps(_mm256_castps256_ps128(t), _mm256_extractf128_ps(t, 1));
+        let bias = _mm_loadu_ps(kp.add(3 * s * LANES));
+        _mm_storeu_ps(out.as_mut_ptr(), _mm_add_ps(sum, bias));
+    }
+    out
+}
