@@ -8,8 +8,8 @@ use super::{ChartTruth, DeltaEReport, EvalError, evaluate_chart};
 use crate::camera::{Camera, Exposure, NoiseSwitches, simulate};
 use crate::colour::Cmfs;
 use crate::l3::{
-    ColourMatrix, IlluminantEntry, L3Table, TableKind, fuse_kernels, render_baseline,
-    render_reference,
+    ColourMatrix, FastRenderer, IlluminantEntry, L3Table, Mosaic, TableKind, fuse_kernels,
+    render_baseline,
 };
 use crate::scene::{Scene, SceneOptions, natural100_or_ces_chart};
 use crate::spectral::{Extrapolation, IlluminantSpec, IsetData, cie_illuminant};
@@ -98,7 +98,9 @@ pub fn evaluate_method(
                 TableKind::SameIlluminant => fuse_kernels(t, &correction.t),
                 TableKind::CrossIlluminant => t.kernels.clone(),
             };
-            render_reference(t, &kernels, &volts, w, h)?.0
+            FastRenderer::new(t, &kernels)?
+                .render_xyz(Mosaic::Volts(&volts), w, h, None)?
+                .0
         }
         Method::Baseline(m) => {
             let mt = m.then(&correction.t);

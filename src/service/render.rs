@@ -18,10 +18,10 @@ use tokio::sync::OwnedSemaphorePermit;
 use super::ServiceError;
 use super::state::AppState;
 use crate::io::{
-    DecodedMosaic, Limits, PngCompression, RawMeta, decode_mosaic, decode_raw_u16_le,
-    encode_png_rgb8, encode_tiff_f32_rgb, encode_tiff_rgb16,
+    DecodedMosaic, Limits, PngCompression, decode_mosaic, decode_raw_u16_le, encode_png_rgb8,
+    encode_tiff_f32_rgb, encode_tiff_rgb16,
 };
-use crate::l3::{WhiteLevel, render_reference, white_y, xyz_to_srgb8, xyz_to_srgb16};
+use crate::l3::{Mosaic, Region, WhiteLevel, xyz_to_srgb8, xyz_to_srgb16};
 
 /// Query parameters of a render.
 #[derive(Debug, Default, Deserialize)]
@@ -169,15 +169,6 @@ fn parse_region(s: &str, w: usize, h: usize) -> Result<(usize, usize, usize, usi
     Ok((x, y, rw, rh))
 }
 
-/// Interleaved XYZ cropped to a region.
-fn crop(xyz: &[f32], w: usize, (x, y, rw, rh): (usize, usize, usize, usize)) -> Vec<f32> {
-    let mut out = Vec::with_capacity(rw * rh * 3);
-    for r in y..y + rh {
-        out.extend_from_slice(&xyz[(r * w + x) * 3..(r * w + x + rw) * 3]);
-    }
-    out
-}
-
 /// Box-average downscale by `k` (partial edge blocks dropped).
 fn downscale(xyz: &[f32], w: usize, h: usize, k: usize) -> (Vec<f32>, usize, usize) {
     let (ow, oh) = (w / k, h / k);
@@ -201,6 +192,18 @@ fn downscale(xyz: &[f32], w: usize, h: usize, k: usize) -> (Vec<f32>, usize, usi
         }
     }
     (out, ow, oh)
+}
+
+/// A decoded mosaic as the renderer takes it.
+enum Input {
+    Dn(Vec<u16>),
+    Volts(Vec<f32>),
+}
+
+/// What the renderer produced.
+enum Rendered8 {
+    Srgb(Vec<u8>),
+    Xyz(Vec<f32>),
 }
 
 struct Rendered {
@@ -337,17 +340,18 @@ pub async fn render(
     rayon::spawn(move || {
         let run = || -> Result<Rendered, ServiceError> {
             let t0 = Instant::now();
-            let swing = active.table.meta.voltage_swing;
             let black = q.black_level.unwrap_or(0);
             let white_dn = q.white_level.unwrap_or(65535);
-            let to_volts =
-                |frame: crate::io::RawFrame| -> Result<(Vec<f32>, usize, usize), ServiceError> {
-                    let meta = RawMeta::new(frame.width, frame.height, "", black, white_dn, swing);
-                    Ok((frame.to_volts(&meta)?, frame.width, frame.height))
-                };
-            let (volts, w, h) = if raw {
+            if white_dn <= black {
+                return Err(ServiceError::BadRequest(format!(
+                    "white_level {white_dn} must exceed black_level {black}"
+                )));
+            }
+            // integer input stays u16: the renderer converts it tile by tile
+            let (input, w, h) = if raw {
                 let (w, h) = (q.width.unwrap_or(0), q.height.unwrap_or(0));
-                to_volts(decode_raw_u16_le(&body, w, h, &limits)?)?
+                let f = decode_raw_u16_le(&body, w, h, &limits)?;
+                (Input::Dn(f.data), f.width, f.height)
             } else {
                 let m = decode_mosaic(&body, &limits)?;
                 let (mw, mh) = m.dims();
@@ -359,51 +363,85 @@ pub async fn render(
                     )));
                 }
                 match m {
-                    DecodedMosaic::U16(frame) => to_volts(frame)?,
+                    DecodedMosaic::U16(f) => (Input::Dn(f.data), f.width, f.height),
                     DecodedMosaic::F32 {
                         width,
                         height,
                         data,
-                    } => (data, width, height),
+                    } => (Input::Volts(data), width, height),
                 }
+            };
+            let mosaic = match &input {
+                Input::Dn(d) => Mosaic::Dn {
+                    data: d,
+                    black,
+                    white: white_dn,
+                },
+                Input::Volts(v) => Mosaic::Volts(v),
             };
             let region = q
                 .region
                 .as_deref()
                 .map(|s| parse_region(s, w, h))
-                .transpose()?;
+                .transpose()?
+                .map(|(x, y, width, height)| Region {
+                    x,
+                    y,
+                    width,
+                    height,
+                });
+            let (ow, oh) = region.map_or((w, h), |r| (r.width, r.height));
+            if preview > 1 && (ow / preview == 0 || oh / preview == 0) {
+                return Err(ServiceError::BadRequest(format!(
+                    "preview {preview} leaves nothing of a {ow}×{oh} image"
+                )));
+            }
             let t1 = Instant::now();
-            let kernels = st.kernels_for(&active, &entry);
-            let (xyz, stats) = render_reference(&active.table, &kernels, &volts, w, h)
-                .map_err(|e| ServiceError::InvalidImage(e.to_string()))?;
-            let t2 = Instant::now();
-            let wy = match format {
-                OutputFormat::F32 => 1.0,
-                OutputFormat::Tiff if !tiff_srgb16 => 1.0,
-                _ => white_y(&xyz, w, h, white),
+            let renderer = st.renderer_for(&active, &entry)?;
+            let bad = |e: crate::l3::L3Error| ServiceError::InvalidImage(e.to_string());
+            // only what the answer needs: 8-bit sRGB straight from the kernels for a PNG,
+            // XYZ otherwise; only the region's pixels
+            let (out, stats, wy) = if format == OutputFormat::Png && preview == 1 {
+                let (rgb, wy, stats) = renderer
+                    .render_srgb8(mosaic, w, h, region, white)
+                    .map_err(bad)?;
+                (Rendered8::Srgb(rgb), stats, wy)
+            } else {
+                let (xyz, stats) = renderer.render_xyz(mosaic, w, h, region).map_err(bad)?;
+                let wy = match format {
+                    OutputFormat::F32 => 1.0,
+                    OutputFormat::Tiff if !tiff_srgb16 => 1.0,
+                    _ => renderer.white_y(mosaic, w, h, white).map_err(bad)?,
+                };
+                (Rendered8::Xyz(xyz), stats, wy)
             };
-            let (mut out, mut ow, mut oh) = (xyz, w, h);
-            if let Some(r) = region {
-                out = crop(&out, w, r);
-                (ow, oh) = (r.2, r.3);
-            }
-            if preview > 1 {
-                if ow / preview == 0 || oh / preview == 0 {
-                    return Err(ServiceError::BadRequest(format!(
-                        "preview {preview} leaves nothing of a {ow}×{oh} image"
-                    )));
+            let t2 = Instant::now();
+            let (out, ow, oh) = match out {
+                Rendered8::Xyz(xyz) if preview > 1 => {
+                    let (d, dw, dh) = downscale(&xyz, ow, oh, preview);
+                    (Rendered8::Xyz(d), dw, dh)
                 }
-                (out, ow, oh) = downscale(&out, ow, oh, preview);
-            }
-            let bytes = match format {
-                OutputFormat::Png => {
-                    encode_png_rgb8(ow, oh, &xyz_to_srgb8(&out, wy), PngCompression::Fast)?
+                other => (other, ow, oh),
+            };
+            let bytes = match (format, out) {
+                (OutputFormat::Png, Rendered8::Srgb(rgb)) => {
+                    encode_png_rgb8(ow, oh, &rgb, PngCompression::Fast)?
                 }
-                OutputFormat::Tiff if tiff_srgb16 => {
-                    encode_tiff_rgb16(ow, oh, &xyz_to_srgb16(&out, wy))?
+                (OutputFormat::Png, Rendered8::Xyz(xyz)) => {
+                    encode_png_rgb8(ow, oh, &xyz_to_srgb8(&xyz, wy), PngCompression::Fast)?
                 }
-                OutputFormat::Tiff => encode_tiff_f32_rgb(ow, oh, &out)?,
-                OutputFormat::F32 => out.iter().flat_map(|v| v.to_le_bytes()).collect(),
+                (OutputFormat::Tiff, Rendered8::Xyz(xyz)) if tiff_srgb16 => {
+                    encode_tiff_rgb16(ow, oh, &xyz_to_srgb16(&xyz, wy))?
+                }
+                (OutputFormat::Tiff, Rendered8::Xyz(xyz)) => encode_tiff_f32_rgb(ow, oh, &xyz)?,
+                (OutputFormat::F32, Rendered8::Xyz(xyz)) => {
+                    xyz.iter().flat_map(|v| v.to_le_bytes()).collect()
+                }
+                _ => {
+                    return Err(ServiceError::Internal(
+                        "render output does not match the format".into(),
+                    ));
+                }
             };
             let t3 = Instant::now();
             let ms = |a: Instant, b: Instant| (b - a).as_secs_f64() * 1e3;
@@ -454,6 +492,7 @@ pub async fn render(
     put("x-l3-texture-pixels", r.stats.texture.to_string());
     put("x-l3-fallback-pixels", r.stats.fallback.to_string());
     put("x-l3-clamped-pixels", r.stats.clamped.to_string());
+    put("x-l3-exact-path-pixels", r.stats.exact_path.to_string());
     put(
         "server-timing",
         format!(

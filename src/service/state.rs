@@ -15,7 +15,9 @@ use tokio::sync::{Notify, Semaphore};
 use super::ServiceError;
 use super::config::ServiceConfig;
 use super::metrics::Metrics;
-use crate::l3::{IlluminantEntry, IlluminantRegistry, L3Table, TableKind, fuse_kernels};
+use crate::l3::{
+    FastRenderer, IlluminantEntry, IlluminantRegistry, L3Table, TableKind, fuse_kernels,
+};
 use crate::spectral::IsetData;
 
 /// The table renders use, with its id. Renders hold an `Arc` of it, so an activation never
@@ -27,8 +29,8 @@ pub struct ActiveTable {
     pub table: L3Table,
 }
 
-/// Fused kernels by (table id, lower-case illuminant name).
-pub type KernelCache = HashMap<(String, String), Arc<Vec<f32>>>;
+/// Fast renderers (fused kernels) by (table id, lower-case illuminant name).
+pub type KernelCache = HashMap<(String, String), Arc<FastRenderer>>;
 
 /// Everything the handlers share (cheap to clone).
 #[derive(Clone)]
@@ -127,33 +129,43 @@ impl Inner {
             .map_err(|e| unknown(e.to_string()))
     }
 
-    /// The kernels to render `active` under `entry`: the table's own for cross-illuminant
-    /// tables, else the fused (kernel · T) set, cached per (table, illuminant).
-    pub fn kernels_for(&self, active: &ActiveTable, entry: &IlluminantEntry) -> Arc<Vec<f32>> {
-        if active.table.meta.kind == TableKind::CrossIlluminant {
-            let key = (active.id.clone(), String::from("\0own"));
-            return self.cached(key, || active.table.kernels.clone());
-        }
-        let key = (active.id.clone(), entry.name.to_ascii_lowercase());
-        self.cached(key, || fuse_kernels(&active.table, &entry.t))
-    }
-
-    fn cached(&self, key: (String, String), make: impl FnOnce() -> Vec<f32>) -> Arc<Vec<f32>> {
+    /// The renderer for `active` under `entry`: the table's own kernels for
+    /// cross-illuminant tables, else the fused (T · kernel) set, prepared for the fast
+    /// renderer and cached per (table, illuminant).
+    pub fn renderer_for(
+        &self,
+        active: &ActiveTable,
+        entry: &IlluminantEntry,
+    ) -> Result<Arc<FastRenderer>, ServiceError> {
+        let own = active.table.meta.kind == TableKind::CrossIlluminant;
+        let key = if own {
+            (active.id.clone(), String::from("\0own"))
+        } else {
+            (active.id.clone(), entry.name.to_ascii_lowercase())
+        };
         if let Some(k) = self
             .kernel_cache
             .lock()
             .unwrap_or_else(|p| p.into_inner())
             .get(&key)
         {
-            return k.clone();
+            return Ok(k.clone());
         }
-        let k = Arc::new(make());
+        let kernels = if own {
+            active.table.kernels.clone()
+        } else {
+            fuse_kernels(&active.table, &entry.t)
+        };
+        let r = Arc::new(
+            FastRenderer::new(&active.table, &kernels)
+                .map_err(|e| ServiceError::Internal(format!("table {}: {e}", active.id)))?,
+        );
         let mut cache = self.kernel_cache.lock().unwrap_or_else(|p| p.into_inner());
         if cache.len() >= KERNEL_CACHE_ENTRIES {
             cache.clear();
         }
-        cache.insert(key, k.clone());
-        k
+        cache.insert(key, r.clone());
+        Ok(r)
     }
 
     /// Drops cached kernels of an illuminant (after it was redefined or deleted).

@@ -1,0 +1,229 @@
+//! The fast renderer against the reference renderer on simulated frames:
+//! RGBW and Bayer CFAs, patch sizes 3 to 9, noise, clipped highlights, fused
+//! illuminant correction, u16 input, regions and 8-bit sRGB output.
+
+use std::sync::atomic::AtomicBool;
+
+use l3::camera::{Camera, Exposure, NoiseSwitches, SensorDesign, simulate};
+use l3::l3::{
+    FastOptions, FastRenderer, IlluminantRegistry, L3Table, Mosaic, Region, WhiteLevel,
+    fuse_kernels, render_reference, white_y, xyz_to_srgb8,
+};
+use l3::scene::{DeadLeavesParams, SceneOptions, dead_leaves};
+use l3::spectral::{Extrapolation, WavelengthGrid, ces_reflectances, cie_illuminant};
+use l3::training::{TrainingSpec, train_table};
+use proptest::prelude::*;
+
+fn design(name: &str) -> SensorDesign {
+    let path = format!("{}/config/sensors/{name}.toml", env!("CARGO_MANIFEST_DIR"));
+    SensorDesign::load(path, None).expect("sensor design")
+}
+
+fn train(design: &SensorDesign, patch: usize) -> L3Table {
+    let spec = TrainingSpec {
+        illuminants: vec!["D65".into(), "A".into()],
+        patch_size: patch,
+        levels: 10,
+        scenes: 6,
+        scene_size: 48,
+        seed: 5,
+        ..TrainingSpec::default()
+    };
+    train_table(design, &spec, None, &|_, _| {}, &AtomicBool::new(false)).expect("train")
+}
+
+/// A noisy dead-leaves frame under A, exposed so that highlights clip.
+fn frame(design: &SensorDesign, size: usize, seed: u64) -> (Vec<f32>, usize, usize) {
+    let grid = WavelengthGrid::default();
+    let camera = Camera::new(design, grid, None).expect("camera");
+    let a = cie_illuminant("A")
+        .expect("A")
+        .resample(&grid, Extrapolation::Zero);
+    let opts = SceneOptions::new(grid, a, "A").expect("options");
+    let refl: Vec<_> = ces_reflectances()
+        .into_iter()
+        .map(|(_, s)| s.resample(&grid, Extrapolation::Hold))
+        .collect();
+    let scene =
+        dead_leaves(&opts, &refl, &DeadLeavesParams::new(size, size + 7, seed)).expect("scene");
+    let auto = Exposure::Auto {
+        target_fraction: 0.95,
+    };
+    let probe = simulate(&camera, &scene, auto, &NoiseSwitches::none(), seed).expect("simulate");
+    // 1.6× the auto exposure: the brightest leaves clip
+    let exposure = Exposure::Seconds(probe.exposure_s * 1.6);
+    let cap = simulate(&camera, &scene, exposure, &NoiseSwitches::all(), seed).expect("simulate");
+    let (h, w) = cap.volts.dim();
+    (cap.volts.as_slice().expect("contiguous").to_vec(), w, h)
+}
+
+fn max_abs_diff(a: &[f32], b: &[f32]) -> f32 {
+    assert_eq!(a.len(), b.len());
+    a.iter()
+        .zip(b)
+        .map(|(x, y)| (x - y).abs())
+        .fold(0.0, f32::max)
+}
+
+fn tungsten_kernels(table: &L3Table) -> Vec<f32> {
+    let grid = WavelengthGrid::default();
+    let mut reg = IlluminantRegistry::with_defaults(grid, None).expect("registry");
+    fuse_kernels(table, &reg.resolve("A", None).expect("A").t)
+}
+
+/// Fast and reference agree to 1e-4 in XYZ, pixel for pixel, with every option
+/// combination, and report the same saturation statistics.
+fn check(design_name: &str, patch: usize) {
+    let d = design(design_name);
+    let table = train(&d, patch);
+    let kernels = tungsten_kernels(&table);
+    let (volts, w, h) = frame(&d, 72, 9);
+    let (want, ws) = render_reference(&table, &kernels, &volts, w, h).expect("reference");
+    assert!(ws.saturated > 0, "the frame should clip somewhere");
+    for simd in [true, false] {
+        for skip in [true, false] {
+            let mut fast = FastRenderer::new(&table, &kernels).expect("fast");
+            fast.options = FastOptions {
+                simd,
+                skip_unsaturated_tiles: skip,
+                skip_equal_contrast_kernels: skip,
+            };
+            let (got, gs) = fast
+                .render_xyz(Mosaic::Volts(&volts), w, h, None)
+                .expect("fast render");
+            let d = max_abs_diff(&want, &got);
+            println!(
+                "{design_name} patch {patch} simd {simd} skips {skip}: max |ΔXYZ| {d:.2e}, {} of {} pixels on the exact path",
+                gs.exact_path, gs.pixels
+            );
+            assert!(d <= 1e-4, "max diff {d}");
+            assert_eq!(
+                (gs.pixels, gs.saturated, gs.fallback, gs.clamped),
+                (ws.pixels, ws.saturated, ws.fallback, ws.clamped)
+            );
+        }
+    }
+}
+
+#[test]
+fn rgbw_patch5_matches_reference() {
+    check("rgbw-paper", 5);
+}
+
+#[test]
+fn rgbw_patch3_and_7_match_reference() {
+    check("rgbw-paper", 3);
+    check("rgbw-paper", 7);
+}
+
+#[test]
+fn rgbw_patch9_takes_the_exact_path_and_matches() {
+    check("rgbw-paper", 9);
+}
+
+#[test]
+fn bayer_matches_reference() {
+    check("bayer-paper", 5);
+}
+
+#[test]
+fn srgb8_u16_and_regions_match_the_reference_pipeline() {
+    let d = design("rgbw-paper");
+    let table = train(&d, 5);
+    let kernels = tungsten_kernels(&table);
+    let (volts, w, h) = frame(&d, 64, 3);
+    // the same frame as 12-bit DN with a black level
+    let (black, white) = (64u16, 4095u16);
+    let dn: Vec<u16> = volts
+        .iter()
+        .map(|v| (v / 1.8 * f32::from(white - black)).round() as u16 + black)
+        .collect();
+    let scale = 1.8 / (f64::from(white) - f64::from(black));
+    let dn_volts: Vec<f32> = dn
+        .iter()
+        .map(|&x| ((f64::from(x) - f64::from(black)) * scale).clamp(0.0, 1.8) as f32)
+        .collect();
+    let fast = FastRenderer::new(&table, &kernels).expect("fast");
+    let mosaic = Mosaic::Dn {
+        data: &dn,
+        black,
+        white,
+    };
+    let (want, _) = render_reference(&table, &kernels, &dn_volts, w, h).expect("reference");
+    let (got, _) = fast.render_xyz(mosaic, w, h, None).expect("fast");
+    assert!(max_abs_diff(&want, &got) <= 1e-4);
+    // sRGB: the same white level, codes within one step (rounding of the fused matrix)
+    let wy = white_y(&want, w, h, WhiteLevel::Auto);
+    let (rgb, wy_fast, _) = fast
+        .render_srgb8(mosaic, w, h, None, WhiteLevel::Auto)
+        .expect("srgb");
+    assert!((wy - wy_fast).abs() <= 1e-5 * wy, "white {wy} vs {wy_fast}");
+    let want_rgb = xyz_to_srgb8(&want, wy);
+    let worst = rgb
+        .iter()
+        .zip(&want_rgb)
+        .map(|(a, b)| a.abs_diff(*b))
+        .max()
+        .unwrap_or(0);
+    let off = rgb.iter().zip(&want_rgb).filter(|(a, b)| a != b).count();
+    println!("sRGB8: {off} of {} codes differ by 1", rgb.len());
+    assert!(
+        worst <= 1 && off * 200 <= rgb.len(),
+        "{off} codes differ, worst {worst}"
+    );
+    // a region is the crop of the whole render, also in sRGB
+    let reg = Region {
+        x: 5,
+        y: 9,
+        width: 23,
+        height: 17,
+    };
+    let (part, _, _) = fast
+        .render_srgb8(mosaic, w, h, Some(reg), WhiteLevel::Y(wy_fast))
+        .expect("region");
+    for y in 0..reg.height {
+        let row = (reg.y + y) * w + reg.x;
+        assert_eq!(
+            &rgb[row * 3..(row + reg.width) * 3],
+            &part[y * reg.width * 3..(y + 1) * reg.width * 3]
+        );
+    }
+}
+
+proptest! {
+    #![proptest_config(ProptestConfig::with_cases(16))]
+
+    /// Random frames (values past both ends of the range included), sizes and regions.
+    #[test]
+    fn random_frames_and_regions_match(
+        seed in 0u64..10_000, w in 1usize..40, h in 1usize..40,
+        rx in 0usize..40, ry in 0usize..40, rw in 1usize..40, rh in 1usize..40
+    ) {
+        use std::sync::OnceLock;
+        static T: OnceLock<(L3Table, Vec<f32>)> = OnceLock::new();
+        let (table, kernels) = T.get_or_init(|| {
+            let t = train(&design("rgbw-paper"), 5);
+            let k = tungsten_kernels(&t);
+            (t, k)
+        });
+        let mut s = seed;
+        let mut next = || {
+            s = s.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
+            (s >> 40) as f32 / (1u64 << 24) as f32
+        };
+        let volts: Vec<f32> = (0..w * h).map(|_| next() * 2.0 - 0.1).collect();
+        let (want, ws) = render_reference(table, kernels, &volts, w, h).unwrap();
+        let fast = FastRenderer::new(table, kernels).unwrap();
+        let (got, gs) = fast.render_xyz(Mosaic::Volts(&volts), w, h, None).unwrap();
+        prop_assert!(max_abs_diff(&want, &got) <= 1e-4);
+        prop_assert_eq!(ws.clamped, gs.clamped);
+        let (rx, ry) = (rx % w, ry % h);
+        let reg = Region { x: rx, y: ry, width: rw.min(w - rx), height: rh.min(h - ry) };
+        let (part, _) = fast.render_xyz(Mosaic::Volts(&volts), w, h, Some(reg)).unwrap();
+        for y in 0..reg.height {
+            let row = (reg.y + y) * w + reg.x;
+            prop_assert_eq!(&want[row * 3..(row + reg.width) * 3].len(), &part[y * reg.width * 3..(y + 1) * reg.width * 3].len());
+            prop_assert!(max_abs_diff(&want[row * 3..(row + reg.width) * 3], &part[y * reg.width * 3..(y + 1) * reg.width * 3]) <= 1e-4);
+        }
+    }
+}
