@@ -108,6 +108,8 @@ pub struct FastRenderer {
     sat_classes: bool,
     contrast_classes: bool,
     swing: f32,
+    /// The swing as the table holds it (DN conversion is done in f64 as `RawFrame::to_volts` does).
+    swing_f64: f64,
     xyz: KernelSet,
     /// Per CFA position, the 4×4 map from phase sums to per-phase channel means,
     /// and the luminance weights of the phase sums (2×2 CFAs only).
@@ -255,6 +257,7 @@ impl FastRenderer {
             sat_classes: table.meta.params.saturation_classes,
             contrast_classes: table.meta.params.contrast_classes,
             swing: table.meta.voltage_swing as f32,
+            swing_f64: table.meta.voltage_swing,
             xyz,
             phases,
             uniform_phases,
@@ -412,7 +415,7 @@ impl FastRenderer {
                         "white level {white} must exceed black level {black}"
                     )));
                 }
-                let (b, s) = (f64::from(black), f64::from(swing));
+                let (b, s) = (f64::from(black), self.swing_f64);
                 let scale = s / (f64::from(white) - b);
                 let lut = (0..=u16::MAX)
                     .map(|d| ((f64::from(d) - b) * scale).clamp(0.0, s) as f32)

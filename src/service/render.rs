@@ -343,7 +343,7 @@ pub async fn render(
             let black = q.black_level.unwrap_or(0);
             let white_dn = q.white_level.unwrap_or(65535);
             if white_dn <= black {
-                return Err(ServiceError::BadRequest(format!(
+                return Err(ServiceError::InvalidImage(format!(
                     "white_level {white_dn} must exceed black_level {black}"
                 )));
             }
