@@ -96,7 +96,7 @@ pub fn svg_plot(report: &BenchReport) -> Result<String, PlotError> {
         .filter(|x| x.is_finite() && *x > 0.0);
     let xs = rows.iter().map(|r| r.1).chain(copy_x);
     let x_lo = xs.clone().fold(f64::INFINITY, f64::min) / 1.6;
-    let x_hi = xs.fold(0.0, f64::max) * 1.6;
+    let x_hi = xs.fold(0.0, f64::max) * 3.0;
     let y_hi = rows
         .iter()
         .flat_map(|r| r.2.iter().flatten().copied())
@@ -114,7 +114,7 @@ pub fn svg_plot(report: &BenchReport) -> Result<String, PlotError> {
             report.renderer, report.frame.width, report.frame.height, report.threads
         );
         let mut chart = ChartBuilder::on(&root)
-            .caption(caption, ("sans-serif", 20))
+            .caption(caption, ("sans-serif", 24))
             .margin(16)
             .x_label_area_size(48)
             .y_label_area_size(60)
@@ -124,6 +124,8 @@ pub fn svg_plot(report: &BenchReport) -> Result<String, PlotError> {
             .configure_mesh()
             .x_desc("milliseconds per megapixel, all threads (log scale)")
             .y_desc("mean ΔE2000, Natural-100 chart")
+            .label_style(("sans-serif", 15))
+            .axis_desc_style(("sans-serif", 17))
             .light_line_style(WHITE.mix(0.0))
             .draw()
             .map_err(draw_err)?;
@@ -144,7 +146,7 @@ pub fn svg_plot(report: &BenchReport) -> Result<String, PlotError> {
                 .draw_series(std::iter::once(Text::new(
                     "plain copy".to_string(),
                     (cx * 1.05, y_hi * 0.97),
-                    ("sans-serif", 13).into_font().color(&grey),
+                    ("sans-serif", 16).into_font().color(&grey),
                 )))
                 .map_err(draw_err)?;
         }
@@ -202,7 +204,7 @@ pub fn svg_plot(report: &BenchReport) -> Result<String, PlotError> {
                 chart
                     .draw_series(pts.iter().map(|&(i, p)| {
                         EmptyElement::at(p)
-                            + Text::new(rows[i].0.to_string(), (8, -14), ("sans-serif", 12))
+                            + Text::new(rows[i].0.to_string(), (8, -16), ("sans-serif", 15))
                     }))
                     .map_err(draw_err)?;
             }
@@ -212,6 +214,7 @@ pub fn svg_plot(report: &BenchReport) -> Result<String, PlotError> {
             .position(SeriesLabelPosition::UpperRight)
             .background_style(WHITE.mix(0.85))
             .border_style(BLACK)
+            .label_font(("sans-serif", 15))
             .draw()
             .map_err(draw_err)?;
         root.present().map_err(draw_err)?;

@@ -112,18 +112,18 @@ impl BenchOptions {
         }
     }
 
-    /// A tiny run for tests: 2 configurations, 8 scenes, a 1 MP frame, 2 runs.
+    /// A tiny run for tests: 2 configurations, 6 scenes, a 0.6 MP frame, 2 runs.
     pub fn quick() -> Self {
         let mut o = Self::full();
         o.configs = vec![
             L3Config::default_config(),
             L3Config::with("patch 3", |c| c.patch_size = 3),
         ];
-        o.scenes = 8;
-        o.scene_size = 64;
+        o.scenes = 6;
+        o.scene_size = 48;
         o.runs = 2;
-        o.frame_width = 1024;
-        o.frame_height = 1024;
+        o.frame_width = 768;
+        o.frame_height = 768;
         o.tile_width = 256;
         o.tile_height = 256;
         o

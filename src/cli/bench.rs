@@ -10,13 +10,13 @@ pub struct BenchArgs {
     /// Output folder for bench.json, bench.md and bench.svg.
     #[arg(long, default_value = "out/bench")]
     pub out: PathBuf,
-    /// Training scenes per table (default: 48; 8 with --quick).
+    /// Training scenes per table (default: 48; 6 with --quick).
     #[arg(long)]
     pub scenes: Option<usize>,
     /// Timed runs per throughput figure, after one warm-up (default: 5; 2 with --quick).
     #[arg(long)]
     pub runs: Option<usize>,
-    /// A tiny run (2 configurations, 8 scenes, a 1 MP frame, 2 runs) for smoke tests.
+    /// A tiny run (2 configurations, 6 scenes, a 0.6 MP frame, 2 runs) for smoke tests.
     #[arg(long)]
     pub quick: bool,
     /// Sensor design TOML (default: the paper's RGBW sensor).
