@@ -15,6 +15,7 @@
 // Index loops read best in numeric kernels.
 #![allow(clippy::needless_range_loop)]
 
+pub mod bench;
 pub mod camera;
 pub mod cli;
 pub mod colour;

@@ -1,5 +1,6 @@
 //! The `l3` command line: thin wrappers over the core.
 
+mod bench;
 mod eval;
 mod render;
 mod serve;
@@ -35,6 +36,8 @@ pub enum Command {
     Render(render::RenderArgs),
     /// ΔE2000 evaluation on the Natural-100 chart; `--paper-table` for Table 1.
     Eval(eval::EvalArgs),
+    /// Run time against colour error for a sweep of configurations (JSON, markdown, SVG plot).
+    Bench(bench::BenchArgs),
     /// Run the HTTP render service (config/default.toml, --config FILE, L3_* variables).
     Serve(serve::ServeArgs),
 }
@@ -58,6 +61,8 @@ pub enum CliError {
     Eval(#[from] crate::eval::EvalError),
     #[error(transparent)]
     Train(#[from] crate::training::TrainError),
+    #[error(transparent)]
+    Bench(#[from] crate::bench::BenchError),
     #[error("{path}: {source}")]
     File {
         path: String,
@@ -104,6 +109,7 @@ pub fn main() -> ExitCode {
         Command::Train(a) => train::run(&cli, a),
         Command::Render(a) => render::run(&cli, a),
         Command::Eval(a) => eval::run(&cli, a),
+        Command::Bench(a) => bench::run(&cli, a),
         Command::Serve(a) => serve::run(&cli, a),
     };
     match result {

@@ -1,0 +1,41 @@
+//! `l3 bench`: render throughput against colour error for a sweep of L3
+//! configurations, the conventional baseline and a plain copy, measured in
+//! one run on the same frames (issue 5). Pure core: no HTTP, no SQL.
+
+mod plot;
+mod render;
+mod report;
+mod sweep;
+
+pub use plot::{PlotError, pareto_front, svg_plot};
+pub use render::{
+    BENCH_WHITE_Y, RENDERER, render_baseline_srgb8, render_baseline_xyz, render_srgb8, render_xyz,
+};
+pub use report::{BENCH_SCHEMA, markdown_table};
+pub use sweep::{
+    BenchOptions, BenchReport, ColourResult, ConfigKind, ConfigResult, FrameInfo, L3Config,
+    ParetoFront, TableChoice, Throughput, default_sweep, median, run_bench,
+};
+
+/// Errors of a benchmark run.
+#[derive(Debug, thiserror::Error)]
+pub enum BenchError {
+    #[error("invalid benchmark input: {0}")]
+    Invalid(String),
+    #[error(transparent)]
+    L3(#[from] crate::l3::L3Error),
+    #[error(transparent)]
+    Eval(#[from] crate::eval::EvalError),
+    #[error(transparent)]
+    Train(#[from] crate::training::TrainError),
+    #[error(transparent)]
+    Camera(#[from] crate::camera::CameraError),
+    #[error(transparent)]
+    Scene(#[from] crate::scene::SceneError),
+    #[error(transparent)]
+    Spectral(#[from] crate::spectral::SpectralError),
+    #[error("cannot draw the plot: {0}")]
+    Plot(#[from] PlotError),
+    #[error("cannot build a {threads}-thread pool: {msg}")]
+    ThreadPool { threads: usize, msg: String },
+}

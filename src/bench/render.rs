@@ -1,0 +1,59 @@
+//! The one place where the benchmark renders: every throughput and every
+//! colour figure goes through these wrappers, so swapping the renderer here
+//! changes both at once.
+
+use crate::camera::Cfa;
+use crate::l3::{ColourMatrix, L3Error, L3Table, render_baseline, render_reference, xyz_to_srgb8};
+
+/// Name of the L3 renderer the wrappers call (recorded in the JSON).
+pub const RENDERER: &str = "reference";
+
+/// Fixed white level (XYZ Y in the table's volts-equivalent units) of the
+/// sRGB output: no per-frame white estimate in the timed path.
+pub const BENCH_WHITE_Y: f64 = 1.0;
+
+/// L3: mosaic volts → interleaved XYZ with `kernels` (the table's own or fused).
+pub fn render_xyz(
+    table: &L3Table,
+    kernels: &[f32],
+    volts: &[f32],
+    width: usize,
+    height: usize,
+) -> Result<Vec<f32>, L3Error> {
+    Ok(render_reference(table, kernels, volts, width, height)?.0)
+}
+
+/// L3: mosaic volts → 8-bit sRGB (interleaved RGB) at [`BENCH_WHITE_Y`].
+pub fn render_srgb8(
+    table: &L3Table,
+    kernels: &[f32],
+    volts: &[f32],
+    width: usize,
+    height: usize,
+) -> Result<Vec<u8>, L3Error> {
+    let xyz = render_xyz(table, kernels, volts, width, height)?;
+    Ok(xyz_to_srgb8(&xyz, BENCH_WHITE_Y))
+}
+
+/// Baseline: bilinear demosaic + colour matrix (T already folded in) → XYZ.
+pub fn render_baseline_xyz(
+    volts: &[f32],
+    width: usize,
+    height: usize,
+    cfa: &Cfa,
+    m: &ColourMatrix,
+) -> Result<Vec<f32>, L3Error> {
+    render_baseline(volts, width, height, cfa, m)
+}
+
+/// Baseline → 8-bit sRGB at [`BENCH_WHITE_Y`].
+pub fn render_baseline_srgb8(
+    volts: &[f32],
+    width: usize,
+    height: usize,
+    cfa: &Cfa,
+    m: &ColourMatrix,
+) -> Result<Vec<u8>, L3Error> {
+    let xyz = render_baseline_xyz(volts, width, height, cfa, m)?;
+    Ok(xyz_to_srgb8(&xyz, BENCH_WHITE_Y))
+}

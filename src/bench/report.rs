@@ -1,0 +1,223 @@
+//! The benchmark's markdown table (the JSON is the serde form of
+//! [`BenchReport`], schema [`BENCH_SCHEMA`]).
+
+use super::sweep::{BenchReport, ConfigKind};
+
+/// Identifier of the benchmark JSON's schema.
+pub const BENCH_SCHEMA: &str = "l3.bench.v1";
+
+fn opt(v: Option<f64>, digits: usize) -> String {
+    match v {
+        Some(x) if x.is_finite() => format!("{x:.digits$}"),
+        _ => "—".into(),
+    }
+}
+
+/// A markdown rendering: one row per configuration, the baseline and the copy.
+pub fn markdown_table(r: &BenchReport) -> String {
+    let mut s = format!(
+        "Run time against colour error: `{}` renderer, sensor `{}`, {}×{} frame ({:.1} Mpix) → sRGB 8-bit, \
+         median of {} runs, 1 thread and {} threads; ΔE2000 of patch means on the {} chart.\n\n",
+        r.renderer,
+        r.sensor,
+        r.frame.width,
+        r.frame.height,
+        r.frame.megapixels,
+        r.options.runs,
+        r.threads,
+        r.chart
+    );
+    s.push_str("| configuration | training (s) |");
+    for a in &r.acquisitions {
+        s.push_str(&format!(" ΔE {a} mean | ΔE {a} p90 |"));
+    }
+    s.push_str(&format!(
+        " Mpix/s (1 thread) | Mpix/s ({} threads) | ms/Mpix ({} threads) | time ÷ copy | Pareto front |\n",
+        r.threads, r.threads
+    ));
+    s.push_str("|---|---:|");
+    for _ in &r.acquisitions {
+        s.push_str("---:|---:|");
+    }
+    s.push_str("---:|---:|---:|---:|---|\n");
+    for c in &r.configs {
+        let name = match c.kind {
+            ConfigKind::L3 => c.name.clone(),
+            _ => format!("*{}*", c.name),
+        };
+        s.push_str(&format!("| {name} | {} |", opt(c.training_seconds, 1)));
+        for a in &r.acquisitions {
+            let col = c.colour_under(a);
+            s.push_str(&format!(
+                " {} | {} |",
+                opt(col.map(|x| x.mean), 2),
+                opt(col.map(|x| x.p90), 2)
+            ));
+        }
+        let fronts: Vec<&str> = r
+            .pareto
+            .iter()
+            .filter(|f| f.names.contains(&c.name))
+            .map(|f| f.illuminant.as_str())
+            .collect();
+        s.push_str(&format!(
+            " {} | {} | {} | {} | {} |\n",
+            opt(Some(c.one_thread.mpix_per_s), 1),
+            opt(Some(c.all_threads.mpix_per_s), 1),
+            opt(Some(c.all_threads.ms_per_mpix), 2),
+            opt(Some(c.time_vs_copy), 1),
+            if fronts.is_empty() {
+                "—".to_string()
+            } else {
+                fronts.join(", ")
+            }
+        ));
+    }
+    s.push_str(&format!(
+        "\nTraining: {} scenes of {}×{} px per table (the I-tables row trains one table per illuminant; its time is the sum). \
+         Throughput frame: {}. Whole run: {:.0} s.\n",
+        r.options.scenes, r.options.scene_size, r.options.scene_size, r.frame.source, r.total_seconds
+    ));
+    s
+}
+
+#[cfg(test)]
+pub(super) mod test_support {
+    use crate::bench::sweep::*;
+
+    fn tp(ms: f64, threads: usize) -> Throughput {
+        Throughput {
+            threads,
+            runs: 3,
+            median_ms: ms,
+            ms_per_mpix: ms / 12.0,
+            mpix_per_s: 12.0 / (ms / 1e3),
+            samples_ms: vec![ms; 3],
+        }
+    }
+
+    fn colour(ill: &str, mean: f64) -> ColourResult {
+        ColourResult {
+            illuminant: ill.into(),
+            method: "m".into(),
+            mean,
+            std: 1.0,
+            median: mean,
+            p90: mean * 2.0,
+            max: mean * 3.0,
+            pixel_mean: mean * 1.5,
+        }
+    }
+
+    fn row(name: &str, kind: ConfigKind, ms: f64, tun: f64, flu: f64) -> ConfigResult {
+        ConfigResult {
+            name: name.into(),
+            kind,
+            config: (kind == ConfigKind::L3).then(L3Config::default_config),
+            training_seconds: (kind != ConfigKind::Copy).then_some(2.5),
+            colour: if kind == ConfigKind::Copy {
+                vec![]
+            } else {
+                vec![colour("Tungsten", tun), colour("Fluorescent", flu)]
+            },
+            one_thread: tp(ms * 2.0, 1),
+            all_threads: tp(ms, 2),
+            time_vs_copy: ms / 12.0,
+        }
+    }
+
+    /// A hand-made report: a copy, three L3 rows and a baseline.
+    pub fn sample_report() -> BenchReport {
+        BenchReport {
+            schema: crate::bench::BENCH_SCHEMA.into(),
+            renderer: "reference".into(),
+            sensor: "paper RGBW".into(),
+            chart: "Natural-100".into(),
+            acquisitions: vec!["Tungsten".into(), "Fluorescent".into()],
+            frame: FrameInfo {
+                width: 4000,
+                height: 3000,
+                megapixels: 12.0,
+                source: "test".into(),
+            },
+            threads: 2,
+            configs: vec![
+                row("plain copy", ConfigKind::Copy, 12.0, 0.0, 0.0),
+                row("default <5×5> & co", ConfigKind::L3, 1200.0, 2.0, 2.5),
+                row("patch 3", ConfigKind::L3, 600.0, 2.6, 3.0),
+                row("patch 7", ConfigKind::L3, 2400.0, 2.1, 2.4),
+                row("baseline", ConfigKind::Baseline, 300.0, 3.5, 4.0),
+            ],
+            pareto: vec![
+                ParetoFront {
+                    illuminant: "Tungsten".into(),
+                    names: vec![
+                        "baseline".into(),
+                        "patch 3".into(),
+                        "default <5×5> & co".into(),
+                    ],
+                },
+                ParetoFront {
+                    illuminant: "Fluorescent".into(),
+                    names: vec![
+                        "baseline".into(),
+                        "patch 3".into(),
+                        "default <5×5> & co".into(),
+                        "patch 7".into(),
+                    ],
+                },
+            ],
+            total_seconds: 100.0,
+            options: BenchOptions::quick(),
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::test_support::sample_report;
+    use super::*;
+
+    #[test]
+    fn markdown_has_a_row_per_configuration_with_aligned_columns() {
+        let r = sample_report();
+        let md = markdown_table(&r);
+        let table: Vec<&str> = md.lines().filter(|l| l.starts_with('|')).collect();
+        assert_eq!(table.len(), 2 + r.configs.len(), "{md}");
+        let cols = table[0].matches('|').count();
+        assert!(table.iter().all(|l| l.matches('|').count() == cols), "{md}");
+        assert!(table[0].contains("ΔE Tungsten mean") && table[0].contains("ΔE Fluorescent p90"));
+        // copy: no colour, no training; italic name
+        assert!(
+            table[2].starts_with("| *plain copy* | — | — | — | — | — |"),
+            "{}",
+            table[2]
+        );
+        // default row: 2.00 / 4.00 under tungsten, 100.0 ms/Mpix, on both fronts
+        let d = table[3];
+        assert!(d.contains("| 2.00 | 4.00 | 2.50 | 5.00 |"), "{d}");
+        assert!(
+            d.contains("| 100.00 |") && d.ends_with("| Tungsten, Fluorescent |"),
+            "{d}"
+        );
+        assert!(table[5].ends_with("| Fluorescent |"), "{}", table[5]);
+        assert!(md.contains("median of 2 runs"));
+    }
+
+    #[test]
+    fn json_round_trips_with_the_schema() {
+        let r = sample_report();
+        let j = serde_json::to_string(&r).unwrap();
+        let back: crate::bench::BenchReport = serde_json::from_str(&j).unwrap();
+        // (serde_json's default float parsing may differ in the last bit)
+        let names = |r: &crate::bench::BenchReport| -> Vec<String> {
+            r.configs.iter().map(|c| c.name.clone()).collect()
+        };
+        assert_eq!(names(&back), names(&r));
+        assert_eq!(back.configs[1].colour, r.configs[1].colour);
+        assert_eq!(back.pareto, r.pareto);
+        assert!(
+            j.contains("\"schema\":\"l3.bench.v1\"") && j.contains("\"renderer\":\"reference\"")
+        );
+    }
+}

@@ -1,0 +1,80 @@
+//! `l3 bench --quick` end to end through the real executable: the JSON
+//! parses with its schema, the markdown and the SVG plot exist, and every
+//! number is finite and positive.
+
+use std::process::Command;
+
+fn numbers(v: &serde_json::Value, path: &str, out: &mut Vec<(String, f64)>) {
+    match v {
+        serde_json::Value::Number(n) => {
+            out.push((path.to_string(), n.as_f64().unwrap_or(f64::NAN)))
+        }
+        serde_json::Value::Array(a) => {
+            for (i, x) in a.iter().enumerate() {
+                numbers(x, &format!("{path}[{i}]"), out);
+            }
+        }
+        serde_json::Value::Object(o) => {
+            for (k, x) in o {
+                numbers(x, &format!("{path}.{k}"), out);
+            }
+        }
+        _ => {}
+    }
+}
+
+#[test]
+fn quick_bench_writes_json_markdown_and_plot() {
+    let Some(iset) = l3::spectral::IsetData::for_tests() else {
+        return;
+    };
+    let tmp = tempfile::tempdir().unwrap();
+    let out_dir = tmp.path().join("bench");
+    let out = Command::new(env!("CARGO_BIN_EXE_l3"))
+        .arg("--iset-dir")
+        .arg(iset.root())
+        .args(["bench", "--quick", "--out"])
+        .arg(&out_dir)
+        .output()
+        .expect("run l3");
+    let stdout = String::from_utf8_lossy(&out.stdout);
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(out.status.success(), "l3 bench failed: {stdout}{stderr}");
+
+    let json: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(out_dir.join("bench.json")).unwrap()).unwrap();
+    assert_eq!(json["schema"], "l3.bench.v1");
+    assert!(json["renderer"].as_str().is_some_and(|s| !s.is_empty()));
+    let report: l3::bench::BenchReport = serde_json::from_value(json.clone()).unwrap();
+    // 2 configurations + baseline + copy
+    assert_eq!(report.configs.len(), 4);
+    assert_eq!(report.acquisitions, ["Tungsten", "Fluorescent"]);
+    for c in &report.configs {
+        let has_colour = c.kind != l3::bench::ConfigKind::Copy;
+        assert_eq!(c.colour.len(), if has_colour { 2 } else { 0 }, "{}", c.name);
+        assert_eq!(c.training_seconds.is_some(), has_colour, "{}", c.name);
+        assert_eq!(c.one_thread.runs, 2);
+        assert_eq!(c.one_thread.threads, 1);
+    }
+    let mut nums = Vec::new();
+    numbers(&json, "", &mut nums);
+    assert!(nums.len() > 50);
+    for (path, v) in &nums {
+        // seeds are the one kind of number allowed to be zero
+        if path.ends_with(".seed") {
+            continue;
+        }
+        assert!(v.is_finite() && *v > 0.0, "{path} = {v}");
+    }
+    assert!(!report.pareto.is_empty() && report.pareto.iter().all(|f| !f.names.is_empty()));
+
+    let md = std::fs::read_to_string(out_dir.join("bench.md")).unwrap();
+    assert!(md.contains("| configuration |") && md.contains("plain copy"));
+    assert!(stdout.contains("| configuration |"));
+    let svg = std::fs::read_to_string(out_dir.join("bench.svg")).unwrap();
+    assert!(svg.trim_start().starts_with("<svg") && svg.trim_end().ends_with("</svg>"));
+    assert!(
+        svg.contains("class=\"pareto-front\""),
+        "no Pareto front element"
+    );
+}
