@@ -3,36 +3,51 @@
 //! changes both at once.
 
 use crate::camera::Cfa;
-use crate::l3::{ColourMatrix, L3Error, L3Table, render_baseline, render_reference, xyz_to_srgb8};
+use crate::l3::{
+    ColourMatrix, FastRenderer, L3Error, L3Table, Mosaic, WhiteLevel, render_baseline, xyz_to_srgb8,
+};
 
 /// Name of the L3 renderer the wrappers call (recorded in the JSON).
-pub const RENDERER: &str = "reference";
+pub const RENDERER: &str = "fast";
 
 /// Fixed white level (XYZ Y in the table's volts-equivalent units) of the
 /// sRGB output: no per-frame white estimate in the timed path.
 pub const BENCH_WHITE_Y: f64 = 1.0;
 
-/// L3: mosaic volts → interleaved XYZ with `kernels` (the table's own or fused).
+/// L3: the table with `kernels` (its own or fused) prepared for rendering
+/// (done once per table and illuminant, as the service caches it).
+pub fn prepare(table: &L3Table, kernels: &[f32]) -> Result<FastRenderer, L3Error> {
+    FastRenderer::new(table, kernels)
+}
+
+/// L3: mosaic volts → interleaved XYZ.
 pub fn render_xyz(
-    table: &L3Table,
-    kernels: &[f32],
+    renderer: &FastRenderer,
     volts: &[f32],
     width: usize,
     height: usize,
 ) -> Result<Vec<f32>, L3Error> {
-    Ok(render_reference(table, kernels, volts, width, height)?.0)
+    Ok(renderer
+        .render_xyz(Mosaic::Volts(volts), width, height, None)?
+        .0)
 }
 
 /// L3: mosaic volts → 8-bit sRGB (interleaved RGB) at [`BENCH_WHITE_Y`].
 pub fn render_srgb8(
-    table: &L3Table,
-    kernels: &[f32],
+    renderer: &FastRenderer,
     volts: &[f32],
     width: usize,
     height: usize,
 ) -> Result<Vec<u8>, L3Error> {
-    let xyz = render_xyz(table, kernels, volts, width, height)?;
-    Ok(xyz_to_srgb8(&xyz, BENCH_WHITE_Y))
+    Ok(renderer
+        .render_srgb8(
+            Mosaic::Volts(volts),
+            width,
+            height,
+            None,
+            WhiteLevel::Y(BENCH_WHITE_Y),
+        )?
+        .0)
 }
 
 /// Baseline: bilinear demosaic + colour matrix (T already folded in) → XYZ.

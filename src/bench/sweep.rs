@@ -7,7 +7,7 @@ use std::time::Instant;
 use serde::{Deserialize, Serialize};
 
 use super::render::{
-    RENDERER, render_baseline_srgb8, render_baseline_xyz, render_srgb8, render_xyz,
+    RENDERER, prepare, render_baseline_srgb8, render_baseline_xyz, render_srgb8, render_xyz,
 };
 use super::{BenchError, pareto_front};
 use crate::camera::{Camera, Exposure, NoiseSwitches, SensorDesign, mosaic, simulate};
@@ -608,7 +608,8 @@ pub fn run_bench(
         let mut colour = Vec::new();
         for (case, (ti, kernels, label)) in cases.iter().zip(&per_case) {
             progress(&format!("[{}] ΔE under {}", c.name, case.name));
-            let xyz = render_xyz(&tables[*ti], kernels, &case.volts, case.width, case.height)?;
+            let renderer = prepare(&tables[*ti], kernels)?;
+            let xyz = render_xyz(&renderer, &case.volts, case.width, case.height)?;
             colour.push(case.evaluate(&xyz, label)?);
         }
         progress(&format!(
@@ -616,9 +617,9 @@ pub fn run_bench(
             c.name, opts.runs, mpix
         ));
         let (ti, kernels, _) = &per_case[0];
-        let table = &tables[*ti];
+        let renderer = prepare(&tables[*ti], kernels)?;
         let (one, all) = measure(&single, opts.runs, mpix, || {
-            Ok(render_srgb8(table, kernels, &frame, w, h)?)
+            Ok(render_srgb8(&renderer, &frame, w, h)?)
         })?;
         rows.push(ConfigResult {
             name: c.name.clone(),

@@ -182,9 +182,22 @@ impl SrgbLut {
     /// Encode one linear value.
     #[inline]
     pub fn encode(&self, linear: f32) -> u8 {
-        // `as usize` saturates: NaN and negatives give 0.
-        let i = (linear * self.scale + 0.5) as usize;
-        self.table[i.min(self.table.len() - 1)]
+        self.at(self.index(linear))
+    }
+
+    /// The table index of a linear value (NaN and negatives give 0, values past 1 the
+    /// last entry); branch-free, so loops over it vectorise.
+    #[inline(always)]
+    pub fn index(&self, linear: f32) -> u32 {
+        // max/min return the non-NaN operand, so NaN becomes 0
+        (linear * self.scale + 0.5).max(0.0).min(self.scale) as u32
+    }
+
+    /// The entry at `index` (clamped to the table).
+    #[inline(always)]
+    pub fn at(&self, index: u32) -> u8 {
+        let i = (index as usize).min(self.table.len() - 1);
+        self.table[i]
     }
 
     /// Encode a slice into `out` (pairs up to the shorter length).

@@ -105,6 +105,10 @@ pub struct FastRenderer {
     contrast_thresholds: Vec<f32>,
     /// Per group: do the flat and texture kernels differ?
     contrast_matters: Vec<bool>,
+    /// The thresholds, +∞ where flat and texture kernels are equal.
+    thresholds_where_they_matter: Vec<f32>,
+    /// +∞ for every group (no contrast classes).
+    no_thresholds: Vec<f32>,
     sat_classes: bool,
     contrast_classes: bool,
     swing: f32,
@@ -149,22 +153,31 @@ struct Scratch {
     contrast: Vec<f32>,
     sat: Vec<bool>,
     class: Vec<u32>,
+    lin: [Vec<f32>; 3],
     patch: Vec<f32>,
     feat: Vec<f32>,
 }
 
-/// Where one pixel's output goes in its output row.
+/// How a row of linear outputs (three planes) becomes the output row.
 trait Sink<T>: Sync {
-    fn put(&self, row: &mut [T], x: usize, v: [f32; 4]);
+    fn finish_row(&self, row: &mut [T], lin: &[Vec<f32>; 3], n: usize);
 }
 
 /// Interleaved f32 XYZ.
 struct XyzSink;
 impl Sink<f32> for XyzSink {
     #[inline(always)]
-    fn put(&self, row: &mut [f32], x: usize, v: [f32; 4]) {
-        if let Some(o) = row.get_mut(3 * x..3 * x + 3) {
-            o.copy_from_slice(&v[..3]);
+    fn finish_row(&self, row: &mut [f32], lin: &[Vec<f32>; 3], n: usize) {
+        let [a, b, c] = lin;
+        for (((o, &x), &y), &z) in row
+            .chunks_exact_mut(3)
+            .zip(&a[..n])
+            .zip(&b[..n])
+            .zip(&c[..n])
+        {
+            o[0] = x;
+            o[1] = y;
+            o[2] = z;
         }
     }
 }
@@ -175,11 +188,27 @@ struct Srgb8Sink<'a> {
 }
 impl Sink<u8> for Srgb8Sink<'_> {
     #[inline(always)]
-    fn put(&self, row: &mut [u8], x: usize, v: [f32; 4]) {
-        if let Some(o) = row.get_mut(3 * x..3 * x + 3) {
-            o[0] = self.lut.encode(v[0]);
-            o[1] = self.lut.encode(v[1]);
-            o[2] = self.lut.encode(v[2]);
+    fn finish_row(&self, row: &mut [u8], lin: &[Vec<f32>; 3], n: usize) {
+        const CHUNK: usize = 64;
+        let mut idx = [[0u32; CHUNK]; 3];
+        let mut start = 0;
+        while start < n {
+            let m = CHUNK.min(n - start);
+            // table indices, vectorised per plane
+            for (ix, plane) in idx.iter_mut().zip(lin) {
+                for (o, &v) in ix[..m].iter_mut().zip(&plane[start..start + m]) {
+                    *o = self.lut.index(v);
+                }
+            }
+            for (k, o) in row[3 * start..3 * (start + m)]
+                .chunks_exact_mut(3)
+                .enumerate()
+            {
+                o[0] = self.lut.at(idx[0][k]);
+                o[1] = self.lut.at(idx[1][k]);
+                o[2] = self.lut.at(idx[2][k]);
+            }
+            start += m;
         }
     }
 }
@@ -245,6 +274,13 @@ impl FastRenderer {
             })
             .collect();
         let phases = phase_maps(&geo);
+        let thresholds_where_they_matter = table
+            .contrast_thresholds
+            .iter()
+            .zip(&contrast_matters)
+            .map(|(&t, &m)| if m { t } else { f32::INFINITY })
+            .collect();
+        let no_thresholds = vec![f32::INFINITY; n_groups];
         let uniform_phases = phases.as_ref().and_then(|maps| uniform_phases(maps));
         let level_lut = LevelLut::new(&geo, table.meta.voltage_swing as f32);
         let xyz = KernelSet::new(kernels.to_vec(), geo.size);
@@ -254,6 +290,8 @@ impl FastRenderer {
             sat_cases: table.meta.sat_cases.clone(),
             contrast_thresholds: table.contrast_thresholds.clone(),
             contrast_matters,
+            thresholds_where_they_matter,
+            no_thresholds,
             sat_classes: table.meta.params.saturation_classes,
             contrast_classes: table.meta.params.contrast_classes,
             swing: table.meta.voltage_swing as f32,
@@ -608,7 +646,12 @@ impl FastRenderer {
                 }
             }
         }
-        for v in sc.sums.iter_mut().chain(sc.means.iter_mut()) {
+        for v in sc
+            .sums
+            .iter_mut()
+            .chain(sc.means.iter_mut())
+            .chain(sc.lin.iter_mut())
+        {
             resize(v, tw8);
         }
         resize(&mut sc.lum, tw8);
@@ -693,6 +736,13 @@ impl FastRenderer {
                 }
                 // classes of the pixels the fast path can take
                 let cpar = tile.c0 % 2;
+                let thresholds = if !use_contrast {
+                    &self.no_thresholds
+                } else if self.options.skip_equal_contrast_kernels {
+                    &self.thresholds_where_they_matter
+                } else {
+                    &self.contrast_thresholds
+                };
                 for i in 0..tw {
                     if sc.sat[i] {
                         sc.class[i] = NO_CLASS;
@@ -704,20 +754,14 @@ impl FastRenderer {
                     };
                     let pos = rpar * 2 + (cpar + i) % 2;
                     let group = (pos * self.n_levels + level) * n_sat;
-                    sc.class[i] = if !use_contrast
-                        || (self.options.skip_equal_contrast_kernels
-                            && !self.contrast_matters[group])
-                    {
-                        (group * 2) as u32
+                    // +∞ where the contrast does not decide the class
+                    let t = thresholds.get(group).copied().unwrap_or(f32::NAN);
+                    let cv = sc.contrast[i];
+                    sc.class[i] = if (cv - t).abs() >= CONTRAST_MARGIN {
+                        (group * 2 + (cv > t) as usize) as u32
                     } else {
-                        let cv = sc.contrast[i];
-                        let t = self.contrast_thresholds[group];
-                        if (cv - t).abs() >= CONTRAST_MARGIN {
-                            (group * 2 + (cv > t) as usize) as u32
-                        } else {
-                            // near the threshold, or NaN
-                            NO_CLASS
-                        }
+                        // near the threshold, or NaN
+                        NO_CLASS
                     };
                 }
             }
@@ -754,8 +798,11 @@ impl FastRenderer {
                         0.0,
                     ]
                 };
-                sink.put(out_row, i, v);
+                sc.lin[0][i] = v[0];
+                sc.lin[1][i] = v[1];
+                sc.lin[2][i] = v[2];
             }
+            sink.finish_row(out_row, &sc.lin, tw);
             st.pixels += tw as u64;
         }
         st
