@@ -44,15 +44,17 @@ summary=()
 crashes=0
 for t in "${targets[@]}"; do
     corpus="fuzz/corpus/$t"
-    art="fuzz/artifacts/$t"
+    # a fresh artifact directory per run: only this run's crashers are kept
+    run="$(date +%Y%m%d-%H%M%S)"
+    art="fuzz/artifacts/$t/$run"
     mkdir -p "$corpus" "$art"
-    log="fuzz/artifacts/$t.log"
+    log="fuzz/artifacts/$t/$run.log"
     echo "=== $t: ${secs}s"
     set +e
     (cd fuzz && cargo +nightly fuzz run -s "$san" --target-dir "$tdir" "$t" \
         "corpus/$t" "seeds/$t" -- \
         -max_total_time="$secs" $par \
-        -print_final_stats=1 -artifact_prefix="artifacts/$t/" -rss_limit_mb=4096 \
+        -print_final_stats=1 -artifact_prefix="artifacts/$t/$run/" -rss_limit_mb=4096 \
         -timeout=20) 2>&1 | tee "$log" | grep -E "^#[0-9]+.*(DONE|pulse)|ERROR|panicked|SUMMARY" || true
     set -e
     execs="$(grep -E '^stat::number_of_executed_units' "$log" | tail -1 | awk '{print $2}')"

@@ -12,12 +12,12 @@ use std::sync::atomic::AtomicBool;
 
 use crate::camera::Cfa;
 use crate::io::{DecodedMosaic, Limits, RawMeta, decode_mosaic_with_info, decode_raw_u16_le};
-use crate::l3::{
-    IlluminantRegistry, L3Error, L3Params, L3Table, NoiseModel, PatchGeometry, TABLE_FORMAT_VERSION,
-    TableKind, TableMeta, TrainControl, TrainingFrame, WhiteLevel, learn, package,
-    render_reference, white_y, xyz_to_srgb8,
-};
 use crate::l3::{CorrectionSource, IlluminantEntry, Mat3};
+use crate::l3::{
+    IlluminantRegistry, L3Error, L3Params, L3Table, NoiseModel, PatchGeometry,
+    TABLE_FORMAT_VERSION, TableKind, TableMeta, TrainControl, TrainingFrame, WhiteLevel, learn,
+    package, render_reference, white_y, xyz_to_srgb8,
+};
 use crate::service::parse_job_request;
 use crate::spectral::{Extrapolation, Samples, WavelengthGrid, ces_reflectances};
 
@@ -82,7 +82,11 @@ pub fn apply_upload(
         if s.wavelengths_nm.len() != s.values.len() || s.values.len() < 2 {
             return Err(bad("spd columns differ in length or are too short".into()));
         }
-        if s.values.iter().chain(&s.wavelengths_nm).any(|v| !v.is_finite()) {
+        if s.values
+            .iter()
+            .chain(&s.wavelengths_nm)
+            .any(|v| !v.is_finite())
+        {
             return Err(bad("spd has non-finite numbers".into()));
         }
         let samples = Samples::new(s.wavelengths_nm.clone(), s.values.clone())
@@ -389,7 +393,10 @@ pub fn fuzz_mosaic_decode(data: &[u8]) {
         }
     };
     let (w, h) = m.dims();
-    assert!(FUZZ_LIMITS.check(w, h).is_ok(), "decoded {w}×{h} beyond limits");
+    assert!(
+        FUZZ_LIMITS.check(w, h).is_ok(),
+        "decoded {w}×{h} beyond limits"
+    );
     let volts = match m {
         DecodedMosaic::U16(frame) => {
             assert_eq!(frame.data.len(), w * h);
@@ -550,7 +557,11 @@ pub fn fuzz_illuminant_upload(data: &[u8]) {
                 entry.t
             );
             let got = reg.get(&name).map(|e| e.t);
-            assert_eq!(got, Some(entry.t), "the entry is not retrievable by its name");
+            assert_eq!(
+                got,
+                Some(entry.t),
+                "the entry is not retrievable by its name"
+            );
             // fusing T into kernels keeps them finite (what rendering uses)
             let t = tiny_table();
             let fused = crate::l3::fuse_kernels(t, &entry.t);

@@ -67,7 +67,10 @@ fn hostile_inputs_are_errors_not_panics() {
         ("raw_query", b""),
         ("raw_query", b"?width=1&height=1\n\x00\x00"),
         ("raw_query", b"?width=0&height=5\n"),
-        ("raw_query", b"?width=3&height=1&black_level=9&white_level=9\n\x01\x00\x02\x00\x03\x00"),
+        (
+            "raw_query",
+            b"?width=3&height=1&black_level=9&white_level=9\n\x01\x00\x02\x00\x03\x00",
+        ),
         ("raw_query", b"?width=18446744073709551615&height=2\n\x00"),
         ("raw_query", b"?white=nan&width=1&height=1\n\x00\x00"),
         ("raw_query", b"?white=-1&width=1&height=1\n\x00\x00"),
@@ -83,11 +86,26 @@ fn hostile_inputs_are_errors_not_panics() {
         ("training_json", b"{\"scenes\": -1}"),
         ("training_json", b"{\"sensor\": {\"voltage_swing_v\": 0}}"),
         ("training_json", b"[]"),
-        ("illuminant_upload", b"x\n{\"matrix\": [[1e308,0,0],[0,1e308,0],[0,0,1e308]]}"),
-        ("illuminant_upload", b"x\n{\"matrix\": [[0,0,0],[0,0,0],[0,0,0]]}"),
-        ("illuminant_upload", b"x\n{\"spd\": {\"wavelengths_nm\": [400, 700], \"values\": [0, 0]}}"),
-        ("illuminant_upload", b"x\n{\"spd\": {\"wavelengths_nm\": [550, 551], \"values\": [1, 1]}}"),
-        ("illuminant_upload", b"x\n{\"spd\": {\"wavelengths_nm\": [700, 400], \"values\": [1, 1]}}"),
+        (
+            "illuminant_upload",
+            b"x\n{\"matrix\": [[1e308,0,0],[0,1e308,0],[0,0,1e308]]}",
+        ),
+        (
+            "illuminant_upload",
+            b"x\n{\"matrix\": [[0,0,0],[0,0,0],[0,0,0]]}",
+        ),
+        (
+            "illuminant_upload",
+            b"x\n{\"spd\": {\"wavelengths_nm\": [400, 700], \"values\": [0, 0]}}",
+        ),
+        (
+            "illuminant_upload",
+            b"x\n{\"spd\": {\"wavelengths_nm\": [550, 551], \"values\": [1, 1]}}",
+        ),
+        (
+            "illuminant_upload",
+            b"x\n{\"spd\": {\"wavelengths_nm\": [700, 400], \"values\": [1, 1]}}",
+        ),
         ("illuminant_upload", b"x\n{\"cct\": 1e9}"),
         ("illuminant_upload", b"\n{\"cct\": 3000}"),
         ("illuminant_upload", b"D65\n{\"cct\": 3000}"),
@@ -115,17 +133,25 @@ fn write_seed_corpus() {
     let mut bin = vec![w as u8, h as u8, 0, 0, 0xff, 0x03];
     bin.extend_from_slice(&body);
     write(&seeds.join("raw_query"), "seed-binary", &bin);
-    let mut q = format!("?width={w}&height={h}&black_level=64&white_level=1023&white=auto\n")
-        .into_bytes();
+    let mut q =
+        format!("?width={w}&height={h}&black_level=64&white_level=1023&white=auto\n").into_bytes();
     q.extend_from_slice(&body);
     write(&seeds.join("raw_query"), "seed-query", &q);
     // mosaics
     let frame = RawFrame::new(w, h, dn.iter().map(|v| v * 60).collect()).unwrap();
     let md = seeds.join("mosaic_decode");
-    write(&md, "seed-gray16.png", &encode_png_gray16(&frame, l3::io::PngCompression::Fast).unwrap());
+    write(
+        &md,
+        "seed-gray16.png",
+        &encode_png_gray16(&frame, l3::io::PngCompression::Fast).unwrap(),
+    );
     write(&md, "seed-gray16.tif", &encode_tiff_gray16(&frame).unwrap());
     let f: Vec<f32> = dn.iter().map(|&v| v as f32 / 1023.0 * 1.8).collect();
-    write(&md, "seed-f32.tif", &encode_tiff_gray_f32(w, h, &f).unwrap());
+    write(
+        &md,
+        "seed-f32.tif",
+        &encode_tiff_gray_f32(w, h, &f).unwrap(),
+    );
     let mut pgm = format!("P5\n{w} {h}\n1023\n").into_bytes();
     for v in &dn {
         pgm.extend_from_slice(&v.to_be_bytes());
@@ -133,11 +159,18 @@ fn write_seed_corpus() {
     write(&md, "seed-p5.pgm", &pgm);
     let p2 = format!(
         "P2\n# comment\n{w} {h}\n255\n{}\n",
-        dn.iter().map(|v| (v / 4).to_string()).collect::<Vec<_>>().join(" ")
+        dn.iter()
+            .map(|v| (v / 4).to_string())
+            .collect::<Vec<_>>()
+            .join(" ")
     );
     write(&md, "seed-p2.pgm", p2.as_bytes());
     // table file
-    write(&seeds.join("table_file"), "seed-tiny.safetensors", &tiny_table().to_bytes().unwrap());
+    write(
+        &seeds.join("table_file"),
+        "seed-tiny.safetensors",
+        &tiny_table().to_bytes().unwrap(),
+    );
     // training job JSON
     let tj = seeds.join("training_json");
     write(
@@ -150,7 +183,11 @@ fn write_seed_corpus() {
     write(&tj, "seed-sensor.json", with_sensor.to_string().as_bytes());
     // illuminant uploads
     let iu = seeds.join("illuminant_upload");
-    write(&iu, "seed-matrix", b"warm\n{\"matrix\": [[1.1, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 0.7]]}");
+    write(
+        &iu,
+        "seed-matrix",
+        b"warm\n{\"matrix\": [[1.1, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 0.7]]}",
+    );
     write(&iu, "seed-cct", b"tungsten-ish\n{\"cct\": 3200}");
     write(
         &iu,

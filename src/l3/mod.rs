@@ -15,8 +15,8 @@ mod trainer;
 pub use baseline::{ColourMatrix, bilinear_demosaic, render_baseline};
 pub use classify::{MAX_CHANNELS, PatchGeometry, PatchStats, mirror, sat_case_index};
 pub use correction::{
-    CorrectionSource, IDENTITY, IlluminantEntry, IlluminantRegistry, Mat3, correction_matrix,
-    default_reflectances,
+    CorrectionSource, IDENTITY, IlluminantEntry, IlluminantRegistry, MAX_MATRIX_ENTRY, Mat3,
+    correction_matrix, default_reflectances,
 };
 pub use normal_eq::{ChannelSumConstraint, ClassSolution, Gram, RidgeChoice, solve, solve_with};
 pub use output::{WhiteLevel, white_y, xyz_to_srgb8, xyz_to_srgb16};

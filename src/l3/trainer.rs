@@ -394,11 +394,19 @@ where
                         }
                         step += 1;
                     }
-                    if count_of(&g) == 0 {
-                        // the other contrast class of the same group
-                        let other = class_of(pos, l, c, 1 - t_src);
-                        g = grams[other].clone();
-                        filled_from = l as i32;
+                    // none at any level: the other contrast class, nearest level first
+                    let mut step = 0;
+                    while count_of(&g) == 0 && step < d.n_levels {
+                        for nl in [l as isize - step as isize, (l + step) as isize] {
+                            if nl >= 0 && (nl as usize) < d.n_levels && count_of(&g) == 0 {
+                                let other = class_of(pos, nl as usize, c, 1 - t_src);
+                                if grams[other].count() > 0 {
+                                    g = grams[other].clone();
+                                    filled_from = nl as i32;
+                                }
+                            }
+                        }
+                        step += 1;
                     }
                     // A saturation case this position never saw (the survey
                     // found it at other positions): borrow the samples of the
