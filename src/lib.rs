@@ -20,6 +20,7 @@ pub mod camera;
 pub mod cli;
 pub mod colour;
 pub mod eval;
+pub mod fuzzing;
 pub mod io;
 pub mod l3;
 pub mod scene;

@@ -18,6 +18,11 @@ use super::L3Error;
 
 pub type Mat3 = [[f64; 3]; 3];
 
+/// Largest magnitude of an entry of a given correction matrix. T maps XYZ to
+/// XYZ, so its entries are O(1); far larger ones would overflow the f32
+/// kernels they are fused into.
+pub const MAX_MATRIX_ENTRY: f64 = 1e3;
+
 pub const IDENTITY: Mat3 = [[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]];
 
 /// The crate-only reflectance set for T: the Munsell matt set and the 99
@@ -85,6 +90,12 @@ pub fn correction_matrix(
     let out: Mat3 = [0, 1, 2].map(|i| [0, 1, 2].map(|j| t[(i, j)]));
     if out.iter().flatten().any(|v| !v.is_finite()) {
         return Err(L3Error::InvalidInput("T is not finite".into()));
+    }
+    if let Some(v) = out.iter().flatten().find(|v| v.abs() > MAX_MATRIX_ENTRY) {
+        // a (nearly) line spectrum: every surface's XYZ is nearly collinear
+        return Err(L3Error::InvalidInput(format!(
+            "the illuminant is too narrow-band for a colour correction (T has an entry {v:e}, beyond ±{MAX_MATRIX_ENTRY:e})"
+        )));
     }
     Ok(out)
 }
@@ -297,6 +308,12 @@ impl IlluminantRegistry {
                 "matrix has non-finite entries".into(),
             ));
         }
+        if let Some(v) = t.iter().flatten().find(|v| v.abs() > MAX_MATRIX_ENTRY) {
+            // fused into f32 kernels, such a matrix overflows to Inf/NaN pixels
+            return Err(L3Error::InvalidInput(format!(
+                "matrix entry {v:e} is beyond ±{MAX_MATRIX_ENTRY:e}: not an XYZ → XYZ correction"
+            )));
+        }
         let m = Matrix3::from_fn(|i, j| t[i][j]);
         if m.determinant().abs() < 1e-9 {
             return Err(L3Error::InvalidInput("matrix is singular".into()));
@@ -415,6 +432,13 @@ mod tests {
         assert!(r.remove("D65").is_err());
         assert!(r.insert_matrix("bad", [[0.0; 3]; 3]).is_err());
         assert!(r.insert_matrix("bad name!", IDENTITY).is_err());
+        // huge finite entries would overflow fused f32 kernels (fuzz crasher)
+        let mut huge = IDENTITY;
+        huge[2][0] = 2.2e73;
+        let e = r.insert_matrix("huge", huge).unwrap_err().to_string();
+        assert!(e.contains("beyond"), "{e}");
+        huge[2][0] = -999.0;
+        assert!(r.insert_matrix("large", huge).is_ok());
         assert!(r.insert_matrix("D65", IDENTITY).is_err());
         r.insert_matrix("m1", [[1.1, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 0.9]])
             .unwrap();

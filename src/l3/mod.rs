@@ -16,8 +16,8 @@ mod trainer;
 pub use baseline::{ColourMatrix, bilinear_demosaic, render_baseline};
 pub use classify::{MAX_CHANNELS, PatchGeometry, PatchStats, mirror, sat_case_index};
 pub use correction::{
-    CorrectionSource, IDENTITY, IlluminantEntry, IlluminantRegistry, Mat3, correction_matrix,
-    default_reflectances,
+    CorrectionSource, IDENTITY, IlluminantEntry, IlluminantRegistry, MAX_MATRIX_ENTRY, Mat3,
+    correction_matrix, default_reflectances,
 };
 pub use fast::{FastOptions, FastRenderer, Mosaic, Region};
 pub use normal_eq::{ChannelSumConstraint, ClassSolution, Gram, RidgeChoice, solve, solve_with};

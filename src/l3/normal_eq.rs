@@ -111,6 +111,20 @@ impl Gram {
         self.gram.view()
     }
 
+    /// The accumulator of the same samples with the regressors `idx` set to
+    /// zero (how saturated pixels enter a kernel: with zero weight).
+    pub fn with_zeroed(&mut self, idx: &[usize]) -> Gram {
+        self.flush();
+        let mut out = self.clone();
+        for &k in idx {
+            if k < self.n_features {
+                out.gram.row_mut(k).fill(0.0);
+                out.gram.column_mut(k).fill(0.0);
+            }
+        }
+        out
+    }
+
     /// Remap regressors: the accumulator of `x' = P x` where `x'_k = x_{map[k]}`.
     /// Used to average a class with its mirror images.
     pub fn permuted(&mut self, map: &[usize]) -> Gram {

@@ -394,11 +394,51 @@ where
                         }
                         step += 1;
                     }
-                    if count_of(&g) == 0 {
-                        // the other contrast class of the same group
-                        let other = class_of(pos, l, c, 1 - t_src);
-                        g = grams[other].clone();
-                        filled_from = l as i32;
+                    // none at any level: the other contrast class, nearest level first
+                    let mut step = 0;
+                    while count_of(&g) == 0 && step < d.n_levels {
+                        for nl in [l as isize - step as isize, (l + step) as isize] {
+                            if nl >= 0 && (nl as usize) < d.n_levels && count_of(&g) == 0 {
+                                let other = class_of(pos, nl as usize, c, 1 - t_src);
+                                if grams[other].count() > 0 {
+                                    g = grams[other].clone();
+                                    filled_from = nl as i32;
+                                }
+                            }
+                        }
+                        step += 1;
+                    }
+                    // A saturation case this position never saw (the survey
+                    // found it at other positions): borrow the samples of the
+                    // case it falls back to, nearest level first, with this
+                    // case's channels zeroed — exactly the features those
+                    // samples would have in this case.
+                    let mut others = sat_cases.clone();
+                    let mut fb = c;
+                    while count_of(&g) == 0 && fb != 0 {
+                        others[fb] = u32::MAX;
+                        fb = sat_case_index(&others, sat_cases[c], &[0.0; MAX_CHANNELS]).0;
+                        let chans = geo.channels_of(pos);
+                        let zero: Vec<usize> = (0..nf - 1)
+                            .filter(|&k| sat_cases[c] & (1 << chans[k]) != 0)
+                            .collect();
+                        'levels: for step in 0..d.n_levels {
+                            for nl in [l as isize - step as isize, (l + step) as isize] {
+                                if nl < 0 || nl as usize >= d.n_levels {
+                                    continue;
+                                }
+                                for tt in [t_src, 1 - t_src] {
+                                    let src = class_of(pos, nl as usize, fb, tt);
+                                    if grams[src].count() > 0 {
+                                        g.merge(&grams[src].with_zeroed(&zero));
+                                        filled_from = nl as i32;
+                                    }
+                                }
+                                if count_of(&g) > 0 {
+                                    break 'levels;
+                                }
+                            }
+                        }
                     }
                     if count_of(&g) == 0 {
                         return Err(L3Error::Table(format!(

@@ -1,0 +1,576 @@
+//! Fuzz target bodies, shared by the cargo-fuzz targets in `fuzz/` and by
+//! `tests/fuzz_regressions.rs` (which replays saved crashers under `cargo test`).
+//!
+//! Each body takes arbitrary bytes, runs one input decoder and what the
+//! service does with a decoded value next, and checks the invariants the
+//! decoder promises. Invalid input must come back as an error; a body panics
+//! only when an invariant breaks (a panic inside the library, a NaN pixel, a
+//! non-finite correction matrix), which is what the fuzzer reports.
+
+use std::sync::OnceLock;
+use std::sync::atomic::AtomicBool;
+
+use crate::camera::Cfa;
+use crate::io::{DecodedMosaic, Limits, RawMeta, decode_mosaic_with_info, decode_raw_u16_le};
+use crate::l3::{CorrectionSource, IlluminantEntry, Mat3};
+use crate::l3::{
+    IlluminantRegistry, L3Error, L3Params, L3Table, NoiseModel, PatchGeometry,
+    TABLE_FORMAT_VERSION, TableKind, TableMeta, TrainControl, TrainingFrame, WhiteLevel, learn,
+    package, render_reference, white_y, xyz_to_srgb8,
+};
+use crate::service::parse_job_request;
+use crate::spectral::{Extrapolation, Samples, WavelengthGrid, ces_reflectances};
+
+/// The render query parameters the raw path reads, with the serde shape of
+/// the service's `RenderQuery` (which is private to `service::render`).
+#[derive(Debug, Default, serde::Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct RawRenderQuery {
+    pub width: Option<usize>,
+    pub height: Option<usize>,
+    pub cfa: Option<String>,
+    pub black_level: Option<u16>,
+    pub white_level: Option<u16>,
+    pub illuminant: Option<String>,
+    pub white: Option<String>,
+    pub tiff: Option<String>,
+    pub region: Option<String>,
+    pub preview: Option<usize>,
+}
+
+/// An illuminant upload body, with the serde shape of the service's
+/// `IlluminantDefinition` (private to `service::illuminants`): exactly one of
+/// a matrix, an SPD or a CCT.
+#[derive(Debug, Clone, serde::Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct IlluminantUpload {
+    #[serde(default)]
+    pub matrix: Option<Mat3>,
+    #[serde(default)]
+    pub spd: Option<UploadSpd>,
+    #[serde(default)]
+    pub cct: Option<f64>,
+}
+
+/// SPD samples of an upload: wavelengths (nm, increasing) and relative power.
+#[derive(Debug, Clone, serde::Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct UploadSpd {
+    pub wavelengths_nm: Vec<f64>,
+    pub values: Vec<f64>,
+}
+
+/// Apply an upload to a registry with the service's checks (one definition,
+/// equal finite SPD columns, CCT within 1000–25000 K) and the registry's own.
+pub fn apply_upload(
+    reg: &mut IlluminantRegistry,
+    name: &str,
+    def: &IlluminantUpload,
+) -> Result<IlluminantEntry, L3Error> {
+    let bad = |e: String| L3Error::InvalidInput(format!("illuminant '{name}': {e}"));
+    let given = usize::from(def.matrix.is_some())
+        + usize::from(def.spd.is_some())
+        + usize::from(def.cct.is_some());
+    if given != 1 {
+        return Err(bad(format!(
+            "give exactly one of matrix, spd or cct ({given} given)"
+        )));
+    }
+    let r = if let Some(m) = def.matrix {
+        reg.insert_matrix(name, m)
+    } else if let Some(s) = &def.spd {
+        if s.wavelengths_nm.len() != s.values.len() || s.values.len() < 2 {
+            return Err(bad("spd columns differ in length or are too short".into()));
+        }
+        if s.values
+            .iter()
+            .chain(&s.wavelengths_nm)
+            .any(|v| !v.is_finite())
+        {
+            return Err(bad("spd has non-finite numbers".into()));
+        }
+        let samples = Samples::new(s.wavelengths_nm.clone(), s.values.clone())
+            .map_err(|e| bad(e.to_string()))?;
+        reg.insert_spd(name, &samples, CorrectionSource::Spd)
+    } else {
+        let k = def.cct.unwrap_or(0.0);
+        if !(k.is_finite() && (1000.0..=25_000.0).contains(&k)) {
+            return Err(bad(format!("cct {k}: 1000 to 25000 K")));
+        }
+        reg.insert_cct(name, k)
+    };
+    r.cloned().map_err(|e| bad(e.to_string()))
+}
+
+/// Names of the fuzz targets, as directories under `tests/fuzz_regressions/`
+/// and binaries under `fuzz/fuzz_targets/`.
+pub const FUZZ_TARGETS: [&str; 5] = [
+    "raw_query",
+    "mosaic_decode",
+    "table_file",
+    "training_json",
+    "illuminant_upload",
+];
+
+/// Run the body of fuzz target `name` on `data`; `false` if there is no such target.
+pub fn run_target(name: &str, data: &[u8]) -> bool {
+    match name {
+        "raw_query" => fuzz_raw_query(data),
+        "mosaic_decode" => fuzz_mosaic_decode(data),
+        "table_file" => fuzz_table_file(data),
+        "training_json" => fuzz_training_json(data),
+        "illuminant_upload" => fuzz_illuminant_upload(data),
+        _ => return false,
+    }
+    true
+}
+
+/// Decoders are given these limits: big enough for every size class, small
+/// enough that one input cannot make the fuzzer allocate gigabytes.
+const FUZZ_LIMITS: Limits = Limits {
+    max_pixels: 1 << 22,
+    max_dim: 1 << 14,
+};
+
+/// Frames up to this many pixels are also rendered.
+const RENDER_MAX_PIXELS: usize = 4096;
+
+/// Linear responses of the synthetic sensor's R, G, W, B channels to XYZ.
+const SYNTH_SENSOR: [[f32; 3]; 4] = [
+    [0.9, 0.1, -0.05],
+    [-0.3, 1.1, 0.1],
+    [0.5, 0.6, 0.4],
+    [0.0, -0.1, 0.9],
+];
+
+/// A small deterministic generator (SplitMix64) for the synthetic frames.
+struct SplitMix(u64);
+
+impl SplitMix {
+    fn next_f32(&mut self) -> f32 {
+        self.0 = self.0.wrapping_add(0x9E37_79B9_7F4A_7C15);
+        let mut z = self.0;
+        z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
+        z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
+        ((z ^ (z >> 31)) >> 40) as f32 / (1u64 << 24) as f32
+    }
+}
+
+/// A synthetic training frame: blocks of random colour seen by a linear
+/// `RG/WB` sensor ([`SYNTH_SENSOR`]) at exposure `scale`, with uniform noise of
+/// amplitude `noise` volts, the CFA shifted by `shift`.
+pub fn synthetic_frame(
+    seed: u64,
+    size: usize,
+    scale: f32,
+    noise: f32,
+    shift: (usize, usize),
+) -> TrainingFrame {
+    let mut rng = SplitMix(seed);
+    let block = 6;
+    let nb = size.div_ceil(block);
+    let colours: Vec<[f32; 3]> = (0..nb * nb)
+        .map(|_| {
+            let y = 0.05 + 0.95 * rng.next_f32();
+            [
+                y * (0.6 + 0.6 * rng.next_f32()),
+                y,
+                y * (0.5 + 0.8 * rng.next_f32()),
+            ]
+        })
+        .collect();
+    let pattern = [0usize, 1, 2, 3]; // R G / W B
+    let mut volts = vec![0f32; size * size];
+    let mut clean = vec![0f32; size * size];
+    let mut xyz = vec![0f32; size * size * 3];
+    for r in 0..size {
+        for c in 0..size {
+            let col = colours[(r / block) * nb + c / block].map(|v| v * scale);
+            let ch = pattern[((r + shift.0) % 2) * 2 + (c + shift.1) % 2];
+            let v: f32 = (0..3).map(|k| SYNTH_SENSOR[ch][k] * col[k]).sum();
+            let n = (2.0 * rng.next_f32() - 1.0) * noise;
+            volts[r * size + c] = (v + n).clamp(0.0, 1.8);
+            clean[r * size + c] = v.clamp(0.0, 1.8);
+            xyz[(r * size + c) * 3..(r * size + c) * 3 + 3].copy_from_slice(&col);
+        }
+    }
+    TrainingFrame {
+        width: size,
+        height: size,
+        volts,
+        xyz,
+        clean: Some(clean),
+        cfa_shift: shift,
+    }
+}
+
+/// Table metadata for a table learned from synthetic `RG/WB` frames.
+pub fn synthetic_meta(params: &L3Params) -> Result<TableMeta, L3Error> {
+    let cfa = Cfa::parse("RG/WB").map_err(|e| L3Error::InvalidParams(e.to_string()))?;
+    Ok(TableMeta {
+        format: "l3-table".into(),
+        version: TABLE_FORMAT_VERSION,
+        kind: TableKind::SameIlluminant,
+        train_illuminants: vec!["synthetic".into()],
+        target_illuminant: "same".into(),
+        sensor_name: "synthetic-rgbw".into(),
+        sensor: serde_json::Value::Null,
+        cfa,
+        grid: WavelengthGrid::default(),
+        params: params.clone(),
+        voltage_swing: 1.8,
+        saturation_threshold: 1.8 - params.saturation_margin_v,
+        sat_cases: vec![0],
+        xyz_scale_note: "synthetic linear sensor".into(),
+        seed: 0,
+        created_unix_s: 0,
+        training_seconds: 0.0,
+        summary: serde_json::Value::Null,
+    })
+}
+
+/// Learn a small table (3×3 patches, 4 levels) from synthetic frames: a
+/// fraction of a second, no spectral data needed.
+pub fn train_tiny_table() -> Result<L3Table, L3Error> {
+    let params = L3Params {
+        patch_size: 3,
+        levels: L3Params::levels_for(4, 1.8)?,
+        min_class_samples: 40,
+        ..L3Params::default()
+    };
+    let cfa = Cfa::parse("RG/WB").map_err(|e| L3Error::InvalidParams(e.to_string()))?;
+    let geo = PatchGeometry::new(3, &cfa, &params.levels, 1.8 - params.saturation_margin_v)?;
+    let cancel = AtomicBool::new(false);
+    let ctl = TrainControl {
+        progress: &|_, _| {},
+        cancel: &cancel,
+    };
+    let noise = NoiseModel {
+        conversion_gain_v: 2e-4,
+        read_noise_v: 1e-3,
+        dsnu_v: 0.0,
+        prnu_fraction: 0.0,
+    };
+    let learned = learn(
+        &geo,
+        &params,
+        noise,
+        16,
+        |i| {
+            let scale = [0.002f32, 0.02, 0.2, 1.0, 2.5][i % 5];
+            Ok(vec![synthetic_frame(
+                i as u64,
+                24,
+                scale,
+                0.002,
+                (i % 2, (i / 2) % 2),
+            )])
+        },
+        &ctl,
+    )?;
+    package(synthetic_meta(&params)?, learned)
+}
+
+/// The tiny table of [`train_tiny_table`], trained once per process.
+pub fn tiny_table() -> &'static L3Table {
+    static T: OnceLock<Result<L3Table, String>> = OnceLock::new();
+    match T.get_or_init(|| train_tiny_table().map_err(|e| e.to_string())) {
+        Ok(t) => t,
+        Err(e) => panic!("the tiny synthetic table does not train: {e}"),
+    }
+}
+
+/// Render `volts` with the tiny table when the frame is small, and check the
+/// output is finite and encodes.
+fn render_small(volts: &[f32], w: usize, h: usize, white: WhiteLevel) {
+    if w.saturating_mul(h) > RENDER_MAX_PIXELS {
+        return;
+    }
+    let t = tiny_table();
+    match render_reference(t, &t.kernels, volts, w, h) {
+        Ok((xyz, stats)) => {
+            assert_eq!(xyz.len(), w * h * 3);
+            assert_eq!(stats.pixels as usize, w * h);
+            if let Some(i) = xyz.iter().position(|v| !v.is_finite()) {
+                panic!("rendered pixel {} of a {w}×{h} frame is {}", i / 3, xyz[i]);
+            }
+            let wy = white_y(&xyz, white);
+            assert!(wy.is_finite() && wy > 0.0, "white Y {wy}");
+            assert_eq!(xyz_to_srgb8(&xyz, wy).len(), w * h * 3);
+        }
+        Err(e) => {
+            // only non-finite volts are refused (the decoders never produce them)
+            assert!(
+                volts.iter().any(|v| !v.is_finite()),
+                "finite frame refused: {e}"
+            );
+        }
+    }
+}
+
+/// Raw little-endian u16 body plus render query parameters, as the service's
+/// `application/octet-stream` render path takes them.
+///
+/// Input layout: if the first byte is `b'?'`, a query string up to the first
+/// `b'\n'` (parsed as [`RawRenderQuery`]) and then the body; otherwise a binary
+/// header `width u8, height u8, black u16 LE, white u16 LE` and then the body.
+pub fn fuzz_raw_query(data: &[u8]) {
+    let (q, body) = if data.first() == Some(&b'?') {
+        let end = data.iter().position(|&b| b == b'\n').unwrap_or(data.len());
+        let text = String::from_utf8_lossy(&data[1..end]);
+        let uri: axum::http::Uri = match format!("/v1/render?{text}").parse() {
+            Ok(u) => u,
+            Err(_) => return,
+        };
+        let q = match axum::extract::Query::<RawRenderQuery>::try_from_uri(&uri) {
+            Ok(q) => q.0,
+            Err(_) => return,
+        };
+        (q, &data[(end + 1).min(data.len())..])
+    } else {
+        if data.len() < 6 {
+            return;
+        }
+        let q = RawRenderQuery {
+            width: Some(usize::from(data[0])),
+            height: Some(usize::from(data[1])),
+            black_level: Some(u16::from_le_bytes([data[2], data[3]])),
+            white_level: Some(u16::from_le_bytes([data[4], data[5]])),
+            ..RawRenderQuery::default()
+        };
+        (q, &data[6..])
+    };
+    let white = match q.white.as_deref().map(str::parse::<WhiteLevel>) {
+        None => WhiteLevel::Auto,
+        Some(Ok(w)) => w,
+        Some(Err(_)) => return,
+    };
+    let (Some(w), Some(h)) = (q.width, q.height) else {
+        return;
+    };
+    let frame = match decode_raw_u16_le(body, w, h, &FUZZ_LIMITS) {
+        Ok(f) => f,
+        Err(e) => {
+            assert!(!e.to_string().is_empty());
+            return;
+        }
+    };
+    assert_eq!(frame.data.len(), w * h);
+    assert_eq!(body.len(), w * h * 2);
+    let swing = tiny_table().meta.voltage_swing;
+    let meta = RawMeta::new(
+        w,
+        h,
+        "",
+        q.black_level.unwrap_or(0),
+        q.white_level.unwrap_or(u16::MAX),
+        swing,
+    );
+    let volts = match frame.to_volts(&meta) {
+        Ok(v) => v,
+        Err(e) => {
+            // only bad levels are refused
+            assert!(meta.black_level >= meta.white_level, "to_volts: {e}");
+            return;
+        }
+    };
+    assert!(
+        volts
+            .iter()
+            .all(|v| v.is_finite() && (0.0..=swing as f32).contains(v)),
+        "to_volts left the [0, swing] range"
+    );
+    render_small(&volts, w, h, white);
+}
+
+/// PNG / TIFF / PGM mosaic bytes through the format-detecting decoder.
+pub fn fuzz_mosaic_decode(data: &[u8]) {
+    let (m, info) = match decode_mosaic_with_info(data, &FUZZ_LIMITS) {
+        Ok(v) => v,
+        Err(e) => {
+            assert!(!e.to_string().is_empty());
+            return;
+        }
+    };
+    let (w, h) = m.dims();
+    assert!(
+        FUZZ_LIMITS.check(w, h).is_ok(),
+        "decoded {w}×{h} beyond limits"
+    );
+    let volts = match m {
+        DecodedMosaic::U16(frame) => {
+            assert_eq!(frame.data.len(), w * h);
+            let white = info.max_value.unwrap_or(u16::MAX).max(1);
+            if let Some(mx) = info.max_value {
+                assert!(
+                    frame.data.iter().all(|&v| v <= mx),
+                    "a sample exceeds the container's maximum {mx}"
+                );
+            }
+            let meta = RawMeta::new(w, h, "RG/WB", 0, white, 1.8);
+            match frame.to_volts(&meta) {
+                Ok(v) => v,
+                Err(e) => panic!("to_volts of a decoded mosaic: {e}"),
+            }
+        }
+        DecodedMosaic::F32 { data, .. } => {
+            assert_eq!(data.len(), w * h);
+            assert!(data.iter().all(|v| v.is_finite()), "non-finite f32 decoded");
+            data
+        }
+    };
+    render_small(&volts, w, h, WhiteLevel::Auto);
+}
+
+/// The tensors a table file holds, in checksum order.
+const TABLE_TENSORS: [&str; 7] = [
+    "kernels",
+    "contrast_thresholds",
+    "class_samples",
+    "class_lambda",
+    "class_condition",
+    "class_kernel_norm",
+    "class_filled_from",
+];
+
+/// Re-sign a safetensors file as a table file: recompute the `sha256` header
+/// entry over its `l3` metadata and tables tensors, so that a mutated header
+/// or tensor reaches the table's validation instead of stopping at the
+/// checksum (anyone can compute a SHA-256: the checksum guards against
+/// corruption, not against a hostile file). `None` if the bytes are not a
+/// safetensors file with `l3` metadata and all seven tensors.
+pub fn resign_table(bytes: &[u8]) -> Option<Vec<u8>> {
+    use safetensors::SafeTensors;
+    use sha2::{Digest, Sha256};
+    let st = SafeTensors::deserialize(bytes).ok()?;
+    let (_, md) = SafeTensors::read_metadata(bytes).ok()?;
+    let mut info = md.metadata().clone()?;
+    let meta = info.get("l3")?.clone();
+    let mut views = Vec::new();
+    for n in TABLE_TENSORS {
+        views.push((n.to_string(), st.tensor(n).ok()?));
+    }
+    let mut h = Sha256::new();
+    h.update(meta.as_bytes());
+    for (name, v) in &views {
+        h.update(name.as_bytes());
+        h.update((v.data().len() as u64).to_le_bytes());
+        h.update(v.data());
+    }
+    let digest: String = h.finalize().iter().map(|b| format!("{b:02x}")).collect();
+    info.insert("sha256".into(), digest);
+    safetensors::serialize(views, Some(info)).ok()
+}
+
+/// Table file bytes (safetensors with the l3 header and checksum), as given
+/// and re-signed ([`resign_table`]).
+pub fn fuzz_table_file(data: &[u8]) {
+    check_table_bytes(data);
+    if let Some(resigned) = resign_table(data) {
+        check_table_bytes(&resigned);
+    }
+}
+
+fn check_table_bytes(data: &[u8]) {
+    let t = match L3Table::from_bytes(data, "fuzz") {
+        Ok(t) => t,
+        Err(e) => {
+            assert!(!e.to_string().is_empty());
+            return;
+        }
+    };
+    assert!(t.validate().is_ok());
+    // a loaded table saves and loads back to the same numbers
+    let bytes = match t.to_bytes() {
+        Ok(b) => b,
+        Err(e) => panic!("a loaded table does not serialise: {e}"),
+    };
+    match L3Table::from_bytes(&bytes, "fuzz round trip") {
+        Ok(back) => assert_eq!(back.kernels, t.kernels),
+        Err(e) => panic!("a re-serialised table does not load: {e}"),
+    }
+    // and classifies a small frame without panicking
+    if t.n_classes() <= 1 << 16 {
+        let frame: Vec<f32> = (0..64)
+            .map(|i| (i as f32 / 64.0) * t.meta.voltage_swing as f32)
+            .collect();
+        let _ = render_reference(&t, &t.kernels, &frame, 8, 8);
+    }
+}
+
+/// A training job's JSON body (the [`TrainingSpec`](crate::training::TrainingSpec)
+/// fields plus `sensor` and `activate`), parsed and validated as the service does,
+/// then turned into L3 parameters. Nothing is trained.
+pub fn fuzz_training_json(data: &[u8]) {
+    let req = match parse_job_request(data) {
+        Ok((req, _)) => req,
+        Err(e) => {
+            assert!(!e.to_string().is_empty());
+            return;
+        }
+    };
+    assert!(req.spec.validate().is_ok());
+    assert!(req.sensor.validate().is_ok());
+    match req.spec.params(req.sensor.voltage_swing_v) {
+        Ok(p) => {
+            assert!(p.validate().is_ok());
+            assert_eq!(p.levels.len(), req.spec.levels);
+        }
+        Err(e) => assert!(!e.to_string().is_empty()),
+    }
+}
+
+/// A small registry (CES reflectances only) cloned for every upload.
+fn fuzz_registry() -> &'static IlluminantRegistry {
+    static R: OnceLock<Result<IlluminantRegistry, String>> = OnceLock::new();
+    let r = R.get_or_init(|| {
+        let grid = WavelengthGrid::default();
+        let refl = ces_reflectances()
+            .into_iter()
+            .map(|(_, s)| s.resample(&grid, Extrapolation::Hold))
+            .collect();
+        IlluminantRegistry::new(grid, refl).map_err(|e| e.to_string())
+    });
+    match r {
+        Ok(r) => r,
+        Err(e) => panic!("the fuzz registry does not build: {e}"),
+    }
+}
+
+/// An illuminant upload: a name up to the first `b'\n'`, then the JSON body
+/// ([`IlluminantUpload`]: a matrix, an SPD or a CCT), applied to a registry
+/// as the service's `PUT /v1/illuminants/{name}` does ([`apply_upload`]).
+pub fn fuzz_illuminant_upload(data: &[u8]) {
+    let end = data.iter().position(|&b| b == b'\n').unwrap_or(0);
+    let name = String::from_utf8_lossy(&data[..end]).into_owned();
+    let body = &data[(end + 1).min(data.len())..];
+    let def: IlluminantUpload = match serde_json::from_slice(body) {
+        Ok(d) => d,
+        Err(_) => return,
+    };
+    let mut reg = fuzz_registry().clone();
+    match apply_upload(&mut reg, &name, &def) {
+        Ok(entry) => {
+            assert!(
+                entry.t.iter().flatten().all(|v| v.is_finite()),
+                "non-finite T {:?}",
+                entry.t
+            );
+            let got = reg.get(&name).map(|e| e.t);
+            assert_eq!(
+                got,
+                Some(entry.t),
+                "the entry is not retrievable by its name"
+            );
+            // fusing T into kernels keeps them finite (what rendering uses)
+            let t = tiny_table();
+            let fused = crate::l3::fuse_kernels(t, &entry.t);
+            assert!(
+                fused.iter().all(|v| v.is_finite()),
+                "T {:?} makes fused kernels non-finite",
+                entry.t
+            );
+        }
+        Err(e) => assert!(!e.to_string().is_empty()),
+    }
+}
