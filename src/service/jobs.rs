@@ -18,7 +18,7 @@ use sqlx::Row;
 
 use super::ServiceError;
 use super::state::{AppState, new_id, now_ms, sha256_hex};
-use super::tables::{activate_table, insert_table, write_table_file};
+use super::tables::{activate_table, insert_table, write_table_file_with_pause};
 use crate::camera::SensorDesign;
 use crate::l3::L3Error;
 use crate::training::{TrainError, TrainingSpec, train_table};
@@ -419,7 +419,11 @@ async fn run_job(state: &AppState, id: &str, request: &str) {
             &progress,
             &cancel2,
         ) {
-            Ok(table) => match write_table_file(&st.tables_dir, &table) {
+            Ok(table) => match write_table_file_with_pause(
+                &st.tables_dir,
+                &table,
+                st.config.server.test_pause_activation_ms,
+            ) {
                 Ok(stored) => Outcome::Done(Box::new(table), stored),
                 Err(e) => Outcome::Failed(e.to_string()),
             },
