@@ -48,6 +48,7 @@ class Stats:
         self.lat = defaultdict(list)  # kind -> seconds (answered, not 503)
         self.failures = []  # (kind, what)
         self.bytes_in = 0
+        self.reconnects = 0  # keep-alive connections found closed, retried once
 
     def record(self, kind, status, secs, nbytes):
         with self.lock:
@@ -96,6 +97,8 @@ class Client(threading.Thread):
                 self.conn.close()
                 self.conn = None
                 if attempt == 0:
+                    with self.stats.lock:
+                        self.stats.reconnects += 1
                     continue
                 self.stats.fail(kind, "connection error: %r" % e)
                 return None
@@ -253,6 +256,7 @@ def main():
     summary = {"clients": args.clients, "duration_s": round(elapsed, 1), "requests": total,
                "throughput_rps": round(total / elapsed, 1), "503": n503, "other_5xx": n5xx,
                "connection_errors": sum(1 for _, w in stats.failures if w.startswith("connection")),
+               "reconnects": stats.reconnects,
                "received_mb": round(stats.bytes_in / mb, 1), "kinds": {}}
     print("\n%-13s %7s %7s %7s %9s %9s %9s  statuses" % ("kind", "n", "ok", "503", "p50 ms", "p99 ms", "max ms"))
     for kind in sorted(stats.status):
@@ -266,8 +270,10 @@ def main():
         summary["kinds"][kind] = row
         print("%-13s %7d %7d %7d %9.1f %9.1f %9s  %s" % (kind, row["n"], ok, row["503"], row["p50_ms"],
               row["p99_ms"], row["max_ms"], dict(sorted(st.items()))))
-    print("\nrequests %d in %.1f s (%.1f/s), 503 backpressure %d, other 5xx %d, connection errors %d, received %.1f MB"
-          % (total, elapsed, total / elapsed, n503, n5xx, summary["connection_errors"], summary["received_mb"]))
+    print("\nrequests %d in %.1f s (%.1f/s), 503 backpressure %d, other 5xx %d, connection errors %d "
+          "(keep-alive reconnects retried: %d), received %.1f MB"
+          % (total, elapsed, total / elapsed, n503, n5xx, summary["connection_errors"], stats.reconnects,
+             summary["received_mb"]))
     if args.pid:
         hwm = read_status(args.pid, "VmHWM")
         peak = max([v for _, v in rss] + [hwm or 0])
