@@ -284,6 +284,13 @@ def main():
                         "rss_mid_third_max_mb": round(max(mid, default=0) / mb, 1),
                         "rss_last_third_max_mb": round(max(third, default=0) / mb, 1),
                         "rss_end_mb": round(rss[-1][1] / mb, 1) if rss else None})
+        series, nxt = [], 0.0
+        for t, v in rss:
+            if t >= nxt:
+                series.append([round(t), round(v / mb)])
+                nxt = t + max(5.0, elapsed / 24)
+        summary["rss_series_s_mb"] = series
+        print("server RSS series (s, MB): %s" % " ".join("%d:%d" % (t, v) for t, v in series))
         print("server RSS: start %.1f MB, peak %.1f MB (VmHWM %.1f MB), max in the middle third %.1f MB, "
               "max in the last third %.1f MB, end %s MB" % (
                   summary["rss_start_mb"], summary["rss_peak_mb"], summary["vmhwm_mb"],

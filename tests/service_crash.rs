@@ -54,7 +54,7 @@ impl Service {
         let log = Arc::new(Mutex::new(Vec::new()));
         for pipe in [
             Box::new(child.stdout.take().unwrap()) as Box<dyn std::io::Read + Send>,
-            Box::new(child.stderr.take().unwrap()),
+            Box::new(child.stderr.take().unwrap()) as Box<dyn std::io::Read + Send>,
         ] {
             let log = log.clone();
             std::thread::spawn(move || {
@@ -124,7 +124,10 @@ impl Service {
         let r = reqwest::get(self.url(path)).await.expect("GET");
         let status = r.status().as_u16();
         let bytes = r.bytes().await.unwrap();
-        (status, serde_json::from_slice(&bytes).unwrap_or(Value::Null))
+        (
+            status,
+            serde_json::from_slice(&bytes).unwrap_or(Value::Null),
+        )
     }
 
     async fn post(&self, path: &str, body: &Value) -> (u16, Value) {
@@ -136,7 +139,10 @@ impl Service {
             .expect("POST");
         let status = r.status().as_u16();
         let bytes = r.bytes().await.unwrap();
-        (status, serde_json::from_slice(&bytes).unwrap_or(Value::Null))
+        (
+            status,
+            serde_json::from_slice(&bytes).unwrap_or(Value::Null),
+        )
     }
 
     /// Polls a job until `done(job)`; panics with the log after `secs`.
@@ -234,7 +240,11 @@ async fn kill9_during_a_training_job_then_the_restart_finishes_it() {
         .await;
     let (_, list) = s.get("/v1/training-jobs").await;
     assert_eq!(list["items"].as_array().unwrap().len(), 1, "{list}");
-    let done = s.wait_job(&id, 120, |j| j["status"] != "queued" && j["status"] != "running").await;
+    let done = s
+        .wait_job(&id, 120, |j| {
+            j["status"] != "queued" && j["status"] != "running"
+        })
+        .await;
     assert_eq!(done["status"], "succeeded", "{done}");
     assert_eq!(done["attempts"], 2, "{done}");
     assert_eq!(done["request"]["seed"], 3);
@@ -258,7 +268,11 @@ async fn kill9_while_storing_and_switching_tables_then_a_corrupt_table_file() {
     let s = Service::start(data.path(), iset.as_ref(), 0).await;
     let (_, job) = s.post("/v1/training-jobs", &job_body(1, 4, true)).await;
     let a_job = job["id"].as_str().unwrap().to_string();
-    let done = s.wait_job(&a_job, 120, |j| j["status"] == "succeeded" || j["status"] == "failed").await;
+    let done = s
+        .wait_job(&a_job, 120, |j| {
+            j["status"] == "succeeded" || j["status"] == "failed"
+        })
+        .await;
     assert_eq!(done["status"], "succeeded", "{done}");
     let a = done["table_id"].as_str().unwrap().to_string();
     assert_eq!(s.ready_table().await.as_deref(), Some(a.as_str()));
@@ -270,13 +284,20 @@ async fn kill9_while_storing_and_switching_tables_then_a_corrupt_table_file() {
     let (_, job) = s.post("/v1/training-jobs", &job_body(2, 4, true)).await;
     let b_job = job["id"].as_str().unwrap().to_string();
     s.wait_log(BEFORE_RENAME, 1, 120).await;
-    assert_eq!(temp_files(&tables).len(), 1, "the window holds a temporary file");
+    assert_eq!(
+        temp_files(&tables).len(),
+        1,
+        "the window holds a temporary file"
+    );
     s.kill9();
 
     // run 3: the temporary file is cleaned at start, A still serves, B runs again and is
     // killed after its file is stored and verified, before the switch to it is recorded
     let s = Service::start(data.path(), iset.as_ref(), PAUSE_MS).await;
-    assert!(temp_files(&tables).is_empty(), "orphan temporary file remains");
+    assert!(
+        temp_files(&tables).is_empty(),
+        "orphan temporary file remains"
+    );
     s.wait_log("left half-written", 1, 10).await;
     assert_eq!(s.ready_table().await.as_deref(), Some(a.as_str()));
     s.wait_log(BEFORE_SWITCH, 1, 120).await;
@@ -290,13 +311,21 @@ async fn kill9_while_storing_and_switching_tables_then_a_corrupt_table_file() {
     assert_eq!(s.ready_table().await.as_deref(), Some(a.as_str()));
     let ids = check_tables_agree(&s, &tables).await;
     assert_eq!(ids.len(), 2);
-    let done = s.wait_job(&b_job, 120, |j| j["status"] == "succeeded" || j["status"] == "failed").await;
+    let done = s
+        .wait_job(&b_job, 120, |j| {
+            j["status"] == "succeeded" || j["status"] == "failed"
+        })
+        .await;
     assert_eq!(done["status"], "succeeded", "{done}");
     assert_eq!(done["attempts"], 3, "{done}");
     let b = done["table_id"].as_str().unwrap().to_string();
     assert_ne!(a, b);
     assert_eq!(s.ready_table().await.as_deref(), Some(b.as_str()));
-    assert_eq!(check_tables_agree(&s, &tables).await.len(), 2, "same table again");
+    assert_eq!(
+        check_tables_agree(&s, &tables).await.len(),
+        2,
+        "same table again"
+    );
     let (_, jobs) = s.get("/v1/training-jobs").await;
     assert_eq!(jobs["items"].as_array().unwrap().len(), 2);
     s.kill9();
@@ -327,14 +356,18 @@ async fn kill9_while_storing_and_switching_tables_then_a_corrupt_table_file() {
         }
     }
     // the corrupt table is refused (409), never served; renders still work on A
-    let (st, p) = s.post(&format!("/v1/tables/{b}/activate"), &json!({})).await;
+    let (st, p) = s
+        .post(&format!("/v1/tables/{b}/activate"), &json!({}))
+        .await;
     assert_eq!(st, 409, "{p}");
     assert_eq!(p["code"], "conflict");
     let r = reqwest::get(s.url(&format!("/v1/tables/{b}/download")))
         .await
         .unwrap();
     assert_eq!(r.status(), 409);
-    let raw: Vec<u8> = (0..64 * 64).flat_map(|i| (1000u16 + i as u16).to_le_bytes()).collect();
+    let raw: Vec<u8> = (0..64 * 64)
+        .flat_map(|i| (1000u16 + i as u16).to_le_bytes())
+        .collect();
     let r = reqwest::Client::new()
         .post(s.url("/v1/render?width=64&height=64"))
         .header("content-type", "application/octet-stream")
@@ -350,7 +383,9 @@ async fn kill9_while_storing_and_switching_tables_then_a_corrupt_table_file() {
         *x ^= 0xA5;
     }
     std::fs::write(&b_path, &bytes).unwrap();
-    let (st, t) = s.post(&format!("/v1/tables/{b}/activate"), &json!({})).await;
+    let (st, t) = s
+        .post(&format!("/v1/tables/{b}/activate"), &json!({}))
+        .await;
     assert_eq!(st, 200, "{t}");
     assert_eq!(t["status"], "ok");
     assert_eq!(s.ready_table().await.as_deref(), Some(b.as_str()));

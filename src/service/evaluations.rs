@@ -112,7 +112,10 @@ pub async fn create(
 ) -> Result<Response, ServiceError> {
     super::render::require_json(&headers)?;
     let body = super::render::body_bytes(body, state.config.server.max_body_bytes)?;
-    let req: EvaluationRequest = serde_json::from_slice(&body)
+    let mut value: Value = serde_json::from_slice(&body)
+        .map_err(|e| ServiceError::InvalidJson(format!("evaluation request: {e}")))?;
+    super::jobs::integral_floats_to_ints(&mut value);
+    let req: EvaluationRequest = serde_json::from_value(value)
         .map_err(|e| ServiceError::InvalidJson(format!("evaluation request: {e}")))?;
     if !CHARTS.contains(&req.chart.as_str()) {
         return Err(ServiceError::BadRequest(format!(
@@ -167,12 +170,15 @@ pub async fn create(
     } else {
         None
     };
-    let slot = state.eval_slots.clone().try_acquire_owned().map_err(|_| {
-        ServiceError::Overloaded {
-            msg: "evaluations are already running at capacity; retry shortly".into(),
-            retry_after_s: 2,
-        }
-    })?;
+    let slot =
+        state
+            .eval_slots
+            .clone()
+            .try_acquire_owned()
+            .map_err(|_| ServiceError::Overloaded {
+                msg: "evaluations are already running at capacity; retry shortly".into(),
+                retry_after_s: 2,
+            })?;
     let table_id = table.as_ref().map(|t| t.id.clone());
     let iset = state.iset.clone();
     let r2 = req.clone();

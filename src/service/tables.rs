@@ -187,10 +187,7 @@ fn read_checked(path: &Path, sha256: &str) -> Result<(Vec<u8>, L3Table), TableFi
         )));
     }
     let table = L3Table::from_bytes(&bytes, &path.display().to_string()).map_err(|e| {
-        TableFileError::Corrupt(format!(
-            "table file {} does not parse: {e}",
-            path.display()
-        ))
+        TableFileError::Corrupt(format!("table file {} does not parse: {e}", path.display()))
     })?;
     Ok((bytes, table))
 }
