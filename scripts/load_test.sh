@@ -7,12 +7,12 @@
 #
 #   scripts/load_test.sh [--clients N] [--duration S]   (other args go to load_test.py)
 # Env: CARGO_TARGET_DIR, L3_ISET_DIR (default ../shared/data/iset), MAX_RSS_MB (default 2048),
-#      KEEP_DATA=1 keeps the data dir, L3_* server settings.
+#      KEEP_DATA=1 keeps the data dir, SKIP_BUILD=1 uses the existing binary, L3_* settings.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 ROOT=$(pwd)
 TARGET=${CARGO_TARGET_DIR:-$ROOT/target}
-cargo build --release --bin l3
+[ "${SKIP_BUILD:-0}" = 1 ] || cargo build --release --bin l3
 BIN=$TARGET/release/l3
 DATA=$(mktemp -d -t l3-load.XXXXXX)
 PORT=$(python3 -c 'import socket; s=socket.socket(); s.bind(("127.0.0.1", 0)); print(s.getsockname()[1])')

@@ -321,11 +321,10 @@ async fn kill9_while_storing_and_switching_tables_then_a_corrupt_table_file() {
     let b = done["table_id"].as_str().unwrap().to_string();
     assert_ne!(a, b);
     assert_eq!(s.ready_table().await.as_deref(), Some(b.as_str()));
-    assert_eq!(
-        check_tables_agree(&s, &tables).await.len(),
-        2,
-        "same table again"
-    );
+    // the interrupted attempt's table stays stored (a table records its training time, so the
+    // re-run's file is a new table); all of them agree with their files
+    let ids = check_tables_agree(&s, &tables).await;
+    assert!(ids.contains(&a) && ids.contains(&b), "{ids:?}");
     let (_, jobs) = s.get("/v1/training-jobs").await;
     assert_eq!(jobs["items"].as_array().unwrap().len(), 2);
     s.kill9();
@@ -352,7 +351,7 @@ async fn kill9_while_storing_and_switching_tables_then_a_corrupt_table_file() {
             assert!(t["status_detail"].as_str().unwrap().contains("SHA-256"));
         } else {
             assert_eq!(t["status"], "ok", "{t}");
-            assert_eq!(t["active"], true);
+            assert_eq!(t["active"], t["id"] == a.as_str());
         }
     }
     // the corrupt table is refused (409), never served; renders still work on A
