@@ -112,7 +112,10 @@ pub async fn create(
 ) -> Result<Response, ServiceError> {
     super::render::require_json(&headers)?;
     let body = super::render::body_bytes(body, state.config.server.max_body_bytes)?;
-    let req: EvaluationRequest = serde_json::from_slice(&body)
+    let mut value: Value = serde_json::from_slice(&body)
+        .map_err(|e| ServiceError::InvalidJson(format!("evaluation request: {e}")))?;
+    super::jobs::integral_floats_to_ints(&mut value);
+    let req: EvaluationRequest = serde_json::from_value(value)
         .map_err(|e| ServiceError::InvalidJson(format!("evaluation request: {e}")))?;
     if !CHARTS.contains(&req.chart.as_str()) {
         return Err(ServiceError::BadRequest(format!(
@@ -151,31 +154,8 @@ pub async fn create(
                     state.active.load_full()
                 } else {
                     // load through activation's checks without activating
-                    let row = sqlx::query("SELECT path, sha256 FROM l3_tables WHERE id = $1")
-                        .bind(id)
-                        .fetch_optional(&state.db)
-                        .await?
-                        .ok_or_else(|| {
-                            ServiceError::NotFound(format!("no table with id '{id}'"))
-                        })?;
-                    let path = state.tables_dir.join(row.try_get::<String, _>("path")?);
-                    let sha: String = row.try_get("sha256")?;
+                    let (_, t, _, _) = super::tables::load_verified(&state, id).await?;
                     let id2 = id.clone();
-                    let t = tokio::task::spawn_blocking(move || {
-                        let bytes = std::fs::read(&path).map_err(|e| {
-                            ServiceError::Internal(format!("cannot read {}: {e}", path.display()))
-                        })?;
-                        if super::state::sha256_hex(&bytes) != sha {
-                            return Err(ServiceError::Internal(format!(
-                                "table file {} is corrupt",
-                                path.display()
-                            )));
-                        }
-                        L3Table::from_bytes(&bytes, &path.display().to_string())
-                            .map_err(|e| ServiceError::Internal(e.to_string()))
-                    })
-                    .await
-                    .map_err(|e| ServiceError::Internal(format!("table loader: {e}")))??;
                     Some(std::sync::Arc::new(super::state::ActiveTable {
                         id: id2,
                         sha256: String::new(),
@@ -190,6 +170,15 @@ pub async fn create(
     } else {
         None
     };
+    let slot =
+        state
+            .eval_slots
+            .clone()
+            .try_acquire_owned()
+            .map_err(|_| ServiceError::Overloaded {
+                msg: "evaluations are already running at capacity; retry shortly".into(),
+                retry_after_s: 2,
+            })?;
     let table_id = table.as_ref().map(|t| t.id.clone());
     let iset = state.iset.clone();
     let r2 = req.clone();
@@ -252,6 +241,7 @@ pub async fn create(
             Ok(report)
         };
         let _ = tx.send(run());
+        drop(slot);
     });
     let report = rx
         .await

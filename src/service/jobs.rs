@@ -18,7 +18,7 @@ use sqlx::Row;
 
 use super::ServiceError;
 use super::state::{AppState, new_id, now_ms, sha256_hex};
-use super::tables::{activate_table, insert_table, write_table_file};
+use super::tables::{activate_table, insert_table, write_table_file_with_pause};
 use crate::camera::SensorDesign;
 use crate::l3::L3Error;
 use crate::training::{TrainError, TrainingSpec, train_table};
@@ -38,8 +38,9 @@ pub struct JobRequest {
 /// `"paper_default"`, or a sensor design object) and `activate` (bool).
 pub fn parse_job_request(body: &[u8]) -> Result<(JobRequest, Value), ServiceError> {
     let bad = |m: String| ServiceError::InvalidJson(m);
-    let value: Value = serde_json::from_slice(body)
+    let mut value: Value = serde_json::from_slice(body)
         .map_err(|e| bad(format!("the body is not valid JSON: {e}")))?;
+    integral_floats_to_ints(&mut value);
     let Value::Object(mut map) = value.clone() else {
         return Err(bad(
             "the body must be a JSON object with the training spec".into()
@@ -78,6 +79,25 @@ pub fn parse_job_request(body: &[u8]) -> Result<(JobRequest, Value), ServiceErro
         },
         value,
     ))
+}
+
+/// Rewrites numbers like `4800.0` as the integer `4800`, everywhere in `v`. JSON Schema (and
+/// many clients) treat them as integers; serde's integer fields would refuse them. Float
+/// fields accept integers, so the rewrite changes no meaning.
+pub(super) fn integral_floats_to_ints(v: &mut Value) {
+    match v {
+        Value::Number(n) if n.is_f64() => {
+            if let Some(f) = n.as_f64()
+                && f.fract() == 0.0
+                && f.abs() < 9.0e15
+            {
+                *v = Value::from(f as i64);
+            }
+        }
+        Value::Array(a) => a.iter_mut().for_each(integral_floats_to_ints),
+        Value::Object(m) => m.values_mut().for_each(integral_floats_to_ints),
+        _ => {}
+    }
 }
 
 /// Inserts a queued job; returns its id.
@@ -419,7 +439,11 @@ async fn run_job(state: &AppState, id: &str, request: &str) {
             &progress,
             &cancel2,
         ) {
-            Ok(table) => match write_table_file(&st.tables_dir, &table) {
+            Ok(table) => match write_table_file_with_pause(
+                &st.tables_dir,
+                &table,
+                st.config.server.test_pause_activation_ms,
+            ) {
                 Ok(stored) => Outcome::Done(Box::new(table), stored),
                 Err(e) => Outcome::Failed(e.to_string()),
             },
@@ -544,6 +568,8 @@ mod tests {
             parse_job_request(br#"{"illuminants":["D65"],"scenes":4,"activate":true}"#).unwrap();
         assert!(r.activate);
         assert_eq!(r.spec.scenes, 4);
+        let (r, _) = parse_job_request(br#"{"scenes":48.0,"levels":1e1}"#).unwrap();
+        assert_eq!((r.spec.scenes, r.spec.levels), (48, 10));
         for (body, needle) in [
             (&b"{"[..], "not valid JSON"),
             (b"[1]", "JSON object"),
@@ -551,6 +577,7 @@ mod tests {
             (br#"{"levels":1}"#, "levels 1"),
             (br#"{"activate":"yes"}"#, "activate"),
             (br#"{"sensor":"nikon"}"#, "nikon"),
+            (br#"{"scenes":4.5}"#, "scenes"),
         ] {
             let e = parse_job_request(body).unwrap_err();
             assert!(e.to_string().contains(needle), "{e}");

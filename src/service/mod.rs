@@ -36,6 +36,9 @@ use crate::l3::IlluminantRegistry;
 use crate::spectral::{IsetData, WavelengthGrid};
 use crate::training::TrainingSpec;
 
+/// Evaluations running at once; more get 503 with Retry-After.
+const EVALUATION_SLOTS: usize = 2;
+
 /// A running server: its address, and a handle to stop it.
 pub struct Server {
     addr: SocketAddr,
@@ -161,6 +164,7 @@ pub async fn start_with(
     let state = AppState(Arc::new(Inner {
         render_slots: Arc::new(Semaphore::new(cfg.server.render_concurrency)),
         cpu_gate: Arc::new(Semaphore::new((rayon::current_num_threads() / 2).max(1))),
+        eval_slots: Arc::new(Semaphore::new(EVALUATION_SLOTS)),
         config: cfg.clone(),
         db,
         iset,
@@ -181,23 +185,44 @@ pub async fn start_with(
     if requeued > 0 {
         tracing::info!("{requeued} interrupted training job(s) re-queued");
     }
-    // the active table: the recorded one, else the newest stored one
-    let mut candidates = Vec::new();
-    if let Some(id) = tables::recorded_active(&state).await? {
-        candidates.push(id);
-    }
-    if let Some(id) = sqlx::query_scalar::<_, String>(
-        "SELECT id FROM l3_tables ORDER BY created_at DESC, id LIMIT 1",
-    )
-    .fetch_optional(&state.db)
-    .await?
-    {
-        candidates.push(id);
-    }
+    // table files: drop half-written temporaries, verify every stored file's checksum
+    let dir = state.tables_dir.clone();
+    tokio::task::spawn_blocking(move || tables::remove_orphan_temp_files(&dir))
+        .await
+        .map_err(|e| ServiceError::Internal(format!("table directory scan: {e}")))?;
+    let unusable = tables::verify_all(&state).await?;
+    // the active table: the recorded one, else the last good one (most recently activated,
+    // then the newest stored), skipping files found corrupt or missing
+    let recorded = tables::recorded_active(&state).await?;
+    let mut candidates: Vec<String> = recorded.iter().cloned().collect();
+    candidates.extend(
+        sqlx::query_scalar::<_, String>(
+            "SELECT id FROM l3_tables WHERE status = 'ok'
+             ORDER BY (last_activated_at IS NULL), last_activated_at DESC, created_at DESC, id",
+        )
+        .fetch_all(&state.db)
+        .await?,
+    );
     for id in candidates {
+        if unusable.iter().any(|(b, _)| *b == id) {
+            continue;
+        }
         match tables::activate_table(&state, &id).await {
             Ok(()) => break,
             Err(e) => tracing::error!(table = id, "cannot activate: {e}"),
+        }
+    }
+    if let Some(r) = &recorded
+        && let Some((_, why)) = unusable.iter().find(|(b, _)| b == r)
+    {
+        match state.active.load().as_ref() {
+            Some(a) => tracing::error!(
+                "the recorded active table {r} is unusable ({why}); serving the last good table {} instead",
+                a.id
+            ),
+            None => tracing::error!(
+                "the recorded active table {r} is unusable ({why}) and no other stored table is usable"
+            ),
         }
     }
     if state.active.load().is_none() && cfg.training.auto_train_default {

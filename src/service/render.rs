@@ -223,7 +223,8 @@ struct Rendered {
 pub struct RenderSlot(Arc<Mutex<Option<OwnedSemaphorePermit>>>);
 
 /// Admission of renders: takes a slot before the body is read, or answers 503 with
-/// Retry-After at once (an overloaded service reads no bodies).
+/// Retry-After at once (an overloaded service decodes no bodies; it discards what the client
+/// already sends, so the client can read the 503 and keep its connection).
 pub async fn admit(State(state): State<AppState>, mut req: Request, next: Next) -> Response {
     match state.render_slots.clone().try_acquire_owned() {
         Ok(p) => {
@@ -231,15 +232,62 @@ pub async fn admit(State(state): State<AppState>, mut req: Request, next: Next) 
                 .insert(RenderSlot(Arc::new(Mutex::new(Some(p)))));
             next.run(req).await
         }
-        Err(_) => ServiceError::Overloaded {
-            msg: format!(
-                "{} renders are already running; retry shortly",
-                state.config.server.render_concurrency
-            ),
-            retry_after_s: 1,
+        Err(_) => {
+            let keep_alive = discard_body(req, state.config.server.max_body_bytes).await;
+            let mut resp = ServiceError::Overloaded {
+                msg: format!(
+                    "{} renders are already running; retry shortly",
+                    state.config.server.render_concurrency
+                ),
+                retry_after_s: 1,
+            }
+            .into_response();
+            if !keep_alive {
+                resp.headers_mut()
+                    .insert(header::CONNECTION, HeaderValue::from_static("close"));
+            }
+            resp
         }
-        .into_response(),
     }
+}
+
+/// Largest body an overloaded render reads and throws away before its 503.
+const DISCARD_LIMIT: usize = 64 << 20;
+
+/// Reads and drops a refused request's body (up to [`DISCARD_LIMIT`], within 10 s) so that a
+/// client still sending it sees the answer instead of a broken pipe. Without this, answering
+/// before the body is read makes the server close the connection mid-upload. A client that
+/// sent `Expect: 100-continue` has not sent the body yet: nothing is read. Returns whether
+/// the connection can be kept.
+async fn discard_body(req: Request, max_body_bytes: usize) -> bool {
+    use axum::body::HttpBody;
+    if req
+        .headers()
+        .get(header::EXPECT)
+        .is_some_and(|v| v.as_bytes().eq_ignore_ascii_case(b"100-continue"))
+    {
+        return true;
+    }
+    let limit = DISCARD_LIMIT.min(max_body_bytes);
+    let mut body = req.into_body();
+    let drain = async {
+        let mut seen = 0usize;
+        loop {
+            match std::future::poll_fn(|cx| std::pin::Pin::new(&mut body).poll_frame(cx)).await {
+                None => return true,
+                Some(Err(_)) => return false,
+                Some(Ok(frame)) => {
+                    seen += frame.data_ref().map_or(0, |d| d.len());
+                    if seen > limit {
+                        return false;
+                    }
+                }
+            }
+        }
+    };
+    tokio::time::timeout(std::time::Duration::from_secs(10), drain)
+        .await
+        .unwrap_or(false)
 }
 
 /// `POST /v1/render`

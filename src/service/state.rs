@@ -59,6 +59,8 @@ pub struct Inner {
     pub render_slots: Arc<Semaphore>,
     /// Execution: renders running on rayon at once (FIFO); the rest of the admitted wait.
     pub cpu_gate: Arc<Semaphore>,
+    /// Admission of evaluations (each simulates and renders a chart); excess gets 503.
+    pub eval_slots: Arc<Semaphore>,
     pub metrics: Metrics,
     pub tables_dir: PathBuf,
     /// Wakes the job workers when a job is queued.

@@ -29,13 +29,23 @@ pub struct StoredTable {
 /// Serialises `table`, names it by its content (`tbl_` + 16 hex digits of its SHA-256) and
 /// writes it atomically under `dir` (temporary file, fsync, rename). Blocking.
 pub fn write_table_file(dir: &Path, table: &L3Table) -> Result<StoredTable, ServiceError> {
+    write_table_file_with_pause(dir, table, 0)
+}
+
+/// [`write_table_file`] with the fault-injection pause (`test_pause_activation_ms`) between
+/// the fsync of the temporary file and the rename. Blocking.
+pub(super) fn write_table_file_with_pause(
+    dir: &Path,
+    table: &L3Table,
+    pause_ms: u64,
+) -> Result<StoredTable, ServiceError> {
     let bytes = table
         .to_bytes()
         .map_err(|e| ServiceError::Internal(format!("cannot serialise the table: {e}")))?;
     let sha256 = sha256_hex(&bytes);
     let id = format!("tbl_{}", &sha256[..16]);
     let path = dir.join(format!("{id}.safetensors"));
-    let tmp = dir.join(format!(".{id}.safetensors.tmp"));
+    let tmp = dir.join(format!(".{id}{TMP_SUFFIX}"));
     let werr =
         |e: std::io::Error| ServiceError::Internal(format!("cannot write {}: {e}", path.display()));
     {
@@ -43,13 +53,53 @@ pub fn write_table_file(dir: &Path, table: &L3Table) -> Result<StoredTable, Serv
         f.write_all(&bytes).map_err(werr)?;
         f.sync_all().map_err(werr)?;
     }
+    if pause_ms > 0 {
+        tracing::warn!(
+            table = id,
+            "fault injection: temporary table file written, pausing {pause_ms} ms before the rename"
+        );
+        std::thread::sleep(std::time::Duration::from_millis(pause_ms));
+    }
     std::fs::rename(&tmp, &path).map_err(werr)?;
+    // make the rename itself durable
+    if let Ok(d) = std::fs::File::open(dir) {
+        let _ = d.sync_all();
+    }
     Ok(StoredTable {
         id,
         path,
         sha256,
         size_bytes: bytes.len() as u64,
     })
+}
+
+/// Suffix of the temporary files [`write_table_file`] renames into place.
+const TMP_SUFFIX: &str = ".safetensors.tmp";
+
+/// Removes temporary table files left by a crash between write and rename (at start, before
+/// any job runs); returns how many. Blocking.
+pub fn remove_orphan_temp_files(dir: &Path) -> usize {
+    let Ok(entries) = std::fs::read_dir(dir) else {
+        return 0;
+    };
+    let mut n = 0;
+    for e in entries.flatten() {
+        let name = e.file_name();
+        let name = name.to_string_lossy();
+        if name.starts_with('.') && name.ends_with(TMP_SUFFIX) {
+            match std::fs::remove_file(e.path()) {
+                Ok(()) => {
+                    tracing::warn!(
+                        "removed {}: a table file left half-written by an interrupted run",
+                        e.path().display()
+                    );
+                    n += 1;
+                }
+                Err(err) => tracing::error!("cannot remove {}: {err}", e.path().display()),
+            }
+        }
+    }
+    n
 }
 
 /// Records a stored table in the database (idempotent: the id is the content hash).
@@ -92,45 +142,175 @@ async fn table_row(state: &Inner, id: &str) -> Result<sqlx::sqlite::SqliteRow, S
         .ok_or_else(|| ServiceError::NotFound(format!("no table with id '{id}'")))
 }
 
+/// Why a stored table file cannot be used.
+#[derive(Debug)]
+pub(super) enum TableFileError {
+    /// The file is gone.
+    Missing(String),
+    /// The file's bytes differ from the recorded checksum, or do not parse as a table.
+    Corrupt(String),
+    /// Any other I/O failure (permissions, …): not the file's fault.
+    Io(String),
+}
+
+impl TableFileError {
+    fn status(&self) -> Option<&'static str> {
+        match self {
+            TableFileError::Missing(_) => Some("missing"),
+            TableFileError::Corrupt(_) => Some("corrupt"),
+            TableFileError::Io(_) => None,
+        }
+    }
+
+    fn message(&self) -> &str {
+        match self {
+            TableFileError::Missing(m) | TableFileError::Corrupt(m) | TableFileError::Io(m) => m,
+        }
+    }
+}
+
 /// Reads a table file and checks it against its recorded checksum. Blocking.
-fn read_checked(path: &Path, sha256: &str) -> Result<(Vec<u8>, L3Table), ServiceError> {
+fn read_checked(path: &Path, sha256: &str) -> Result<(Vec<u8>, L3Table), TableFileError> {
     let bytes = std::fs::read(path).map_err(|e| {
-        ServiceError::Internal(format!("cannot read table file {}: {e}", path.display()))
+        let m = format!("cannot read table file {}: {e}", path.display());
+        if e.kind() == std::io::ErrorKind::NotFound {
+            TableFileError::Missing(m)
+        } else {
+            TableFileError::Io(m)
+        }
     })?;
     let actual = sha256_hex(&bytes);
     if actual != sha256 {
-        return Err(ServiceError::Internal(format!(
-            "table file {} is corrupt: SHA-256 {actual}, {sha256} recorded",
+        return Err(TableFileError::Corrupt(format!(
+            "table file {} is corrupt: its SHA-256 is {actual}, {sha256} was recorded when it was stored",
             path.display()
         )));
     }
-    let table = L3Table::from_bytes(&bytes, &path.display().to_string())
-        .map_err(|e| ServiceError::Internal(e.to_string()))?;
+    let table = L3Table::from_bytes(&bytes, &path.display().to_string()).map_err(|e| {
+        TableFileError::Corrupt(format!("table file {} does not parse: {e}", path.display()))
+    })?;
     Ok((bytes, table))
 }
 
-/// Loads table `id` (checksum verified) and makes it the one renders use; records the choice.
-pub async fn activate_table(state: &AppState, id: &str) -> Result<(), ServiceError> {
+/// Records a table's file health (`ok`, `corrupt` or `missing`) when it changed.
+async fn set_status(
+    state: &Inner,
+    id: &str,
+    status: &str,
+    detail: Option<&str>,
+) -> Result<(), ServiceError> {
+    sqlx::query(
+        "UPDATE l3_tables SET status = $1, status_detail = $2
+         WHERE id = $3 AND (status <> $1 OR status_detail IS NOT $2)",
+    )
+    .bind(status)
+    .bind(detail)
+    .bind(id)
+    .execute(&state.db)
+    .await?;
+    Ok(())
+}
+
+/// Loads table `id` with its checksum verified. A corrupt or missing file is recorded in the
+/// table's status and refused with 409 (the table cannot be used until its file is restored);
+/// a file that verifies again is marked `ok` again.
+pub(super) async fn load_verified(
+    state: &Inner,
+    id: &str,
+) -> Result<(Vec<u8>, L3Table, String, String), ServiceError> {
     let row = table_row(state, id).await?;
     let file: String = row.try_get("path")?;
     let sha: String = row.try_get("sha256")?;
-    let path = state.tables_dir.join(file);
+    let path = state.tables_dir.join(&file);
     let sha2 = sha.clone();
-    let (_, table) = tokio::task::spawn_blocking(move || read_checked(&path, &sha2))
+    let loaded = tokio::task::spawn_blocking(move || read_checked(&path, &sha2))
         .await
-        .map_err(|e| ServiceError::Internal(format!("table loader: {e}")))??;
+        .map_err(|e| ServiceError::Internal(format!("table loader: {e}")))?;
+    match loaded {
+        Ok((bytes, table)) => {
+            set_status(state, id, "ok", None).await?;
+            Ok((bytes, table, sha, file))
+        }
+        Err(e) => {
+            if let Some(st) = e.status() {
+                tracing::error!(table = id, "{}; the table is marked {st}", e.message());
+                set_status(state, id, st, Some(e.message())).await?;
+                Err(ServiceError::Conflict(format!(
+                    "table '{id}' cannot be used: {}",
+                    e.message()
+                )))
+            } else {
+                Err(ServiceError::Internal(e.message().to_string()))
+            }
+        }
+    }
+}
+
+/// Checks every stored table file against its checksum (at start) and records each one's
+/// status; returns the ids found unusable, with the reason. Blocking reads run off the runtime.
+pub async fn verify_all(state: &Inner) -> Result<Vec<(String, String)>, ServiceError> {
+    let rows = sqlx::query("SELECT id, path, sha256 FROM l3_tables ORDER BY created_at, id")
+        .fetch_all(&state.db)
+        .await?;
+    let mut bad = Vec::new();
+    for r in rows {
+        let id: String = r.try_get("id")?;
+        let path = state.tables_dir.join(r.try_get::<String, _>("path")?);
+        let sha: String = r.try_get("sha256")?;
+        let checked = tokio::task::spawn_blocking(move || read_checked(&path, &sha).map(|_| ()))
+            .await
+            .map_err(|e| ServiceError::Internal(format!("table check: {e}")))?;
+        match checked {
+            Ok(()) => set_status(state, &id, "ok", None).await?,
+            Err(e) => {
+                if let Some(st) = e.status() {
+                    tracing::error!(
+                        table = id,
+                        "{}; the table is marked {st} and will not be used (restore the file to use it again)",
+                        e.message()
+                    );
+                    set_status(state, &id, st, Some(e.message())).await?;
+                } else {
+                    tracing::error!(table = id, "{}", e.message());
+                }
+                bad.push((id, e.message().to_string()));
+            }
+        }
+    }
+    Ok(bad)
+}
+
+/// Loads table `id` (checksum verified) and makes it the one renders use; records the choice
+/// (and the activation time, so a start can fall back to the last good table).
+pub async fn activate_table(state: &AppState, id: &str) -> Result<(), ServiceError> {
+    let (_, table, sha, _) = load_verified(state, id).await?;
     if table.meta.grid != *state.default_registry.grid() {
         return Err(ServiceError::Unprocessable(format!(
             "table '{id}' uses a wavelength grid other than the service's"
         )));
     }
+    let pause = state.config.server.test_pause_activation_ms;
+    if pause > 0 && state.active.load().is_some() {
+        tracing::warn!(
+            table = id,
+            "fault injection: table verified, pausing {pause} ms before recording it as active"
+        );
+        tokio::time::sleep(std::time::Duration::from_millis(pause)).await;
+    }
+    let mut tx = state.db.begin().await?;
     sqlx::query(
         "INSERT INTO settings (key, value) VALUES ('active_table', $1)
          ON CONFLICT (key) DO UPDATE SET value = excluded.value",
     )
     .bind(id)
-    .execute(&state.db)
+    .execute(&mut *tx)
     .await?;
+    sqlx::query("UPDATE l3_tables SET last_activated_at = $1 WHERE id = $2")
+        .bind(now_ms())
+        .bind(id)
+        .execute(&mut *tx)
+        .await?;
+    tx.commit().await?;
     state.active.store(Some(Arc::new(ActiveTable {
         id: id.to_string(),
         sha256: sha,
@@ -168,6 +348,9 @@ fn row_json(
         "job_id": row.try_get::<Option<String>, _>("job_id")?,
         "created_at_ms": row.try_get::<i64, _>("created_at")?,
         "active": active,
+        "status": row.try_get::<String, _>("status")?,
+        "status_detail": row.try_get::<Option<String>, _>("status_detail")?,
+        "last_activated_at_ms": row.try_get::<Option<i64>, _>("last_activated_at")?,
         "train_illuminants": meta["train_illuminants"].clone(),
         "sensor_name": meta["sensor_name"].clone(),
         "training_seconds": meta["training_seconds"].clone(),
@@ -211,14 +394,7 @@ pub async fn download(
     State(state): State<AppState>,
     UrlPath(id): UrlPath<String>,
 ) -> Result<Response, ServiceError> {
-    let row = table_row(&state, &id).await?;
-    let file: String = row.try_get("path")?;
-    let sha: String = row.try_get("sha256")?;
-    let path = state.tables_dir.join(&file);
-    let sha2 = sha.clone();
-    let (bytes, _) = tokio::task::spawn_blocking(move || read_checked(&path, &sha2))
-        .await
-        .map_err(|e| ServiceError::Internal(format!("table reader: {e}")))??;
+    let (bytes, _, sha, file) = load_verified(&state, &id).await?;
     let mut resp = Body::from(bytes).into_response();
     let h = resp.headers_mut();
     h.insert(
