@@ -294,8 +294,21 @@ fn render_small(volts: &[f32], w: usize, h: usize, white: WhiteLevel) {
             if let Some(i) = xyz.iter().position(|v| !v.is_finite()) {
                 panic!("rendered pixel {} of a {w}×{h} frame is {}", i / 3, xyz[i]);
             }
-            let wy = white_y(&xyz, white);
+            let wy = white_y(&xyz, w, h, white);
             assert!(wy.is_finite() && wy > 0.0, "white Y {wy}");
+            // the fast renderer agrees with the reference on whatever the fuzzer sends
+            if let Ok(fast) = crate::l3::FastRenderer::new(t, &t.kernels) {
+                let got = fast.render_xyz(crate::l3::Mosaic::Volts(volts), w, h, None);
+                let Ok((got, _)) = got else {
+                    panic!("the fast renderer refused a frame the reference rendered")
+                };
+                let d = got
+                    .iter()
+                    .zip(&xyz)
+                    .map(|(a, b)| (a - b).abs())
+                    .fold(0f32, f32::max);
+                assert!(d <= 1e-4, "fast and reference renderers differ by {d}");
+            }
             assert_eq!(xyz_to_srgb8(&xyz, wy).len(), w * h * 3);
         }
         Err(e) => {
