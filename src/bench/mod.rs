@@ -5,6 +5,7 @@
 mod plot;
 mod render;
 mod report;
+mod skips;
 mod sweep;
 
 pub use plot::{PlotError, pareto_front, svg_plot};
@@ -12,6 +13,7 @@ pub use render::{
     BENCH_WHITE_Y, RENDERER, render_baseline_srgb8, render_baseline_xyz, render_srgb8, render_xyz,
 };
 pub use report::{BENCH_SCHEMA, markdown_table};
+pub use skips::{EncoderResult, SkipInputs, SkipResult, run_skips};
 pub use sweep::{
     BenchOptions, BenchReport, ColourResult, ConfigKind, ConfigResult, FrameInfo, L3Config,
     ParetoFront, TableChoice, Throughput, default_sweep, median, run_bench,

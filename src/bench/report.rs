@@ -78,6 +78,37 @@ pub fn markdown_table(r: &BenchReport) -> String {
          Throughput frame: {}. Whole run: {:.0} s.\n",
         r.options.scenes, r.options.scene_size, r.options.scene_size, r.frame.source, r.total_seconds
     ));
+    if !r.skips.is_empty() {
+        s.push_str(
+            "\nSkips (DESIGN.md §9), default table, median ms with and without each skip, all threads:\n\n\
+             | skip | case | applies | with (ms) | without (ms) | speed-up | max output difference |\n\
+             |---|---|---|---:|---:|---:|---|\n",
+        );
+        for k in &r.skips {
+            s.push_str(&format!(
+                "| {} | {} | {} | {:.1} | {:.1} | {:.2}× | {:.2e} {} |\n",
+                k.skip,
+                k.case,
+                if k.applies { "yes" } else { "no" },
+                k.with_ms,
+                k.without_ms,
+                k.speedup,
+                k.max_diff,
+                k.diff_unit
+            ));
+        }
+    }
+    if !r.encoders.is_empty() {
+        s.push_str(
+            "\nEncoders of the rendered frame:\n\n| encoding | ms | bytes |\n|---|---:|---:|\n",
+        );
+        for e in &r.encoders {
+            s.push_str(&format!(
+                "| {} | {:.1} | {} |\n",
+                e.encoding, e.median_ms, e.bytes
+            ));
+        }
+    }
     s
 }
 
@@ -129,6 +160,8 @@ pub(super) mod test_support {
     /// A hand-made report: a copy, three L3 rows and a baseline.
     pub fn sample_report() -> BenchReport {
         BenchReport {
+            skips: Vec::new(),
+            encoders: Vec::new(),
             schema: crate::bench::BENCH_SCHEMA.into(),
             renderer: "reference".into(),
             sensor: "paper RGBW".into(),

@@ -9,6 +9,7 @@ use serde::{Deserialize, Serialize};
 use super::render::{
     RENDERER, prepare, render_baseline_srgb8, render_baseline_xyz, render_srgb8, render_xyz,
 };
+use super::skips::{EncoderResult, SkipInputs, SkipResult, run_skips};
 use super::{BenchError, pareto_front};
 use crate::camera::{Camera, Exposure, NoiseSwitches, SensorDesign, mosaic, simulate};
 use crate::eval::{ChartSetup, ChartTruth, chart_scene, evaluate_chart, fit_baseline_matrix};
@@ -268,6 +269,12 @@ pub struct BenchReport {
     pub pareto: Vec<ParetoFront>,
     pub total_seconds: f64,
     pub options: BenchOptions,
+    /// The skips of DESIGN.md §9 with and without, on the default table.
+    #[serde(default)]
+    pub skips: Vec<SkipResult>,
+    /// Encodings of the rendered frame.
+    #[serde(default)]
+    pub encoders: Vec<EncoderResult>,
 }
 
 /// The non-dominated configurations under one illuminant.
@@ -535,6 +542,8 @@ pub fn run_bench(
         })?;
     let cancel = AtomicBool::new(false);
     let mut rows = Vec::new();
+    // the table the skips are measured on: the default configuration's (else the first SI one)
+    let mut skip_table: Option<(bool, L3Table)> = None;
 
     // the plain copy first: the reference every row is compared with
     progress("timing a plain copy of the frame");
@@ -586,6 +595,10 @@ pub fn run_bench(
                 ));
                 let spec = training_spec(c, TableKind::SameIlluminant, ills.clone(), opts);
                 tables.push(train_table(design, &spec, iset, &|_, _| {}, &cancel)?);
+                let is_default = c.name == L3Config::default_config().name;
+                if skip_table.as_ref().is_none_or(|(d, _)| !d && is_default) {
+                    skip_table = Some((is_default, tables[0].clone()));
+                }
                 for case in &cases {
                     per_case.push((
                         0,
@@ -681,7 +694,23 @@ pub fn run_bench(
             }
         })
         .collect();
+    let (skips, encoders) = match &skip_table {
+        Some((_, table)) => run_skips(
+            &SkipInputs {
+                table,
+                t: cases[0].correction.t,
+                frame: &frame,
+                width: w,
+                height: h,
+                runs: opts.runs,
+            },
+            progress,
+        )?,
+        None => (Vec::new(), Vec::new()),
+    };
     Ok(BenchReport {
+        skips,
+        encoders,
         schema: super::BENCH_SCHEMA.into(),
         renderer: RENDERER.into(),
         sensor: design.name.clone(),
