@@ -60,12 +60,31 @@ fn quick_bench_writes_json_markdown_and_plot() {
     numbers(&json, "", &mut nums);
     assert!(nums.len() > 50);
     for (path, v) in &nums {
-        // seeds are the one kind of number allowed to be zero
-        if path.ends_with(".seed") {
+        // seeds, and output differences of skips (0 when identical), may be zero
+        if path.ends_with(".seed") || path.ends_with(".max_diff") {
+            assert!(v.is_finite() && *v >= 0.0, "{path} = {v}");
             continue;
         }
         assert!(v.is_finite() && *v > 0.0, "{path} = {v}");
     }
+    // every skip measured where it applies and where it does not, outputs (nearly) equal
+    assert!(report.skips.len() >= 10, "{} skips", report.skips.len());
+    assert!(report.skips.iter().any(|k| k.applies) && report.skips.iter().any(|k| !k.applies));
+    for k in &report.skips {
+        let bound = if k.diff_unit == "sRGB codes" {
+            1.0
+        } else {
+            1e-4
+        };
+        assert!(
+            k.max_diff <= bound,
+            "{}: {} differs by {}",
+            k.skip,
+            k.case,
+            k.max_diff
+        );
+    }
+    assert_eq!(report.encoders.len(), 4);
     assert!(!report.pareto.is_empty() && report.pareto.iter().all(|f| !f.names.is_empty()));
 
     let md = std::fs::read_to_string(out_dir.join("bench.md")).unwrap();

@@ -139,6 +139,6 @@ mod tests {
         assert!((white_y(&img, 100, 1, WhiteLevel::Auto) - 0.98).abs() < 0.011);
         assert_eq!(white_sample_points(300, 2).len(), 2 * 100);
         assert_eq!(white_sample_points(1, 1), vec![(0, 0)]);
-        assert_eq!(white_sample_points(4000, 3000).len(), 128 * 125);
+        assert_eq!(white_sample_points(4000, 3000).len(), 125 * 125);
     }
 }

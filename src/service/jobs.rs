@@ -67,8 +67,9 @@ pub fn parse_job_request(body: &[u8]) -> Result<(JobRequest, Value), ServiceErro
             d
         }
     };
-    let spec: TrainingSpec = serde_json::from_value(Value::Object(map))
-        .map_err(|e| bad(format!("training spec: {e}")))?;
+    // the error names the field (`scenes: invalid type: floating point 4.5, …`)
+    let spec: TrainingSpec = serde_path_to_error::deserialize(Value::Object(map))
+        .map_err(|e| bad(format!("training spec: {}: {}", e.path(), e.inner())))?;
     spec.validate()
         .map_err(|e| ServiceError::BadRequest(e.to_string()))?;
     Ok((
