@@ -590,20 +590,28 @@ impl FastRenderer {
         let stride = tw8 + LANES;
         let brows = tile.rows + 2 * rad;
         let thr = self.geo.sat_threshold();
-        // 1. the tile and its halo, clamped volts, mirrored at the frame's borders
-        sc.buf.clear();
-        sc.buf.resize(brows * stride, 0.0);
+        // 1. the tile and its halo, clamped volts, mirrored at the frame's borders.
+        // Columns past the halo are never weighted (zero kernel weights), so stale
+        // finite values from an earlier tile may stay there: no clearing needed.
+        if sc.buf.len() != brows * stride {
+            sc.buf.clear();
+            sc.buf.resize(brows * stride, 0.0);
+        }
         let mut peak = 0f32;
+        let first = tile.c0 as isize - rad as isize;
+        let span = tw + 2 * rad;
+        // the part of the span inside the frame, and its offset in the buffer row
+        let lo = first.max(0) as usize;
+        let hi = (first + span as isize).min(src.width as isize) as usize;
+        let off = (lo as isize - first) as usize;
         for j in 0..brows {
             let r = super::mirror(tile.r0 as isize + j as isize - rad as isize, src.height);
-            let row = &mut sc.buf[j * stride..j * stride + tw + 2 * rad];
-            let first = tile.c0 as isize - rad as isize;
-            if first >= 0 && tile.c0 + tw + rad <= src.width {
-                src.row_into(r, first as usize, row);
-            } else {
-                for (i, v) in row.iter_mut().enumerate() {
-                    *v = src.at(r, super::mirror(first + i as isize, src.width));
-                }
+            let row = &mut sc.buf[j * stride..j * stride + span];
+            if hi > lo {
+                src.row_into(r, lo, &mut row[off..off + (hi - lo)]);
+            }
+            for i in (0..off).chain(off + hi.saturating_sub(lo)..span) {
+                row[i] = src.at(r, super::mirror(first + i as isize, src.width));
             }
             peak = row.iter().fold(peak, |a, &v| a.max(v));
         }
@@ -700,13 +708,21 @@ impl FastRenderer {
                     // every channel on its own phase: means and luminance are position-free
                     let [s0, s1, s2, s3] = &sc.sums;
                     let [m0, m1, m2, m3] = &mut sc.means;
+                    let (s0, s1, s2, s3) = (&s0[..tw8], &s1[..tw8], &s2[..tw8], &s3[..tw8]);
+                    let (m0, m1, m2, m3) = (
+                        &mut m0[..tw8],
+                        &mut m1[..tw8],
+                        &mut m2[..tw8],
+                        &mut m3[..tw8],
+                    );
+                    let lum = &mut sc.lum[..tw8];
                     for i in 0..tw8 {
                         let q = [s0[i], s1[i], s2[i], s3[i]];
                         m0[i] = q[0] * u.inv[0];
                         m1[i] = q[1] * u.inv[1];
                         m2[i] = q[2] * u.inv[2];
                         m3[i] = q[3] * u.inv[3];
-                        sc.lum[i] =
+                        lum[i] =
                             q[0] * u.lum[0] + q[1] * u.lum[1] + q[2] * u.lum[2] + q[3] * u.lum[3];
                     }
                 } else {
@@ -743,31 +759,38 @@ impl FastRenderer {
                 } else {
                     &self.contrast_thresholds
                 };
+                let (sat, lum) = (&sc.sat[..tw], &sc.lum[..tw]);
+                let (contrast, class) = (&sc.contrast[..tw], &mut sc.class[..tw]);
+                let levels = self.n_levels;
                 for i in 0..tw {
-                    if sc.sat[i] {
-                        sc.class[i] = NO_CLASS;
-                        continue;
-                    }
-                    let Some(level) = self.level_lut.level(sc.lum[i]) else {
-                        sc.class[i] = NO_CLASS;
-                        continue;
-                    };
-                    let pos = rpar * 2 + (cpar + i) % 2;
-                    let group = (pos * self.n_levels + level) * n_sat;
-                    // +∞ where the contrast does not decide the class
-                    let t = thresholds.get(group).copied().unwrap_or(f32::NAN);
-                    let cv = sc.contrast[i];
-                    sc.class[i] = if (cv - t).abs() >= CONTRAST_MARGIN {
-                        (group * 2 + (cv > t) as usize) as u32
+                    let level = if sat[i] {
+                        None
                     } else {
-                        // near the threshold, or NaN
-                        NO_CLASS
+                        self.level_lut.level(lum[i])
+                    };
+                    class[i] = match level {
+                        None => NO_CLASS,
+                        Some(level) => {
+                            let pos = rpar * 2 + (cpar + i) % 2;
+                            let group = (pos * levels + level) * n_sat;
+                            // +∞ where the contrast does not decide the class
+                            let t = thresholds.get(group).copied().unwrap_or(f32::NAN);
+                            let cv = contrast[i];
+                            if (cv - t).abs() >= CONTRAST_MARGIN {
+                                (group * 2 + (cv > t) as usize) as u32
+                            } else {
+                                // near the threshold, or NaN
+                                NO_CLASS
+                            }
+                        }
                     };
                 }
             }
             // 5. apply
             let out_row = &mut band[y * row_len + offset..(y + 1) * row_len];
             let rows = &sc.buf[y * stride..];
+            let [l0, l1, l2] = &mut sc.lin;
+            let (l0, l1, l2) = (&mut l0[..tw], &mut l1[..tw], &mut l2[..tw]);
             for i in 0..tw {
                 let class = sc.class[i];
                 let v = if class != NO_CLASS {
@@ -798,9 +821,9 @@ impl FastRenderer {
                         0.0,
                     ]
                 };
-                sc.lin[0][i] = v[0];
-                sc.lin[1][i] = v[1];
-                sc.lin[2][i] = v[2];
+                l0[i] = v[0];
+                l1[i] = v[1];
+                l2[i] = v[2];
             }
             sink.finish_row(out_row, &sc.lin, tw);
             st.pixels += tw as u64;
@@ -904,10 +927,14 @@ impl LevelLut {
     #[inline(always)]
     fn level(&self, lum: f32) -> Option<usize> {
         // `as usize` saturates (negative and NaN give 0, which is then range-checked by value)
-        if lum.is_nan() || lum < 0.0 {
+        let x = lum * self.scale;
+        // NaN fails both comparisons
+        if !(0.0..Self::BINS as f32).contains(&x) {
             return None;
         }
-        let l = *self.bins.get((lum * self.scale) as usize)?;
+        // SAFETY: x is finite and in [0, BINS), so it fits a u32.
+        let i = unsafe { x.to_int_unchecked::<u32>() } as usize;
+        let l = *self.bins.get(i)?;
         (l != Self::AMBIGUOUS).then_some(l as usize)
     }
 }
