@@ -75,7 +75,14 @@ pub fn correction_matrix(
             "the illuminant makes the reflectance XYZs degenerate (T is singular)".into(),
         )
     })?;
-    let mut t = bat * inv;
+    // least squares T·A ≈ B through the SVD of Aᵀ (conditioned as A, not as A·Aᵀ):
+    // exact to rounding when both sides hold the same XYZs, even for a few nearly
+    // collinear reflectances
+    let svd = a.transpose().svd(true, true);
+    let mut t = match svd.solve(&b.transpose(), 0.0) {
+        Ok(tt) => tt.transpose(),
+        Err(_) => bat * inv,
+    };
     if white_preserving {
         // Constrained least squares: T·w_acq = w_target exactly (a perfect
         // white keeps its colour), the rest as close as possible.

@@ -140,6 +140,11 @@ struct PhaseMap {
     lum: [f32; 4],
 }
 
+thread_local! {
+    /// Each thread's tile buffers (a band that finds them in use makes its own).
+    static SCRATCH: std::cell::RefCell<Scratch> = std::cell::RefCell::new(Scratch::default());
+}
+
 /// Reusable per-thread buffers.
 #[derive(Default)]
 struct Scratch {
@@ -492,7 +497,48 @@ impl FastRenderer {
         let simd = self.uses_simd();
         out.par_chunks_mut(BAND_ROWS * row_len)
             .enumerate()
-            .map_init(Scratch::default, |scratch, (b, band)| {
+            .map(|(b, band)| {
+                // the thread's buffers, reused across bands and renders
+                SCRATCH.with(|cell| match cell.try_borrow_mut() {
+                    Ok(mut scratch) => {
+                        self.band(src, reg, set, b, band, row_len, simd, sink, &mut scratch)
+                    }
+                    Err(_) => self.band(
+                        src,
+                        reg,
+                        set,
+                        b,
+                        band,
+                        row_len,
+                        simd,
+                        sink,
+                        &mut Scratch::default(),
+                    ),
+                })
+            })
+            .reduce(RenderStats::default, |mut a, b| {
+                a += b;
+                a
+            })
+    }
+
+    /// Render band `b` (rows `reg.y + b·BAND_ROWS …`) tile by tile.
+    #[allow(clippy::too_many_arguments)]
+    fn band<T, S: Sink<T>>(
+        &self,
+        src: &Source<'_>,
+        reg: Region,
+        set: &KernelSet,
+        b: usize,
+        band: &mut [T],
+        row_len: usize,
+        simd: bool,
+        sink: &S,
+        scratch: &mut Scratch,
+    ) -> RenderStats {
+        let chans = 3;
+        {
+            {
                 let y0 = reg.y + b * BAND_ROWS;
                 let rows = band.len() / row_len;
                 let mut st = RenderStats::default();
@@ -525,11 +571,8 @@ impl FastRenderer {
                     x += tw;
                 }
                 st
-            })
-            .reduce(RenderStats::default, |mut a, b| {
-                a += b;
-                a
-            })
+            }
+        }
     }
 
     #[cfg(target_arch = "x86_64")]
@@ -593,10 +636,7 @@ impl FastRenderer {
         // 1. the tile and its halo, clamped volts, mirrored at the frame's borders.
         // Columns past the halo are never weighted (zero kernel weights), so stale
         // finite values from an earlier tile may stay there: no clearing needed.
-        if sc.buf.len() != brows * stride {
-            sc.buf.clear();
-            sc.buf.resize(brows * stride, 0.0);
-        }
+        resize(&mut sc.buf, brows * stride);
         let mut peak = 0f32;
         let first = tile.c0 as isize - rad as isize;
         let span = tw + 2 * rad;
@@ -664,12 +704,18 @@ impl FastRenderer {
         }
         resize(&mut sc.lum, tw8);
         resize(&mut sc.contrast, tw8);
-        sc.sat.clear();
-        sc.sat.resize(tw8, false);
-        sc.class.clear();
-        sc.class.resize(tw8, NO_CLASS);
-        resize(&mut sc.patch, s * s);
-        resize(&mut sc.feat, nf);
+        if sc.sat.len() < tw8 {
+            sc.sat.resize(tw8, false);
+        }
+        sc.sat[..tw8].fill(false);
+        if sc.class.len() < tw8 {
+            sc.class.resize(tw8, NO_CLASS);
+        }
+        sc.class[..tw8].fill(NO_CLASS);
+        sc.patch.clear();
+        sc.patch.resize(s * s, 0.0);
+        sc.feat.clear();
+        sc.feat.resize(nf, 0.0);
         let inv_area = 1.0 / (s * s) as f32;
         let n_sat = self.sat_cases.len();
         let mut st = RenderStats::default();
@@ -677,7 +723,7 @@ impl FastRenderer {
             let r = tile.r0 + y;
             // 3. which pixels see a saturated value
             if any_sat {
-                for (i, f) in sc.sat.iter_mut().enumerate() {
+                for (i, f) in sc.sat[..tw8].iter_mut().enumerate() {
                     let mut m = 0f32;
                     for dy in 0..s {
                         m = m.max(sc.hmax[(y + dy) * tw8 + i]);
@@ -688,7 +734,7 @@ impl FastRenderer {
             // 4. phase sums → per-phase means and luminance, then contrast and class
             if let Some(maps) = &self.phases {
                 for v in sc.sums.iter_mut() {
-                    v.fill(0.0);
+                    v[..tw8].fill(0.0);
                 }
                 for dy in 0..s {
                     let j = y + dy;
@@ -747,7 +793,7 @@ impl FastRenderer {
                         rad,
                         &sc.means,
                         inv_area,
-                        &mut sc.contrast,
+                        &mut sc.contrast[..tw8],
                     );
                 }
                 // classes of the pixels the fast path can take
@@ -984,9 +1030,10 @@ fn fuse3(kernels: &[f32], m: &[[f64; 3]; 3], nf: usize) -> Vec<f32> {
     out
 }
 
+/// Grow `v` to at least `n` values (never shrinks: tiles of different widths reuse it;
+/// callers use the first `n`).
 fn resize(v: &mut Vec<f32>, n: usize) {
-    if v.len() != n {
-        v.clear();
+    if v.len() < n {
         v.resize(n, 0.0);
     }
 }
