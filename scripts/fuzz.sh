@@ -6,8 +6,8 @@
 #
 # Needs the nightly toolchain and cargo-fuzz (`cargo install cargo-fuzz`). Not part
 # of CI's default run. Environment:
-#   FUZZ_SANITIZER   libFuzzer sanitizer (default: none — the crate is safe Rust;
-#                    use `address` to also check the dependencies' unsafe code)
+#   FUZZ_SANITIZER   libFuzzer sanitizer (default: none, for speed; use `address` to
+#                    also check unsafe code: the fast renderer's SIMD and the dependencies)
 #   FUZZ_TARGET_DIR  cargo target directory (default: fuzz/target)
 #   FUZZ_JOBS        parallel fuzzing processes per target (default: 1)
 set -euo pipefail
