@@ -150,6 +150,9 @@ impl Default for SrgbLut {
 }
 
 impl SrgbLut {
+    /// The largest table (keeps every index inside an i32).
+    pub const MAX_ENTRIES: usize = 1 << 20;
+
     /// Default table size.
     pub const DEFAULT_ENTRIES: usize = 4096;
 
@@ -158,9 +161,9 @@ impl SrgbLut {
         Self::with_entries(Self::DEFAULT_ENTRIES)
     }
 
-    /// A table with `entries` entries (at least 2; fewer is raised to 2).
+    /// A table with `entries` entries (clamped to 2 ..= [`Self::MAX_ENTRIES`]).
     pub fn with_entries(entries: usize) -> Self {
-        let n = entries.max(2);
+        let n = entries.clamp(2, Self::MAX_ENTRIES);
         let last = (n - 1) as f64;
         let table = (0..n).map(|i| encode_srgb8(i as f64 / last)).collect();
         Self {
@@ -190,7 +193,10 @@ impl SrgbLut {
     #[inline(always)]
     pub fn index(&self, linear: f32) -> u32 {
         // max/min return the non-NaN operand, so NaN becomes 0
-        (linear * self.scale + 0.5).max(0.0).min(self.scale) as u32
+        let x = (linear * self.scale + 0.5).max(0.0).min(self.scale);
+        // SAFETY: x is finite and within [0, scale] (scale < MAX_ENTRIES < 2³¹), so it fits an i32;
+        // the unchecked conversion lets the loops over it vectorise
+        (unsafe { x.to_int_unchecked::<i32>() }) as u32
     }
 
     /// The entry at `index` (clamped to the table).

@@ -557,7 +557,7 @@ impl FastRenderer {
                             self.tile_avx2(src, set, tile, scratch, band, row_len, chans * x, sink)
                         }
                     } else {
-                        self.tile::<false, T, S>(
+                        self.tile::<false, 0, T, S>(
                             src,
                             set,
                             tile,
@@ -589,7 +589,13 @@ impl FastRenderer {
         offset: usize,
         sink: &S,
     ) -> RenderStats {
-        self.tile::<true, T, S>(src, set, tile, scratch, band, row_len, offset, sink)
+        // the patch size as a constant where it is a common one, so loops unroll
+        match self.geo.size {
+            3 => self.tile::<true, 3, T, S>(src, set, tile, scratch, band, row_len, offset, sink),
+            5 => self.tile::<true, 5, T, S>(src, set, tile, scratch, band, row_len, offset, sink),
+            7 => self.tile::<true, 7, T, S>(src, set, tile, scratch, band, row_len, offset, sink),
+            _ => self.tile::<true, 0, T, S>(src, set, tile, scratch, band, row_len, offset, sink),
+        }
     }
 
     #[cfg(not(target_arch = "x86_64"))]
@@ -605,14 +611,14 @@ impl FastRenderer {
         offset: usize,
         sink: &S,
     ) -> RenderStats {
-        self.tile::<false, T, S>(src, set, tile, scratch, band, row_len, offset, sink)
+        self.tile::<false, 0, T, S>(src, set, tile, scratch, band, row_len, offset, sink)
     }
 
     /// Render one tile: rows `r0..r0 + rows`, columns `c0..c0 + cols` of the
     /// frame, into the band's rows at `offset`.
     #[inline(always)]
     #[allow(clippy::too_many_arguments)]
-    fn tile<const SIMD: bool, T, S: Sink<T>>(
+    fn tile<const SIMD: bool, const P: usize, T, S: Sink<T>>(
         &self,
         src: &Source<'_>,
         set: &KernelSet,
@@ -623,8 +629,9 @@ impl FastRenderer {
         offset: usize,
         sink: &S,
     ) -> RenderStats {
-        let s = self.geo.size;
-        let rad = self.geo.radius;
+        // P: the patch size known at compile time (0: not)
+        let s = if P != 0 { P } else { self.geo.size };
+        let rad = s / 2;
         let nf = self.n_features;
         let tw = tile.cols;
         // scratch rows are padded to whole 8-lane chunks; the buffer has 8 more
@@ -921,11 +928,13 @@ fn contrast_row(
             let mb: &[f32; LANES] = means[pr * 2 + (1 + rad) % 2][i0..i0 + LANES]
                 .try_into()
                 .unwrap_or(&[0.0; LANES]);
-            for dx in 0..s {
-                let m = if dx % 2 == 0 { ma } else { mb };
-                let v: &[f32; LANES] = row[dx..dx + LANES].try_into().unwrap_or(&[0.0; LANES]);
-                for l in 0..LANES {
-                    acc[l] += (v[l] - m[l]).abs();
+            // even and odd column offsets: one phase mean each
+            for (start, m) in [(0, ma), (1, mb)] {
+                for dx in (start..s).step_by(2) {
+                    let v: &[f32; LANES] = row[dx..dx + LANES].try_into().unwrap_or(&[0.0; LANES]);
+                    for l in 0..LANES {
+                        acc[l] += (v[l] - m[l]).abs();
+                    }
                 }
             }
         }
