@@ -12,94 +12,28 @@ use std::sync::atomic::AtomicBool;
 
 use crate::camera::Cfa;
 use crate::io::{DecodedMosaic, Limits, RawMeta, decode_mosaic_with_info, decode_raw_u16_le};
-use crate::l3::{CorrectionSource, IlluminantEntry, Mat3};
+use crate::l3::IlluminantEntry;
 use crate::l3::{
     IlluminantRegistry, L3Error, L3Params, L3Table, NoiseModel, PatchGeometry,
     TABLE_FORMAT_VERSION, TableKind, TableMeta, TrainControl, TrainingFrame, WhiteLevel, learn,
     package, render_reference, white_y, xyz_to_srgb8,
 };
 use crate::service::parse_job_request;
-use crate::spectral::{Extrapolation, Samples, WavelengthGrid, ces_reflectances};
+use crate::spectral::{Extrapolation, WavelengthGrid, ces_reflectances};
 
-/// The render query parameters the raw path reads, with the serde shape of
-/// the service's `RenderQuery` (which is private to `service::render`).
-#[derive(Debug, Default, serde::Deserialize)]
-#[serde(deny_unknown_fields)]
-pub struct RawRenderQuery {
-    pub width: Option<usize>,
-    pub height: Option<usize>,
-    pub cfa: Option<String>,
-    pub black_level: Option<u16>,
-    pub white_level: Option<u16>,
-    pub illuminant: Option<String>,
-    pub white: Option<String>,
-    pub tiff: Option<String>,
-    pub region: Option<String>,
-    pub preview: Option<usize>,
-}
+/// The render query parameters: the service's own type.
+pub use crate::service::RenderQuery as RawRenderQuery;
+/// An illuminant upload body (exactly one of a matrix, an SPD or a CCT): the service's own type.
+pub use crate::service::{IlluminantDefinition as IlluminantUpload, SpdSamples as UploadSpd};
 
-/// An illuminant upload body, with the serde shape of the service's
-/// `IlluminantDefinition` (private to `service::illuminants`): exactly one of
-/// a matrix, an SPD or a CCT.
-#[derive(Debug, Clone, serde::Deserialize)]
-#[serde(deny_unknown_fields)]
-pub struct IlluminantUpload {
-    #[serde(default)]
-    pub matrix: Option<Mat3>,
-    #[serde(default)]
-    pub spd: Option<UploadSpd>,
-    #[serde(default)]
-    pub cct: Option<f64>,
-}
-
-/// SPD samples of an upload: wavelengths (nm, increasing) and relative power.
-#[derive(Debug, Clone, serde::Deserialize)]
-#[serde(deny_unknown_fields)]
-pub struct UploadSpd {
-    pub wavelengths_nm: Vec<f64>,
-    pub values: Vec<f64>,
-}
-
-/// Apply an upload to a registry with the service's checks (one definition,
-/// equal finite SPD columns, CCT within 1000–25000 K) and the registry's own.
+/// Apply an upload to a registry exactly as `PUT /v1/illuminants/{name}` does.
 pub fn apply_upload(
     reg: &mut IlluminantRegistry,
     name: &str,
     def: &IlluminantUpload,
 ) -> Result<IlluminantEntry, L3Error> {
-    let bad = |e: String| L3Error::InvalidInput(format!("illuminant '{name}': {e}"));
-    let given = usize::from(def.matrix.is_some())
-        + usize::from(def.spd.is_some())
-        + usize::from(def.cct.is_some());
-    if given != 1 {
-        return Err(bad(format!(
-            "give exactly one of matrix, spd or cct ({given} given)"
-        )));
-    }
-    let r = if let Some(m) = def.matrix {
-        reg.insert_matrix(name, m)
-    } else if let Some(s) = &def.spd {
-        if s.wavelengths_nm.len() != s.values.len() || s.values.len() < 2 {
-            return Err(bad("spd columns differ in length or are too short".into()));
-        }
-        if s.values
-            .iter()
-            .chain(&s.wavelengths_nm)
-            .any(|v| !v.is_finite())
-        {
-            return Err(bad("spd has non-finite numbers".into()));
-        }
-        let samples = Samples::new(s.wavelengths_nm.clone(), s.values.clone())
-            .map_err(|e| bad(e.to_string()))?;
-        reg.insert_spd(name, &samples, CorrectionSource::Spd)
-    } else {
-        let k = def.cct.unwrap_or(0.0);
-        if !(k.is_finite() && (1000.0..=25_000.0).contains(&k)) {
-            return Err(bad(format!("cct {k}: 1000 to 25000 K")));
-        }
-        reg.insert_cct(name, k)
-    };
-    r.cloned().map_err(|e| bad(e.to_string()))
+    crate::service::apply_illuminant(reg, name, def)
+        .map_err(|e| L3Error::InvalidInput(e.to_string()))
 }
 
 /// Names of the fuzz targets, as directories under `tests/fuzz_regressions/`

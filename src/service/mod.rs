@@ -26,8 +26,9 @@ use tokio::sync::{Notify, Semaphore};
 
 pub use config::{DEFAULT_CONFIG_TOML, DataConfig, ServerConfig, ServiceConfig, TrainingConfig};
 pub use error::ServiceError;
+pub use illuminants::{IlluminantDefinition, SpdSamples, apply as apply_illuminant};
 pub use jobs::{JOB_STATES, JobRequest, parse_job_request};
-pub use render::{OutputFormat, negotiate};
+pub use render::{OutputFormat, RenderQuery, negotiate};
 pub use routes::{OPENAPI_YAML, ROUTES};
 pub use state::{ActiveTable, AppState, Inner, sha256_hex};
 pub use tables::{StoredTable, write_table_file};
