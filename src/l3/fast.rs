@@ -26,7 +26,7 @@ use rayon::prelude::*;
 
 use super::classify::sat_case_index;
 use super::output::{WhiteLevel, white_from_samples, white_sample_points};
-use super::render::dot;
+use super::render::{dot, fuse_matrix};
 use super::{L3Error, L3Table, PatchGeometry, RenderStats};
 use crate::colour::{SrgbLut, XYZ_TO_LINEAR_SRGB};
 
@@ -350,7 +350,10 @@ impl FastRenderer {
         let wy = self.white_of(&src, white);
         let k = 1.0 / wy;
         let m = XYZ_TO_LINEAR_SRGB.map(|r| r.map(|v| v * k));
-        let set = KernelSet::new(fuse3(&self.xyz.flat, &m, self.n_features), self.geo.size);
+        let set = KernelSet::new(
+            fuse_matrix(&self.xyz.flat, &m, self.n_features),
+            self.geo.size,
+        );
         let lut = SrgbLut::new();
         let mut out = vec![0u8; reg.width * reg.height * 3];
         let mut stats = self.run(&src, reg, &set, &mut out, &Srgb8Sink { lut: &lut });
@@ -1020,23 +1023,6 @@ impl KernelSet {
         }
         Self { flat, stride, rows }
     }
-}
-
-/// `y = M·x` applied to every class's 3 output rows.
-fn fuse3(kernels: &[f32], m: &[[f64; 3]; 3], nf: usize) -> Vec<f32> {
-    let mut out = vec![0f32; kernels.len()];
-    for (src, dst) in kernels
-        .chunks_exact(3 * nf)
-        .zip(out.chunks_exact_mut(3 * nf))
-    {
-        for i in 0..3 {
-            for j in 0..nf {
-                let v: f64 = (0..3).map(|k| m[i][k] * f64::from(src[k * nf + j])).sum();
-                dst[i * nf + j] = v as f32;
-            }
-        }
-    }
-    out
 }
 
 /// Grow `v` to at least `n` values (never shrinks: tiles of different widths reuse it;

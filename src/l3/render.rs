@@ -42,16 +42,19 @@ pub fn fuse_kernels(table: &L3Table, m: &[[f64; 3]; 3]) -> Vec<f32> {
         // D65: the table as is
         return table.kernels.clone();
     }
-    let nf = table.n_features();
-    let mut out = vec![0f32; table.kernels.len()];
-    for (src, dst) in table
-        .kernels
+    fuse_matrix(&table.kernels, m, table.n_features())
+}
+
+/// `M·K` for every class's 3 output rows of `n_features` weights (f64 sums).
+pub(super) fn fuse_matrix(kernels: &[f32], m: &[[f64; 3]; 3], nf: usize) -> Vec<f32> {
+    let mut out = vec![0f32; kernels.len()];
+    for (src, dst) in kernels
         .chunks_exact(3 * nf)
         .zip(out.chunks_exact_mut(3 * nf))
     {
         for i in 0..3 {
             for j in 0..nf {
-                let v: f64 = (0..3).map(|k| m[i][k] * src[k * nf + j] as f64).sum();
+                let v: f64 = (0..3).map(|k| m[i][k] * f64::from(src[k * nf + j])).sum();
                 dst[i * nf + j] = v as f32;
             }
         }
