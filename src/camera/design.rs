@@ -555,10 +555,10 @@ impl SensorDesign {
                 self.offset_v, self.voltage_swing_v
             ));
         }
-        if let Some(b) = self.adc_bits {
-            if !(1..=24).contains(&b) {
-                return err(format!("adc_bits = {b} must be within 1–24"));
-            }
+        if let Some(b) = self.adc_bits
+            && !(1..=24).contains(&b)
+        {
+            return err(format!("adc_bits = {b} must be within 1–24"));
         }
         if !(1..=65_536).contains(&self.rows) || !(1..=65_536).contains(&self.cols) {
             return err(format!(

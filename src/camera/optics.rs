@@ -284,7 +284,7 @@ fn fft_friendly(n: usize) -> usize {
     loop {
         let mut k = m;
         for p in [2, 3, 5, 7] {
-            while k % p == 0 {
+            while k.is_multiple_of(p) {
                 k /= p;
             }
         }

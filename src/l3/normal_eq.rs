@@ -259,41 +259,41 @@ pub fn solve_with(
     }
     let mut w = &eig.eigenvectors * scaled; // p × 3
     let mut intercept: Option<[f64; 3]> = None;
-    if let Some(con) = constraint {
-        if con.channel_of.len() == p {
-            // KKT: w = H⁻¹(cxy − Aᵀν), ν = (A H⁻¹ Aᵀ)⁻¹ (A H⁻¹ cxy − m),
-            // with H = V diag(e+λ) Vᵀ and A the channel-membership matrix.
-            let nc = con.n_channels;
-            let present: Vec<usize> = (0..nc)
-                .filter(|&c| con.channel_of.iter().any(|&x| x as usize == c))
-                .collect();
-            let a = DMatrix::from_fn(present.len(), p, |r, j| {
-                (con.channel_of[j] as usize == present[r]) as u8 as f64
-            });
-            let hinv = {
-                let mut d = eig.eigenvectors.clone();
-                for j in 0..p {
-                    let f = 1.0 / (evals[j] + lambda);
-                    for i in 0..p {
-                        d[(i, j)] *= f;
-                    }
+    if let Some(con) = constraint
+        && con.channel_of.len() == p
+    {
+        // KKT: w = H⁻¹(cxy − Aᵀν), ν = (A H⁻¹ Aᵀ)⁻¹ (A H⁻¹ cxy − m),
+        // with H = V diag(e+λ) Vᵀ and A the channel-membership matrix.
+        let nc = con.n_channels;
+        let present: Vec<usize> = (0..nc)
+            .filter(|&c| con.channel_of.iter().any(|&x| x as usize == c))
+            .collect();
+        let a = DMatrix::from_fn(present.len(), p, |r, j| {
+            (con.channel_of[j] as usize == present[r]) as u8 as f64
+        });
+        let hinv = {
+            let mut d = eig.eigenvectors.clone();
+            for j in 0..p {
+                let f = 1.0 / (evals[j] + lambda);
+                for i in 0..p {
+                    d[(i, j)] *= f;
                 }
-                d * eig.eigenvectors.transpose()
-            };
-            let ahinv = &a * &hinv; // nc × p
-            let s_mat = &ahinv * a.transpose(); // nc × nc
-            if let Some(s_inv) = s_mat.try_inverse() {
-                for k in 0..3 {
-                    let m = nalgebra::DVector::from_fn(present.len(), |r, _| {
-                        con.sums[k].get(present[r]).copied().unwrap_or(0.0)
-                    });
-                    let wk = w.column(k).into_owned(); // = H⁻¹ cxy
-                    let nu = &s_inv * (&a * &wk - m);
-                    let corr = &hinv * (a.transpose() * nu);
-                    w.set_column(k, &(wk - corr));
-                }
-                intercept = Some(con.intercept);
             }
+            d * eig.eigenvectors.transpose()
+        };
+        let ahinv = &a * &hinv; // nc × p
+        let s_mat = &ahinv * a.transpose(); // nc × nc
+        if let Some(s_inv) = s_mat.try_inverse() {
+            for k in 0..3 {
+                let m = nalgebra::DVector::from_fn(present.len(), |r, _| {
+                    con.sums[k].get(present[r]).copied().unwrap_or(0.0)
+                });
+                let wk = w.column(k).into_owned(); // = H⁻¹ cxy
+                let nu = &s_inv * (&a * &wk - m);
+                let corr = &hinv * (a.transpose() * nu);
+                w.set_column(k, &(wk - corr));
+            }
+            intercept = Some(con.intercept);
         }
     }
     let mut kernel = vec![0.0; 3 * nf];

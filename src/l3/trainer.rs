@@ -282,18 +282,20 @@ where
                 acc[class]
                     .get_or_insert_with(|| Box::new(Gram::new(nf)))
                     .push(&feat, y);
-                if use_maps && case == 0 && !texture {
-                    if let Some(clean) = &f.clean {
-                        let (r, c) = (idx / f.width, idx % f.width);
-                        geo.gather(clean, f.width, f.height, r, c, &mut clean_patch);
-                        let cs = geo.stats(&clean_patch, pos);
-                        map_feat[..nch].copy_from_slice(&cs.channel_means[..nch]);
-                        map_feat[nch] = 1.0;
-                        let my = patch_mean_xyz(geo, f, r, c);
-                        acc[n_classes + level]
-                            .get_or_insert_with(|| Box::new(Gram::new(nch + 1)))
-                            .push(&map_feat, my);
-                    }
+                if use_maps
+                    && case == 0
+                    && !texture
+                    && let Some(clean) = &f.clean
+                {
+                    let (r, c) = (idx / f.width, idx % f.width);
+                    geo.gather(clean, f.width, f.height, r, c, &mut clean_patch);
+                    let cs = geo.stats(&clean_patch, pos);
+                    map_feat[..nch].copy_from_slice(&cs.channel_means[..nch]);
+                    map_feat[nch] = 1.0;
+                    let my = patch_mean_xyz(geo, f, r, c);
+                    acc[n_classes + level]
+                        .get_or_insert_with(|| Box::new(Gram::new(nch + 1)))
+                        .push(&map_feat, my);
                 }
             });
         }
@@ -448,20 +450,18 @@ where
                     let lv = geo.levels()[l] as f64;
                     // flat, unsaturated: unbiased on flat patches
                     let mut con_sums = None;
-                    if c == 0 && t_src == 0 && use_maps {
-                        if let Some(mg) = maps[l].as_mut() {
-                            if mg.count() >= 50 {
-                                if let Ok(ms) =
-                                    solve(mg, RidgeChoice::Fixed { relative: 1e-9 }, 0.0)
-                                {
-                                    let w = nch + 1;
-                                    con_sums = Some((
-                                        [0, 1, 2].map(|k| ms.kernel[k * w..k * w + nch].to_vec()),
-                                        [0, 1, 2].map(|k| ms.kernel[k * w + nch]),
-                                    ));
-                                }
-                            }
-                        }
+                    if c == 0
+                        && t_src == 0
+                        && use_maps
+                        && let Some(mg) = maps[l].as_mut()
+                        && mg.count() >= 50
+                        && let Ok(ms) = solve(mg, RidgeChoice::Fixed { relative: 1e-9 }, 0.0)
+                    {
+                        let w = nch + 1;
+                        con_sums = Some((
+                            [0, 1, 2].map(|k| ms.kernel[k * w..k * w + nch].to_vec()),
+                            [0, 1, 2].map(|k| ms.kernel[k * w + nch]),
+                        ));
                     }
                     let con = con_sums.map(|(sums, intercept)| ChannelSumConstraint {
                         channel_of: geo.channels_of(pos),

@@ -94,13 +94,13 @@ impl SpectralTable {
                 Ok(v)
             };
             let w = parse(&cells[0])?;
-            if let Some(&prev) = wavelengths.last() {
-                if w <= prev {
-                    return Err(err(
-                        i + 1,
-                        format!("wavelength {w} does not increase (after {prev})"),
-                    ));
-                }
+            if let Some(&prev) = wavelengths.last()
+                && w <= prev
+            {
+                return Err(err(
+                    i + 1,
+                    format!("wavelength {w} does not increase (after {prev})"),
+                ));
             }
             wavelengths.push(w);
             for (j, c) in cells[1..].iter().enumerate() {

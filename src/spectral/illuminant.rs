@@ -51,13 +51,15 @@ impl IlluminantSpec {
                 return Err(bad("expected csv:PATH or csv:PATH:COLUMN"));
             }
             // A trailing `:COLUMN` is a column name unless it looks like part of a path.
-            if let Some((p, c)) = rest.rsplit_once(':') {
-                if !c.is_empty() && !c.contains(['/', '\\', '.']) && !p.is_empty() {
-                    return Ok(Self::Csv {
-                        path: p.to_string(),
-                        column: Some(c.to_string()),
-                    });
-                }
+            if let Some((p, c)) = rest.rsplit_once(':')
+                && !c.is_empty()
+                && !c.contains(['/', '\\', '.'])
+                && !p.is_empty()
+            {
+                return Ok(Self::Csv {
+                    path: p.to_string(),
+                    column: Some(c.to_string()),
+                });
             }
             return Ok(Self::Csv {
                 path: rest.to_string(),
