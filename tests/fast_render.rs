@@ -80,11 +80,13 @@ fn check(design_name: &str, patch: usize) {
     let (volts, w, h) = frame(&d, 72, 9);
     let (want, ws) = render_reference(&table, &kernels, &volts, w, h).expect("reference");
     assert!(ws.saturated > 0, "the frame should clip somewhere");
-    for simd in [true, false] {
+    // AVX-512 (where the CPU has it), AVX2 + FMA, portable
+    for (simd, avx512) in [(true, true), (true, false), (false, false)] {
         for skip in [true, false] {
             let mut fast = FastRenderer::new(&table, &kernels).expect("fast");
             fast.options = FastOptions {
                 simd,
+                avx512,
                 skip_unsaturated_tiles: skip,
                 skip_equal_contrast_kernels: skip,
             };
@@ -93,8 +95,10 @@ fn check(design_name: &str, patch: usize) {
                 .expect("fast render");
             let d = max_abs_diff(&want, &got);
             println!(
-                "{design_name} patch {patch} simd {simd} skips {skip}: max |ΔXYZ| {d:.2e}, {} of {} pixels on the exact path",
-                gs.exact_path, gs.pixels
+                "{design_name} patch {patch} simd {simd} avx512 {}: skips {skip}: max |ΔXYZ| {d:.2e}, {} of {} pixels on the exact path",
+                fast.uses_avx512(),
+                gs.exact_path,
+                gs.pixels
             );
             assert!(d <= 1e-4, "max diff {d}");
             assert_eq!(
@@ -188,6 +192,25 @@ fn srgb8_u16_and_regions_match_the_reference_pipeline() {
             &part[y * reg.width * 3..(y + 1) * reg.width * 3]
         );
     }
+    // every instruction set gives the same codes but for rounding of the kernel sums
+    for (simd, avx512) in [(true, false), (false, false)] {
+        let mut other = FastRenderer::new(&table, &kernels).expect("fast");
+        other.options.simd = simd;
+        other.options.avx512 = avx512;
+        let (o, _, _) = other
+            .render_srgb8(mosaic, w, h, None, WhiteLevel::Y(wy_fast))
+            .expect("srgb");
+        let off = o.iter().zip(&rgb).filter(|(a, b)| a != b).count();
+        let worst = o.iter().zip(&rgb).map(|(a, b)| a.abs_diff(*b)).max();
+        println!(
+            "simd {simd} avx512 {avx512}: {off} of {} codes differ",
+            o.len()
+        );
+        assert!(
+            worst <= Some(1) && off * 200 <= o.len(),
+            "{off} codes differ"
+        );
+    }
 }
 
 proptest! {
@@ -217,6 +240,10 @@ proptest! {
         let (got, gs) = fast.render_xyz(Mosaic::Volts(&volts), w, h, None).unwrap();
         prop_assert!(max_abs_diff(&want, &got) <= 1e-4);
         prop_assert_eq!(ws.clamped, gs.clamped);
+        let mut avx2 = fast.clone();
+        avx2.options.avx512 = false;
+        let (got2, _) = avx2.render_xyz(Mosaic::Volts(&volts), w, h, None).unwrap();
+        prop_assert!(max_abs_diff(&want, &got2) <= 1e-4);
         let (rx, ry) = (rx % w, ry % h);
         let reg = Region { x: rx, y: ry, width: rw.min(w - rx), height: rh.min(h - ry) };
         let (part, _) = fast.render_xyz(Mosaic::Volts(&volts), w, h, Some(reg)).unwrap();

@@ -206,6 +206,16 @@ impl SrgbLut {
         self.table[i]
     }
 
+    /// The table's entries (index with [`Self::index`]).
+    pub fn entries(&self) -> &[u8] {
+        &self.table
+    }
+
+    /// The linear value → index scale (the last index).
+    pub fn scale(&self) -> f32 {
+        self.scale
+    }
+
     /// Encode a slice into `out` (pairs up to the shorter length).
     pub fn encode_slice(&self, linear: &[f32], out: &mut [u8]) {
         for (o, &v) in out.iter_mut().zip(linear) {

@@ -90,7 +90,7 @@ impl PatchGeometry {
         levels: &[f64],
         sat_threshold: f64,
     ) -> Result<Self, L3Error> {
-        if size % 2 == 0 || !(3..=9).contains(&size) {
+        if size.is_multiple_of(2) || !(3..=9).contains(&size) {
             return Err(L3Error::InvalidParams(format!(
                 "patch size {size} (3, 5, 7 or 9)"
             )));

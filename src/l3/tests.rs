@@ -228,10 +228,11 @@ fn fast_renderer_matches_the_reference() {
     // blocks from dark to clipped, plus noise: every level and saturated patches
     let mut f = synth_frame(11, 96, 1.6, 0.02, (0, 0));
     f.volts[40 * 96 + 40] = 1.8;
-    for simd in [true, false] {
+    for (simd, avx512) in [(true, true), (true, false), (false, false)] {
         for kernels in [&table.kernels, &fused] {
             let mut fast = FastRenderer::new(&table, kernels).unwrap();
             fast.options.simd = simd;
+            fast.options.avx512 = avx512;
             for (w, h) in [(96, 96), (95, 61), (1, 1), (1, 9), (7, 1), (2, 3), (13, 5)] {
                 let v: Vec<f32> = f.volts[..w * h].to_vec();
                 let (want, ws) = render_reference(&table, kernels, &v, w, h).unwrap();

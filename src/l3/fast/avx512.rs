@@ -1,0 +1,372 @@
+//! AVX-512 kernels of the fast renderer, for 2×2 CFAs whose four phases each
+//! hold one channel (RGBW) and up to 32 luminance levels:
+//!
+//! - [`classify_row`] classifies 16 pixels per step: phase sums → means and
+//!   luminance, the contrast, the level by a branch-free binary search over the
+//!   level edges held in registers, the contrast threshold by a register
+//!   permute, and the mask of pixels the reference code must classify;
+//! - [`apply_row`] applies the kernels of 8 pixels at a time, X and Y sharing one
+//!   16-lane FMA per patch row, and sums the lanes of all 8 pixels together
+//!   (a transposing reduction) so results leave as whole vectors;
+//! - [`srgb8_row`] encodes three planes of linear sRGB through the table with
+//!   gathers and interleaves the bytes with one permute.
+//!
+//! Every function checks the lengths of what it reads and writes before its
+//! unchecked loads; the callers run them only when the CPU has the features.
+
+#![allow(unsafe_op_in_unsafe_fn)]
+
+use std::arch::x86_64::*;
+
+use super::{CONTRAST_MARGIN, LUMINANCE_MARGIN, NO_CLASS};
+
+/// Lanes per classification step.
+pub(super) const WIDE: usize = 16;
+/// The most luminance levels the register tables hold.
+pub(super) const MAX_LEVELS: usize = 32;
+
+/// What classification needs beyond the row data, prepared once per tile.
+pub(super) struct ClassParams {
+    /// Per phase (0: the centre's, 1: same row other column, 2: other row same column, 3: both other).
+    pub inv: [f32; 4],
+    pub lum: [f32; 4],
+    pub inv_area: f32,
+    /// Level edges padded with +∞ to 32: `edges[l]` is the top of level l.
+    pub edges: [f32; MAX_LEVELS],
+    /// The bottom of each level: −∞, then the edges.
+    pub below: [f32; MAX_LEVELS],
+    /// Per CFA position, the contrast threshold of each level (sat case 0), padded with +∞.
+    pub thresholds: [[f32; MAX_LEVELS]; 4],
+    pub n_levels: u32,
+    pub n_sat: u32,
+    pub use_contrast: bool,
+}
+
+/// Per-row counts from [`classify_row`].
+#[derive(Default, Clone, Copy)]
+pub(super) struct RowCounts {
+    pub texture: u64,
+    pub exact: u64,
+}
+
+#[inline(always)]
+fn tail_mask(i: usize, n: usize) -> u16 {
+    if i + WIDE <= n {
+        u16::MAX
+    } else {
+        ((1u32 << (n - i)) - 1) as u16
+    }
+}
+
+/// Classify pixels `0..tw` of one output row.
+///
+/// - `he`, `ho`: `p` rows of `tw_pad` horizontal sums over the even / odd column
+///   offsets of the patch, starting at the patch's top row;
+/// - `buf`: the tile buffer from the patch's top row, rows `stride` apart;
+/// - `sat`: per pixel, whether its patch holds a saturated value (when the tile can);
+/// - `class`: receives the class of each pixel, or [`NO_CLASS`] where the
+///   reference code must decide; `rpar`/`cpar` are the parities of the row and
+///   of the tile's first column.
+///
+/// Returns `None` (and writes nothing) if a slice is too short.
+///
+/// # Safety
+/// The CPU must have AVX-512 F, VL and BW.
+#[target_feature(enable = "avx512f,avx512vl,avx512bw,avx512dq,avx2,fma")]
+#[allow(clippy::too_many_arguments)]
+pub(super) unsafe fn classify_row<const P: usize>(
+    he: &[f32],
+    ho: &[f32],
+    tw_pad: usize,
+    buf: &[f32],
+    stride: usize,
+    sat: Option<&[bool]>,
+    tw: usize,
+    rpar: usize,
+    cpar: usize,
+    prm: &ClassParams,
+    class: &mut [u32],
+) -> Option<RowCounts> {
+    let rad = P / 2;
+    if P == 0
+        || tw > tw_pad
+        || !tw_pad.is_multiple_of(WIDE)
+        || he.len() < P * tw_pad
+        || ho.len() < P * tw_pad
+        || buf.len() < (P - 1) * stride + tw_pad + P - 1
+        || class.len() < tw_pad
+        || sat.is_some_and(|s| s.len() < tw_pad)
+        || prm.n_levels as usize > MAX_LEVELS
+    {
+        return None;
+    }
+    let (hp, op, bp) = (he.as_ptr(), ho.as_ptr(), buf.as_ptr());
+    let inv = prm.inv.map(|v| _mm512_set1_ps(v));
+    let lw = prm.lum.map(|v| _mm512_set1_ps(v));
+    let inv_area = _mm512_set1_ps(prm.inv_area);
+    let e0 = _mm512_loadu_ps(prm.edges.as_ptr());
+    let e1 = _mm512_loadu_ps(prm.edges.as_ptr().add(16));
+    let b0 = _mm512_loadu_ps(prm.below.as_ptr());
+    let b1 = _mm512_loadu_ps(prm.below.as_ptr().add(16));
+    // positions of even and odd lanes in this row
+    let pos_even = rpar * 2 + cpar;
+    let pos_odd = rpar * 2 + (1 - cpar);
+    let t_even = &prm.thresholds[pos_even];
+    let t_odd = &prm.thresholds[pos_odd];
+    let (te0, te1) = (
+        _mm512_loadu_ps(t_even.as_ptr()),
+        _mm512_loadu_ps(t_even.as_ptr().add(16)),
+    );
+    let (to0, to1) = (
+        _mm512_loadu_ps(t_odd.as_ptr()),
+        _mm512_loadu_ps(t_odd.as_ptr().add(16)),
+    );
+    let odd_lanes: __mmask16 = 0xAAAA;
+    let pos = _mm512_mask_blend_epi32(
+        odd_lanes,
+        _mm512_set1_epi32(pos_even as i32),
+        _mm512_set1_epi32(pos_odd as i32),
+    );
+    let levels = _mm512_set1_epi32(prm.n_levels as i32);
+    let sat2 = _mm512_set1_epi32(2 * prm.n_sat as i32);
+    let one = _mm512_set1_epi32(1);
+    let margin = _mm512_set1_ps(LUMINANCE_MARGIN);
+    let cmargin = _mm512_set1_ps(CONTRAST_MARGIN);
+    let abs_mask = _mm512_set1_epi32(0x7fff_ffff);
+    let no_class = _mm512_set1_epi32(NO_CLASS as i32);
+    let mut counts = RowCounts::default();
+    let mut i = 0;
+    while i < tw {
+        // phase sums over the patch rows
+        let mut s = [_mm512_setzero_ps(); 4];
+        for dy in 0..P {
+            let e = _mm512_loadu_ps(hp.add(dy * tw_pad + i));
+            let o = _mm512_loadu_ps(op.add(dy * tw_pad + i));
+            let base = 2 * ((dy + rad) % 2);
+            s[base] = _mm512_add_ps(s[base], e);
+            s[base + 1] = _mm512_add_ps(s[base + 1], o);
+        }
+        let m = [0, 1, 2, 3].map(|k| _mm512_mul_ps(s[k], inv[k]));
+        let lum = _mm512_add_ps(
+            _mm512_add_ps(_mm512_mul_ps(s[0], lw[0]), _mm512_mul_ps(s[1], lw[1])),
+            _mm512_add_ps(_mm512_mul_ps(s[2], lw[2]), _mm512_mul_ps(s[3], lw[3])),
+        );
+        // level: the number of edges below the luminance (a binary search over the
+        // edges held in two registers), exact only if no edge lies within the margin
+        let mut lo = _mm512_setzero_si512();
+        for step in [16, 8, 4, 2, 1] {
+            let probe = _mm512_add_epi32(lo, _mm512_set1_epi32(step - 1));
+            let e = _mm512_permutex2var_ps(e0, probe, e1);
+            let k = _mm512_cmp_ps_mask::<_CMP_LT_OQ>(e, lum);
+            lo = _mm512_mask_add_epi32(lo, k, lo, _mm512_set1_epi32(step));
+        }
+        let top = _mm512_permutex2var_ps(e0, lo, e1);
+        let bottom = _mm512_permutex2var_ps(b0, lo, b1);
+        // (NaN luminance fails both tests)
+        let mut exact = _mm512_cmp_ps_mask::<_CMP_NGT_UQ>(_mm512_sub_ps(lum, bottom), margin)
+            | _mm512_cmp_ps_mask::<_CMP_NGE_UQ>(_mm512_sub_ps(top, lum), margin);
+        let mut texture: __mmask16 = 0;
+        if prm.use_contrast {
+            let mut acc = _mm512_setzero_ps();
+            for dy in 0..P {
+                let pr = (dy + rad) % 2;
+                let row = bp.add(dy * stride + i);
+                for dx in 0..P {
+                    let v = _mm512_loadu_ps(row.add(dx));
+                    let d = _mm512_sub_ps(v, m[2 * pr + (dx + rad) % 2]);
+                    let d = _mm512_castsi512_ps(_mm512_and_si512(_mm512_castps_si512(d), abs_mask));
+                    acc = _mm512_add_ps(acc, d);
+                }
+            }
+            let cv = _mm512_mul_ps(acc, inv_area);
+            let t = _mm512_mask_blend_ps(
+                odd_lanes,
+                _mm512_permutex2var_ps(te0, lo, te1),
+                _mm512_permutex2var_ps(to0, lo, to1),
+            );
+            let gap = _mm512_castsi512_ps(_mm512_and_si512(
+                _mm512_castps_si512(_mm512_sub_ps(cv, t)),
+                abs_mask,
+            ));
+            // near the threshold (or NaN): the reference decides
+            exact |= _mm512_cmp_ps_mask::<_CMP_NGE_UQ>(gap, cmargin);
+            texture = _mm512_cmp_ps_mask::<_CMP_GT_OQ>(cv, t);
+        }
+        if let Some(sat) = sat {
+            let b = _mm_loadu_si128(sat.as_ptr().add(i).cast());
+            exact |= _mm_cmpneq_epi8_mask(b, _mm_setzero_si128());
+        }
+        let valid = tail_mask(i, tw);
+        exact &= valid;
+        let group = _mm512_add_epi32(_mm512_mullo_epi32(pos, levels), lo);
+        let c = _mm512_mullo_epi32(group, sat2);
+        let c = _mm512_mask_add_epi32(c, texture, c, one);
+        let c = _mm512_mask_mov_epi32(c, exact, no_class);
+        _mm512_storeu_si512(class.as_mut_ptr().add(i).cast(), c);
+        counts.texture += u64::from((texture & !exact & valid).count_ones());
+        counts.exact += u64::from(exact.count_ones());
+        i += WIDE;
+    }
+    Some(counts)
+}
+
+/// Apply the kernels of pixels `0..tw` (rounded up to 8) of one output row into
+/// the three output planes. `kernels` holds per class, `kstride` values apart:
+/// `P` rows of 16 weights (X row | Y row, 8 lanes each), the biases (X at lane
+/// 0, Y at lane 8), `P` rows of 8 Z weights, and the Z bias at lane 0. Pixels
+/// marked [`NO_CLASS`] get class 0's values (the caller overwrites them).
+///
+/// Returns `false` (and writes nothing) if a slice is too short.
+///
+/// # Safety
+/// The CPU must have AVX-512 F and VL, AVX2 and FMA.
+#[target_feature(enable = "avx512f,avx512vl,avx512dq,avx2,fma")]
+#[allow(clippy::too_many_arguments)]
+pub(super) unsafe fn apply_row<const P: usize>(
+    buf: &[f32],
+    stride: usize,
+    class: &[u32],
+    tw: usize,
+    kernels: &[f32],
+    kstride: usize,
+    planes: [&mut [f32]; 3],
+) -> bool {
+    let n = tw.div_ceil(8) * 8;
+    let n_classes = kernels.len() / kstride.max(1);
+    if P == 0
+        || kstride < 24 * (P + 1)
+        || n_classes == 0
+        || class.len() < n
+        || buf.len() < (P - 1) * stride + n + 8
+        || planes.iter().any(|p| p.len() < n)
+    {
+        return false;
+    }
+    let (bp, kp) = (buf.as_ptr(), kernels.as_ptr());
+    let last = (n_classes - 1) as u32;
+    let [px, py, pz] = planes;
+    let mut i0 = 0;
+    while i0 < n {
+        let mut xy = [_mm512_setzero_ps(); 8];
+        let mut z = [_mm256_setzero_ps(); 8];
+        for p in 0..8 {
+            let c = class[i0 + p];
+            let c = if c == NO_CLASS { 0 } else { c.min(last) } as usize;
+            let k = kp.add(c * kstride);
+            let b = bp.add(i0 + p);
+            let mut axy = _mm512_loadu_ps(k.add(16 * P));
+            let mut az = _mm256_loadu_ps(k.add(16 * (P + 1) + 8 * P));
+            for dy in 0..P {
+                let row = _mm256_loadu_ps(b.add(dy * stride));
+                let both = _mm512_broadcast_f32x8(row);
+                axy = _mm512_fmadd_ps(both, _mm512_loadu_ps(k.add(16 * dy)), axy);
+                az = _mm256_fmadd_ps(row, _mm256_loadu_ps(k.add(16 * (P + 1) + 8 * dy)), az);
+            }
+            xy[p] = axy;
+            z[p] = az;
+        }
+        let (x8, y8) = reduce_xy(&xy);
+        _mm256_storeu_ps(px.as_mut_ptr().add(i0), x8);
+        _mm256_storeu_ps(py.as_mut_ptr().add(i0), y8);
+        _mm256_storeu_ps(pz.as_mut_ptr().add(i0), reduce8(&z));
+        i0 += 8;
+    }
+    true
+}
+
+/// `[a0+a1, a2+a3, b0+b1, b2+b3]` in each 128-bit lane.
+#[inline(always)]
+unsafe fn hadd512(a: __m512, b: __m512) -> __m512 {
+    let even = _mm512_shuffle_ps::<0b10_00_10_00>(a, b);
+    let odd = _mm512_shuffle_ps::<0b11_01_11_01>(a, b);
+    _mm512_add_ps(even, odd)
+}
+
+/// Eight [X row | Y row] accumulators → (X sums, Y sums) of the eight pixels.
+#[inline(always)]
+unsafe fn reduce_xy(v: &[__m512; 8]) -> (__m256, __m256) {
+    // per 128-bit lane L of pixel p: after two steps, lane L of u holds the sums of
+    // lane L of pixels 0..4, of w those of pixels 4..8 (lanes 0, 1: X; 2, 3: Y)
+    let u = hadd512(hadd512(v[0], v[1]), hadd512(v[2], v[3]));
+    let w = hadd512(hadd512(v[4], v[5]), hadd512(v[6], v[7]));
+    // [u0, u2, w0, w2] + [u1, u3, w1, w3] = [X 0..4, Y 0..4, X 4..8, Y 4..8]
+    let a = _mm512_shuffle_f32x4::<0b10_00_10_00>(u, w);
+    let b = _mm512_shuffle_f32x4::<0b11_01_11_01>(u, w);
+    let s = _mm512_add_ps(a, b);
+    // → [X 0..4, X 4..8, Y 0..4, Y 4..8]
+    let s = _mm512_shuffle_f32x4::<0b11_01_10_00>(s, s);
+    (_mm512_castps512_ps256(s), _mm512_extractf32x8_ps::<1>(s))
+}
+
+/// Eight 8-lane accumulators → their eight sums.
+#[inline(always)]
+unsafe fn reduce8(v: &[__m256; 8]) -> __m256 {
+    let q0 = _mm256_hadd_ps(_mm256_hadd_ps(v[0], v[1]), _mm256_hadd_ps(v[2], v[3]));
+    let q1 = _mm256_hadd_ps(_mm256_hadd_ps(v[4], v[5]), _mm256_hadd_ps(v[6], v[7]));
+    let lo = _mm256_permute2f128_ps::<0x20>(q0, q1);
+    let hi = _mm256_permute2f128_ps::<0x31>(q0, q1);
+    _mm256_add_ps(lo, hi)
+}
+
+/// The byte order that interleaves three 16-byte planes (R at 0, G at 16, B at 32).
+const INTERLEAVE: [u8; 64] = {
+    let mut t = [0u8; 64];
+    let mut j = 0;
+    while j < 48 {
+        t[j] = ((j % 3) * 16 + j / 3) as u8;
+        j += 1;
+    }
+    t
+};
+
+/// Encode `n` pixels of three linear sRGB planes (white = 1) to interleaved
+/// 8-bit sRGB through `table` (the sRGB table widened to u32, indexed by
+/// `round(v · scale)` clamped to `0..=scale`, as [`SrgbLut::index`](crate::colour::SrgbLut::index)).
+///
+/// Returns `false` (and writes nothing) if a slice is too short or the table does not match `scale`.
+///
+/// # Safety
+/// The CPU must have AVX-512 F, VL, BW and VBMI.
+#[target_feature(enable = "avx512f,avx512vl,avx512bw,avx512dq,avx512vbmi")]
+pub(super) unsafe fn srgb8_row(
+    planes: [&[f32]; 3],
+    n: usize,
+    table: &[u32],
+    scale: f32,
+    out: &mut [u8],
+) -> bool {
+    let padded = n.div_ceil(WIDE) * WIDE;
+    if out.len() < 3 * n
+        || planes.iter().any(|p| p.len() < padded)
+        || !(scale >= 1.0 && (scale as usize) < table.len())
+    {
+        return false;
+    }
+    let vs = _mm512_set1_ps(scale);
+    let half = _mm512_set1_ps(0.5);
+    let zero = _mm512_setzero_ps();
+    let perm = _mm512_loadu_si512(INTERLEAVE.as_ptr().cast());
+    let tp = table.as_ptr().cast::<i32>();
+    let mut i = 0;
+    while i < n {
+        let codes = planes.map(|p| {
+            let v = _mm512_loadu_ps(p.as_ptr().add(i));
+            // max/min return the second operand for NaN: NaN → 0, as SrgbLut::index
+            // v · scale + 0.5 rounded twice (no FMA), as SrgbLut::index
+            let x = _mm512_add_ps(_mm512_mul_ps(v, vs), half);
+            let x = _mm512_min_ps(_mm512_max_ps(x, zero), vs);
+            let idx = _mm512_cvttps_epi32(x);
+            _mm512_cvtepi32_epi8(_mm512_i32gather_epi32::<4>(idx, tp))
+        });
+        let rgb = _mm512_inserti32x4::<2>(
+            _mm512_inserti32x4::<1>(_mm512_castsi128_si512(codes[0]), codes[1]),
+            codes[2],
+        );
+        let bytes = _mm512_permutexvar_epi8(perm, rgb);
+        let m = (n - i).min(WIDE);
+        let mask: __mmask64 = (1u64 << (3 * m)) - 1;
+        _mm512_mask_storeu_epi8(out.as_mut_ptr().add(3 * i).cast(), mask, bytes);
+        i += WIDE;
+    }
+    true
+}
