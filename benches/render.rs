@@ -92,6 +92,18 @@ fn bench(c: &mut Criterion) {
             )
         })
     });
+    // the same render on the AVX2 + FMA kernels (the "before" of the AVX-512 path)
+    let mut avx2 = fast.clone();
+    avx2.options.avx512 = false;
+    eprintln!("AVX-512 kernels: {}", fast.uses_avx512());
+    g.bench_function("l3_fast_avx2_u16_to_srgb8_auto_white", |b| {
+        b.iter(|| {
+            black_box(
+                avx2.render_srgb8(black_box(dn_frame), W, H, None, WhiteLevel::Auto)
+                    .expect("render"),
+            )
+        })
+    });
     g.bench_function("l3_fast_f32_to_xyz", |b| {
         b.iter(|| {
             black_box(

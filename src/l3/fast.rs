@@ -3,13 +3,16 @@
 //!
 //! - the frame is cut into bands of rows (one rayon task each) and column tiles
 //!   small enough for the core's cache; each tile copies its rows plus a halo
-//!   into an f32 buffer, converting u16 DN through a lookup table on the way
-//!   (no float copy of the frame);
+//!   into an f32 buffer, converting u16 DN on the way (vectorised f64
+//!   arithmetic, bit-identical to `RawFrame::to_volts`; no float copy of the frame);
 //! - on 2×2 CFAs the per-channel patch sums come from separable sums of the
 //!   four CFA phases, and the contrast from one vectorised pass per row;
 //! - a pixel whose patch holds no saturated value (most of them) is a plain
 //!   affine map of its patch rows: the kernels are laid out one 8-lane vector
 //!   per patch row and output, applied with FMA where the CPU has it;
+//! - on CPUs with AVX-512 (F, VL, BW, DQ, VBMI) and one channel per CFA phase
+//!   (RGBW), classification, kernels and the sRGB encoding run 16 pixels at a
+//!   time in [`avx512`]; elsewhere the AVX2 + FMA or portable loops do;
 //! - the 3×3 output matrix (illuminant correction, XYZ → linear sRGB and the
 //!   white level) is fused into the kernels, so sRGB leaves through a lookup
 //!   table without an XYZ image;
