@@ -37,7 +37,7 @@ use super::{L3Error, L3Table, PatchGeometry, RenderStats};
 use crate::colour::{SrgbLut, XYZ_TO_LINEAR_SRGB};
 
 /// Rows per rayon task.
-const BAND_ROWS: usize = 16;
+const BAND_ROWS: usize = 32;
 /// Output columns per tile (the tile buffers stay in L2).
 const TILE_COLS: usize = 512;
 /// Lanes per kernel row in the SIMD layout.
@@ -226,6 +226,9 @@ struct Srgb8Sink<'a> {
     lut: &'a SrgbLut,
     /// The table widened to u32 for gathers.
     wide: Vec<u32>,
+    /// The table as arithmetic, where that reproduces every entry.
+    #[cfg(target_arch = "x86_64")]
+    poly: Option<avx512::SrgbPoly>,
 }
 impl Sink<u8> for Srgb8Sink<'_> {
     #[inline(always)]
@@ -234,7 +237,8 @@ impl Sink<u8> for Srgb8Sink<'_> {
         {
             let planes = [&lin[0][..], &lin[1][..], &lin[2][..]];
             // SAFETY: the caller guarantees the CPU features; the kernel checks lengths.
-            if unsafe { avx512::srgb8_row(planes, n, &self.wide, self.lut.scale(), row) } {
+            let (wide, scale, poly) = (&self.wide, self.lut.scale(), self.poly.as_ref());
+            if unsafe { avx512::srgb8_row(planes, n, wide, scale, poly, row) } {
                 return;
             }
         }
@@ -436,7 +440,12 @@ impl FastRenderer {
         let lut = SrgbLut::new();
         let wide = lut.entries().iter().map(|&v| u32::from(v)).collect();
         let mut out = output_buffer::<u8>(reg.width * reg.height * 3);
-        let sink = Srgb8Sink { lut: &lut, wide };
+        let sink = Srgb8Sink {
+            lut: &lut,
+            wide,
+            #[cfg(target_arch = "x86_64")]
+            poly: avx512::SrgbPoly::for_table(lut.entries()),
+        };
         let mut stats = self.run(&src, reg, &set, &mut out, &sink);
         stats.clamped = clamped;
         Ok((out, wy, stats))

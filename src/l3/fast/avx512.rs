@@ -167,18 +167,23 @@ pub(super) unsafe fn classify_row<const P: usize>(
             | _mm512_cmp_ps_mask::<_CMP_NGE_UQ>(_mm512_sub_ps(top, lum), margin);
         let mut texture: __mmask16 = 0;
         if prm.use_contrast {
-            let mut acc = _mm512_setzero_ps();
-            for dy in 0..P {
+            // one accumulator per patch row, so the adds do not wait on each other
+            let mut acc = [_mm512_setzero_ps(); P];
+            for (dy, a) in acc.iter_mut().enumerate() {
                 let pr = (dy + rad) % 2;
                 let row = bp.add(dy * stride + i);
                 for dx in 0..P {
                     let v = _mm512_loadu_ps(row.add(dx));
                     let d = _mm512_sub_ps(v, m[2 * pr + (dx + rad) % 2]);
                     let d = _mm512_castsi512_ps(_mm512_and_si512(_mm512_castps_si512(d), abs_mask));
-                    acc = _mm512_add_ps(acc, d);
+                    *a = _mm512_add_ps(*a, d);
                 }
             }
-            let cv = _mm512_mul_ps(acc, inv_area);
+            let mut sum = acc[0];
+            for a in &acc[1..] {
+                sum = _mm512_add_ps(sum, *a);
+            }
+            let cv = _mm512_mul_ps(sum, inv_area);
             let t = _mm512_mask_blend_ps(
                 odd_lanes,
                 _mm512_permutex2var_ps(te0, lo, te1),
@@ -308,6 +313,72 @@ unsafe fn reduce8(v: &[__m256; 8]) -> __m256 {
     _mm256_add_ps(lo, hi)
 }
 
+/// `m^(5/12)` for `m` in [1, 2), as a polynomial in `m − 1.5` (degree 7,
+/// least squares on Chebyshev nodes; error 2e-8).
+const POW_5_12: [f32; 8] = [
+    1.184_053_7,
+    0.328_903_7,
+    -0.063_956_715,
+    0.022_505_613,
+    -0.009_625_537,
+    0.004_580_279_3,
+    -0.002_744_552_2,
+    0.001_501_889_6,
+];
+/// Entries of the table the polynomial encoder replaces.
+const POLY_ENTRIES: u32 = 4096;
+/// The last index of that table on the sRGB curve's linear segment (i / 4095 ≤ 0.003 130 8).
+const POLY_LINEAR_LAST: i32 = 12;
+
+/// The sRGB table as arithmetic: `2^(−5k/12)` for k = 0..16, and the scales.
+#[derive(Clone, Copy, Debug)]
+pub(super) struct SrgbPoly {
+    exps: [f32; 16],
+    inv: f32,
+    linear: f32,
+    gain: f32,
+    offset: f32,
+}
+
+impl SrgbPoly {
+    /// The encoder, if it reproduces every entry of `table` (the 4096-entry
+    /// sRGB table, `code(i) = round(255 · srgb(i / 4095))`), checked exhaustively.
+    pub(super) fn for_table(table: &[u8]) -> Option<Self> {
+        let last = f64::from(POLY_ENTRIES - 1);
+        let poly = Self {
+            exps: std::array::from_fn(|k| (-(5.0 * k as f64) / 12.0).exp2() as f32),
+            inv: (1.0 / last) as f32,
+            linear: (255.0 * 12.92 / last) as f32,
+            gain: (255.0 * 1.055) as f32,
+            offset: (255.0 * 0.055) as f32,
+        };
+        let same = table.len() == POLY_ENTRIES as usize
+            && (0..POLY_ENTRIES).all(|i| poly.code(i) == table[i as usize]);
+        same.then_some(poly)
+    }
+
+    /// The code of table index `i`, by the same operations as the vector kernel.
+    fn code(&self, i: u32) -> u8 {
+        let fi = i as f32;
+        let g = if i as i32 <= POLY_LINEAR_LAST {
+            fi * self.linear
+        } else {
+            let x = fi * self.inv;
+            let bits = x.to_bits();
+            let e = ((bits >> 23) & 0xff) as i32 - 127;
+            let m = f32::from_bits((bits & 0x007f_ffff) | 0x3f80_0000);
+            let t = m - 1.5;
+            let mut acc = POW_5_12[7];
+            for &c in POW_5_12[..7].iter().rev() {
+                acc = acc.mul_add(t, c);
+            }
+            let q = self.exps[(-e).clamp(0, 15) as usize] * acc;
+            q.mul_add(self.gain, -self.offset)
+        };
+        g.round_ties_even().clamp(0.0, 255.0) as u8
+    }
+}
+
 /// The byte order that interleaves three 16-byte planes (R at 0, G at 16, B at 32).
 const INTERLEAVE: [u8; 64] = {
     let mut t = [0u8; 64];
@@ -333,6 +404,7 @@ pub(super) unsafe fn srgb8_row(
     n: usize,
     table: &[u32],
     scale: f32,
+    poly: Option<&SrgbPoly>,
     out: &mut [u8],
 ) -> bool {
     let padded = n.div_ceil(WIDE) * WIDE;
@@ -347,16 +419,47 @@ pub(super) unsafe fn srgb8_row(
     let zero = _mm512_setzero_ps();
     let perm = _mm512_loadu_si512(INTERLEAVE.as_ptr().cast());
     let tp = table.as_ptr().cast::<i32>();
+    // the polynomial encoder's constants (unused without it)
+    let pc = poly.copied().unwrap_or(SrgbPoly {
+        exps: [0.0; 16],
+        inv: 0.0,
+        linear: 0.0,
+        gain: 0.0,
+        offset: 0.0,
+    });
+    let exps = _mm512_loadu_ps(pc.exps.as_ptr());
+    let (inv, linear) = (_mm512_set1_ps(pc.inv), _mm512_set1_ps(pc.linear));
+    let (gain, offset) = (_mm512_set1_ps(pc.gain), _mm512_set1_ps(pc.offset));
+    let coef = POW_5_12.map(|c| _mm512_set1_ps(c));
+    let (mid, last_linear) = (_mm512_set1_ps(1.5), _mm512_set1_epi32(POLY_LINEAR_LAST));
     let mut i = 0;
     while i < n {
         let codes = planes.map(|p| {
             let v = _mm512_loadu_ps(p.as_ptr().add(i));
-            // max/min return the second operand for NaN: NaN → 0, as SrgbLut::index
+            // max/min return the second operand for NaN: NaN → 0, as SrgbLut::index;
             // v · scale + 0.5 rounded twice (no FMA), as SrgbLut::index
             let x = _mm512_add_ps(_mm512_mul_ps(v, vs), half);
             let x = _mm512_min_ps(_mm512_max_ps(x, zero), vs);
             let idx = _mm512_cvttps_epi32(x);
-            _mm512_cvtepi32_epi8(_mm512_i32gather_epi32::<4>(idx, tp))
+            if poly.is_none() {
+                return _mm512_cvtepi32_epi8(_mm512_i32gather_epi32::<4>(idx, tp));
+            }
+            // the table entry computed: 255 · (1.055 · x^(5/12) − 0.055), x = 2^e · m
+            let fi = _mm512_cvtepi32_ps(idx);
+            let x = _mm512_mul_ps(fi, inv);
+            let e = _mm512_getexp_ps(x);
+            let m = _mm512_getmant_ps::<_MM_MANT_NORM_1_2, _MM_MANT_SIGN_SRC>(x);
+            let t = _mm512_sub_ps(m, mid);
+            let mut acc = coef[7];
+            for c in coef[..7].iter().rev() {
+                acc = _mm512_fmadd_ps(acc, t, *c);
+            }
+            let k = _mm512_cvtps_epi32(_mm512_sub_ps(zero, e));
+            let q = _mm512_mul_ps(_mm512_permutexvar_ps(k, exps), acc);
+            let g = _mm512_fmsub_ps(q, gain, offset);
+            let small = _mm512_cmple_epi32_mask(idx, last_linear);
+            let g = _mm512_mask_blend_ps(small, g, _mm512_mul_ps(fi, linear));
+            _mm512_cvtusepi32_epi8(_mm512_cvtps_epi32(g))
         });
         let rgb = _mm512_inserti32x4::<2>(
             _mm512_inserti32x4::<1>(_mm512_castsi128_si512(codes[0]), codes[1]),
@@ -369,4 +472,47 @@ pub(super) unsafe fn srgb8_row(
         i += WIDE;
     }
     true
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::colour::SrgbLut;
+
+    #[test]
+    fn the_polynomial_reproduces_every_entry_of_the_srgb_table() {
+        let lut = SrgbLut::new();
+        assert!(SrgbPoly::for_table(lut.entries()).is_some());
+        // and refuses a table it does not reproduce
+        let mut other = lut.entries().to_vec();
+        other[2000] = other[2000].wrapping_add(1);
+        assert!(SrgbPoly::for_table(&other).is_none());
+        assert!(SrgbPoly::for_table(SrgbLut::with_entries(1024).entries()).is_none());
+    }
+
+    #[test]
+    fn the_vector_encoder_equals_the_table() {
+        if !super::super::avx512_available() {
+            return;
+        }
+        let lut = SrgbLut::new();
+        let wide: Vec<u32> = lut.entries().iter().map(|&v| u32::from(v)).collect();
+        let poly = SrgbPoly::for_table(lut.entries());
+        // every table index, plus values outside [0, 1] and NaN
+        let n: usize = 4096 + 4;
+        let mut plane: Vec<f32> = (0..4096).map(|i| i as f32 / 4095.0).collect();
+        plane.extend([-1.0, 7.0, f32::NAN, f32::INFINITY]);
+        plane.resize(n.div_ceil(WIDE) * WIDE, 0.0);
+        let want: Vec<u8> = plane[..n]
+            .iter()
+            .flat_map(|&v| [lut.encode(v); 3])
+            .collect();
+        for p in [poly.as_ref(), None] {
+            let mut out = vec![0u8; 3 * n];
+            let planes = [&plane[..], &plane[..], &plane[..]];
+            // SAFETY: the CPU has the features (checked above)
+            assert!(unsafe { srgb8_row(planes, n, &wide, lut.scale(), p, &mut out) });
+            assert_eq!(out, want, "polynomial {}", p.is_some());
+        }
+    }
 }
