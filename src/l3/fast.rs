@@ -183,6 +183,8 @@ struct Scratch {
     contrast: Vec<f32>,
     sat: Vec<bool>,
     class: Vec<u32>,
+    /// Per pixel, where its kernels start in the AVX-512 layout.
+    offsets: Vec<u32>,
     lin: [Vec<f32>; 3],
     patch: Vec<f32>,
     feat: Vec<f32>,
@@ -857,8 +859,9 @@ impl FastRenderer {
                 let hm = &mut sc.hmax[j * tw8..(j + 1) * tw8];
                 hm.copy_from_slice(&row[..tw8]);
                 for d in 1..s {
+                    // (values are finite: a plain comparison, which vectorises)
                     for (o, &v) in hm.iter_mut().zip(&row[d..d + tw8]) {
-                        *o = o.max(v);
+                        *o = if v > *o { v } else { *o };
                     }
                 }
             }
@@ -881,6 +884,9 @@ impl FastRenderer {
             sc.class.resize(tw8, NO_CLASS);
         }
         sc.class[..tw8].fill(NO_CLASS);
+        if sc.offsets.len() < tw8 {
+            sc.offsets.resize(tw8, 0);
+        }
         sc.patch.clear();
         sc.patch.resize(s * s, 0.0);
         sc.feat.clear();
@@ -896,7 +902,7 @@ impl FastRenderer {
         };
         #[cfg(target_arch = "x86_64")]
         let wide = if WIDE && fast_classes {
-            self.class_params(thresholds, use_contrast)
+            self.class_params(thresholds, use_contrast, set)
         } else {
             None
         };
@@ -905,12 +911,13 @@ impl FastRenderer {
             let r = tile.r0 + y;
             // 3. which pixels see a saturated value
             if any_sat {
-                for (i, f) in sc.sat[..tw8].iter_mut().enumerate() {
-                    let mut m = 0f32;
-                    for dy in 0..s {
-                        m = m.max(sc.hmax[(y + dy) * tw8 + i]);
+                let sat = &mut sc.sat[..tw8];
+                sat.fill(false);
+                for dy in 0..s {
+                    let h = &sc.hmax[(y + dy) * tw8..(y + dy + 1) * tw8];
+                    for (f, &v) in sat.iter_mut().zip(h) {
+                        *f |= v >= thr;
                     }
-                    *f = m >= thr;
                 }
             }
             #[cfg(target_arch = "x86_64")]
@@ -934,6 +941,7 @@ impl FastRenderer {
                         cpar,
                         prm,
                         &mut sc.class,
+                        &mut sc.offsets,
                     )
                 };
                 let [l0, l1, l2] = &mut sc.lin;
@@ -943,7 +951,7 @@ impl FastRenderer {
                         avx512::apply_row::<P>(
                             rows,
                             stride,
-                            &sc.class,
+                            &sc.offsets,
                             tw,
                             set.paired(),
                             set.pstride,
@@ -1134,7 +1142,12 @@ impl FastRenderer {
     /// The AVX-512 classification's view of the table for one tile: phase
     /// weights, level edges and the contrast thresholds per position and level.
     #[cfg(target_arch = "x86_64")]
-    fn class_params(&self, thresholds: &[f32], use_contrast: bool) -> Option<avx512::ClassParams> {
+    fn class_params(
+        &self,
+        thresholds: &[f32],
+        use_contrast: bool,
+        set: &KernelSet,
+    ) -> Option<avx512::ClassParams> {
         let u = self.uniform_phases?;
         let src = self.geo.level_edges();
         if self.n_levels > avx512::MAX_LEVELS || src.len() >= avx512::MAX_LEVELS {
@@ -1164,6 +1177,8 @@ impl FastRenderer {
             n_levels: self.n_levels as u32,
             n_sat: n_sat as u32,
             use_contrast,
+            n_classes: u32::try_from(set.paired().len() / set.pstride).ok()?,
+            kstride: u32::try_from(set.pstride).ok()?,
         })
     }
 }

@@ -40,6 +40,9 @@ pub(super) struct ClassParams {
     pub n_levels: u32,
     pub n_sat: u32,
     pub use_contrast: bool,
+    /// Classes in the kernel layout, and values per class.
+    pub n_classes: u32,
+    pub kstride: u32,
 }
 
 /// Per-row counts from [`classify_row`].
@@ -86,6 +89,7 @@ pub(super) unsafe fn classify_row<const P: usize>(
     cpar: usize,
     prm: &ClassParams,
     class: &mut [u32],
+    offsets: &mut [u32],
 ) -> Option<RowCounts> {
     let rad = P / 2;
     if P == 0
@@ -95,6 +99,8 @@ pub(super) unsafe fn classify_row<const P: usize>(
         || ho.len() < P * tw_pad
         || buf.len() < (P - 1) * stride + tw_pad + P - 1
         || class.len() < tw_pad
+        || offsets.len() < tw_pad
+        || prm.n_classes == 0
         || sat.is_some_and(|s| s.len() < tw_pad)
         || prm.n_levels as usize > MAX_LEVELS
     {
@@ -134,6 +140,8 @@ pub(super) unsafe fn classify_row<const P: usize>(
     let cmargin = _mm512_set1_ps(CONTRAST_MARGIN);
     let abs_mask = _mm512_set1_epi32(0x7fff_ffff);
     let no_class = _mm512_set1_epi32(NO_CLASS as i32);
+    let last_class = _mm512_set1_epi32(prm.n_classes as i32 - 1);
+    let kstride = _mm512_set1_epi32(prm.kstride as i32);
     let mut counts = RowCounts::default();
     let mut i = 0;
     while i < tw {
@@ -206,6 +214,12 @@ pub(super) unsafe fn classify_row<const P: usize>(
         let group = _mm512_add_epi32(_mm512_mullo_epi32(pos, levels), lo);
         let c = _mm512_mullo_epi32(group, sat2);
         let c = _mm512_mask_add_epi32(c, texture, c, one);
+        // where each pixel's kernels start (class 0 for the reference path's pixels)
+        let k = _mm512_maskz_mov_epi32(!exact, _mm512_min_epu32(c, last_class));
+        _mm512_storeu_si512(
+            offsets.as_mut_ptr().add(i).cast(),
+            _mm512_mullo_epi32(k, kstride),
+        );
         let c = _mm512_mask_mov_epi32(c, exact, no_class);
         _mm512_storeu_si512(class.as_mut_ptr().add(i).cast(), c);
         counts.texture += u64::from((texture & !exact & valid).count_ones());
@@ -216,10 +230,11 @@ pub(super) unsafe fn classify_row<const P: usize>(
 }
 
 /// Apply the kernels of pixels `0..tw` (rounded up to 8) of one output row into
-/// the three output planes. `kernels` holds per class, `kstride` values apart:
+/// the three output planes, with each pixel's kernels at `offsets` (from
+/// [`classify_row`]) in `kernels`, which holds per class, `kstride` values apart:
 /// `P` rows of 16 weights (X row | Y row, 8 lanes each), the biases (X at lane
 /// 0, Y at lane 8), `P` rows of 8 Z weights, and the Z bias at lane 0. Pixels
-/// marked [`NO_CLASS`] get class 0's values (the caller overwrites them).
+/// for the reference path get class 0's values (the caller overwrites them).
 ///
 /// Returns `false` (and writes nothing) if a slice is too short.
 ///
@@ -230,34 +245,39 @@ pub(super) unsafe fn classify_row<const P: usize>(
 pub(super) unsafe fn apply_row<const P: usize>(
     buf: &[f32],
     stride: usize,
-    class: &[u32],
+    offsets: &[u32],
     tw: usize,
     kernels: &[f32],
     kstride: usize,
     planes: [&mut [f32]; 3],
 ) -> bool {
     let n = tw.div_ceil(8) * 8;
-    let n_classes = kernels.len() / kstride.max(1);
     if P == 0
         || kstride < 24 * (P + 1)
-        || n_classes == 0
-        || class.len() < n
+        || kernels.len() < kstride
+        || offsets.len() < n.div_ceil(WIDE) * WIDE
         || buf.len() < (P - 1) * stride + n + 8
         || planes.iter().any(|p| p.len() < n)
     {
         return false;
     }
+    // every class's values lie inside `kernels`
+    let top = _mm512_set1_epi32((kernels.len() - kstride).min(i32::MAX as usize) as i32);
+    let mut past: __mmask16 = 0;
+    for chunk in offsets[..n.div_ceil(WIDE) * WIDE].chunks_exact(WIDE) {
+        past |= _mm512_cmpgt_epu32_mask(_mm512_loadu_si512(chunk.as_ptr().cast()), top);
+    }
+    if past != 0 {
+        return false;
+    }
     let (bp, kp) = (buf.as_ptr(), kernels.as_ptr());
-    let last = (n_classes - 1) as u32;
     let [px, py, pz] = planes;
     let mut i0 = 0;
     while i0 < n {
         let mut xy = [_mm512_setzero_ps(); 8];
         let mut z = [_mm256_setzero_ps(); 8];
         for p in 0..8 {
-            let c = class[i0 + p];
-            let c = if c == NO_CLASS { 0 } else { c.min(last) } as usize;
-            let k = kp.add(c * kstride);
+            let k = kp.add(*offsets.get_unchecked(i0 + p) as usize);
             let b = bp.add(i0 + p);
             let mut axy = _mm512_loadu_ps(k.add(16 * P));
             let mut az = _mm256_loadu_ps(k.add(16 * (P + 1) + 8 * P));
