@@ -92,6 +92,23 @@ fn bench(c: &mut Criterion) {
             )
         })
     });
+    // the same into an output buffer reused from frame to frame (no fresh 36 MB to fault in)
+    let mut reused = vec![0u8; W * H * 3];
+    g.bench_function("l3_fast_u16_to_srgb8_auto_white_reused_output", |b| {
+        b.iter(|| {
+            black_box(
+                fast.render_srgb8_into(
+                    black_box(dn_frame),
+                    W,
+                    H,
+                    None,
+                    WhiteLevel::Auto,
+                    &mut reused,
+                )
+                .expect("render"),
+            )
+        })
+    });
     // the same render on the AVX2 + FMA kernels (the "before" of the AVX-512 path)
     let mut avx2 = fast.clone();
     avx2.options.avx512 = false;

@@ -192,6 +192,17 @@ fn srgb8_u16_and_regions_match_the_reference_pipeline() {
             &part[y * reg.width * 3..(y + 1) * reg.width * 3]
         );
     }
+    // into a caller's buffer (reused, so first filled with garbage): the same bytes
+    let mut buf = vec![7u8; w * h * 3];
+    let (wy_into, _) = fast
+        .render_srgb8_into(mosaic, w, h, None, WhiteLevel::Auto, &mut buf)
+        .expect("into");
+    assert_eq!((wy_into, &buf), (wy_fast, &rgb));
+    let mut short = vec![0u8; w * h * 3 - 1];
+    assert!(
+        fast.render_srgb8_into(mosaic, w, h, None, WhiteLevel::Auto, &mut short)
+            .is_err()
+    );
     // every instruction set gives the same codes but for rounding of the kernel sums
     for (simd, avx512) in [(true, false), (false, false)] {
         let mut other = FastRenderer::new(&table, &kernels).expect("fast");

@@ -429,8 +429,35 @@ impl FastRenderer {
         region: Option<Region>,
         white: WhiteLevel,
     ) -> Result<(Vec<u8>, f64, RenderStats), L3Error> {
-        let (src, clamped) = self.source(mosaic, width, height)?;
         let reg = check_region(region, width, height)?;
+        let mut out = output_buffer::<u8>(reg.width * reg.height * 3);
+        let (wy, stats) = self.render_srgb8_into(mosaic, width, height, region, white, &mut out)?;
+        Ok((out, wy, stats))
+    }
+
+    /// [`render_srgb8`](Self::render_srgb8) into `out` (3 bytes per pixel of the
+    /// region, row-major), e.g. a buffer reused from frame to frame. Returns the
+    /// white Y used.
+    pub fn render_srgb8_into(
+        &self,
+        mosaic: Mosaic<'_>,
+        width: usize,
+        height: usize,
+        region: Option<Region>,
+        white: WhiteLevel,
+        out: &mut [u8],
+    ) -> Result<(f64, RenderStats), L3Error> {
+        let reg = check_region(region, width, height)?;
+        let need = reg.width * reg.height * 3;
+        if out.len() != need {
+            return Err(L3Error::InvalidInput(format!(
+                "output buffer holds {} bytes; the {}×{} region needs {need}",
+                out.len(),
+                reg.width,
+                reg.height
+            )));
+        }
+        let (src, clamped) = self.source(mosaic, width, height)?;
         let wy = self.white_of(&src, white);
         let k = 1.0 / wy;
         let m = XYZ_TO_LINEAR_SRGB.map(|r| r.map(|v| v * k));
@@ -441,16 +468,15 @@ impl FastRenderer {
         );
         let lut = SrgbLut::new();
         let wide = lut.entries().iter().map(|&v| u32::from(v)).collect();
-        let mut out = output_buffer::<u8>(reg.width * reg.height * 3);
         let sink = Srgb8Sink {
             lut: &lut,
             wide,
             #[cfg(target_arch = "x86_64")]
             poly: avx512::SrgbPoly::for_table(lut.entries()),
         };
-        let mut stats = self.run(&src, reg, &set, &mut out, &sink);
+        let mut stats = self.run(&src, reg, &set, out, &sink);
         stats.clamped = clamped;
-        Ok((out, wy, stats))
+        Ok((wy, stats))
     }
 
     /// The white level of a frame: `Y(v)` as is, or the 99th percentile of the
@@ -1248,7 +1274,11 @@ fn phase_sums_row<const P: usize>(row: &[f32], he: &mut [f32], ho: &mut [f32]) {
                 .get(x0 + d..x0 + d + W)
                 .and_then(|r| r.try_into().ok())
                 .unwrap_or(&[0.0; W]);
-            let acc = if (d + rad) % 2 == 0 { &mut e } else { &mut o };
+            let acc = if (d + rad).is_multiple_of(2) {
+                &mut e
+            } else {
+                &mut o
+            };
             for l in 0..W {
                 acc[l] += v[l];
             }
