@@ -560,17 +560,27 @@ impl FastRenderer {
         let swing = self.swing;
         let (len, dn, clamped) = match mosaic {
             Mosaic::Volts(v) => {
-                if let Some(i) = v.par_iter().position_first(|x| !x.is_finite()) {
+                // one vectorised pass counts both; the first bad value is looked up only if there is one
+                let (bad, clamped) = v
+                    .par_chunks(1 << 16)
+                    .map(|ch| {
+                        ch.iter().fold((0u64, 0u64), |(b, c), &x| {
+                            let finite = x.abs() < f32::INFINITY;
+                            (
+                                b + u64::from(!finite),
+                                c + u64::from(!(0.0..=swing).contains(&x)),
+                            )
+                        })
+                    })
+                    .reduce(|| (0, 0), |a, b| (a.0 + b.0, a.1 + b.1));
+                if bad > 0 {
+                    let i = v.par_iter().position_first(|x| !x.is_finite()).unwrap_or(0);
                     return Err(L3Error::InvalidInput(format!(
                         "input value at row {}, column {} is not finite",
                         i / width,
                         i % width
                     )));
                 }
-                let clamped = v
-                    .par_chunks(1 << 16)
-                    .map(|ch| ch.iter().filter(|&&x| !(0.0..=swing).contains(&x)).count() as u64)
-                    .sum();
                 (v.len(), DnScale::default(), clamped)
             }
             Mosaic::Dn { data, black, white } => {
