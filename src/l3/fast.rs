@@ -739,16 +739,29 @@ impl FastRenderer {
         offset: usize,
         sink: &S,
     ) -> RenderStats {
-        // the patch size as a constant where it is a common one, so loops unroll
+        self.tile_sized::<false, T, S>(src, set, tile, scratch, band, row_len, offset, sink)
+    }
+
+    /// [`tile`](Self::tile) with the patch size as a constant where it is a common
+    /// one, so loops unroll (inlined into the `target_feature` functions).
+    #[inline(always)]
+    #[allow(clippy::too_many_arguments)]
+    fn tile_sized<const WIDE: bool, T, S: Sink<T>>(
+        &self,
+        src: &Source<'_>,
+        set: &KernelSet,
+        tile: Tile,
+        sc: &mut Scratch,
+        band: &mut [T],
+        row_len: usize,
+        offset: usize,
+        sink: &S,
+    ) -> RenderStats {
         match self.geo.size {
-            3 => self
-                .tile::<true, false, 3, T, S>(src, set, tile, scratch, band, row_len, offset, sink),
-            5 => self
-                .tile::<true, false, 5, T, S>(src, set, tile, scratch, band, row_len, offset, sink),
-            7 => self
-                .tile::<true, false, 7, T, S>(src, set, tile, scratch, band, row_len, offset, sink),
-            _ => self
-                .tile::<true, false, 0, T, S>(src, set, tile, scratch, band, row_len, offset, sink),
+            3 => self.tile::<true, WIDE, 3, T, S>(src, set, tile, sc, band, row_len, offset, sink),
+            5 => self.tile::<true, WIDE, 5, T, S>(src, set, tile, sc, band, row_len, offset, sink),
+            7 => self.tile::<true, WIDE, 7, T, S>(src, set, tile, sc, band, row_len, offset, sink),
+            _ => self.tile::<true, false, 0, T, S>(src, set, tile, sc, band, row_len, offset, sink),
         }
     }
 
@@ -766,16 +779,7 @@ impl FastRenderer {
         offset: usize,
         sink: &S,
     ) -> RenderStats {
-        match self.geo.size {
-            3 => self
-                .tile::<true, true, 3, T, S>(src, set, tile, scratch, band, row_len, offset, sink),
-            5 => self
-                .tile::<true, true, 5, T, S>(src, set, tile, scratch, band, row_len, offset, sink),
-            7 => self
-                .tile::<true, true, 7, T, S>(src, set, tile, scratch, band, row_len, offset, sink),
-            _ => self
-                .tile::<true, false, 0, T, S>(src, set, tile, scratch, band, row_len, offset, sink),
-        }
+        self.tile_sized::<true, T, S>(src, set, tile, scratch, band, row_len, offset, sink)
     }
 
     #[cfg(not(target_arch = "x86_64"))]
