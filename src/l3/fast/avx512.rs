@@ -63,18 +63,20 @@ fn tail_mask(i: usize, n: usize) -> u16 {
 
 /// Classify pixels `0..tw` of one output row.
 ///
-/// - `he`, `ho`: `p` rows of `tw_pad` horizontal sums over the even / odd column
+/// - `he`, `ho`: `P` rows of `tw_pad` horizontal sums over the even / odd column
 ///   offsets of the patch, starting at the patch's top row;
 /// - `buf`: the tile buffer from the patch's top row, rows `stride` apart;
 /// - `sat`: per pixel, whether its patch holds a saturated value (when the tile can);
 /// - `class`: receives the class of each pixel, or [`NO_CLASS`] where the
 ///   reference code must decide; `rpar`/`cpar` are the parities of the row and
-///   of the tile's first column.
+///   of the tile's first column;
+/// - `offsets`: receives where each pixel's kernels start in the AVX-512 layout
+///   (class 0's for the reference path's pixels), for [`apply_row`].
 ///
 /// Returns `None` (and writes nothing) if a slice is too short.
 ///
 /// # Safety
-/// The CPU must have AVX-512 F, VL and BW.
+/// The CPU must have AVX-512 F, VL, BW and DQ, AVX2 and FMA.
 #[target_feature(enable = "avx512f,avx512vl,avx512bw,avx512dq,avx2,fma")]
 #[allow(clippy::too_many_arguments)]
 pub(super) unsafe fn classify_row<const P: usize>(
@@ -239,7 +241,7 @@ pub(super) unsafe fn classify_row<const P: usize>(
 /// Returns `false` (and writes nothing) if a slice is too short.
 ///
 /// # Safety
-/// The CPU must have AVX-512 F and VL, AVX2 and FMA.
+/// The CPU must have AVX-512 F, VL and DQ, AVX2 and FMA.
 #[target_feature(enable = "avx512f,avx512vl,avx512dq,avx2,fma")]
 #[allow(clippy::too_many_arguments)]
 pub(super) unsafe fn apply_row<const P: usize>(
@@ -417,7 +419,7 @@ const INTERLEAVE: [u8; 64] = {
 /// Returns `false` (and writes nothing) if a slice is too short or the table does not match `scale`.
 ///
 /// # Safety
-/// The CPU must have AVX-512 F, VL, BW and VBMI.
+/// The CPU must have AVX-512 F, VL, BW, DQ and VBMI.
 #[target_feature(enable = "avx512f,avx512vl,avx512bw,avx512dq,avx512vbmi")]
 pub(super) unsafe fn srgb8_row(
     planes: [&[f32]; 3],
