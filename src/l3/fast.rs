@@ -224,15 +224,33 @@ impl Sink<f32> for XyzSink {
 }
 
 /// Interleaved 8-bit sRGB from linear sRGB (white = 1).
-struct Srgb8Sink<'a> {
-    lut: &'a SrgbLut,
+struct Srgb8Sink {
+    lut: SrgbLut,
     /// The table widened to u32 for gathers.
     wide: Vec<u32>,
     /// The table as arithmetic, where that reproduces every entry.
     #[cfg(target_arch = "x86_64")]
     poly: Option<avx512::SrgbPoly>,
 }
-impl Sink<u8> for Srgb8Sink<'_> {
+
+impl Srgb8Sink {
+    /// The default table in every form the sinks use, built (and the polynomial
+    /// checked against all its entries) once per process.
+    fn shared() -> &'static Self {
+        static SINK: std::sync::OnceLock<Srgb8Sink> = std::sync::OnceLock::new();
+        SINK.get_or_init(|| {
+            let lut = SrgbLut::new();
+            Self {
+                wide: lut.entries().iter().map(|&v| u32::from(v)).collect(),
+                #[cfg(target_arch = "x86_64")]
+                poly: avx512::SrgbPoly::for_table(lut.entries()),
+                lut,
+            }
+        })
+    }
+}
+
+impl Sink<u8> for Srgb8Sink {
     #[inline(always)]
     unsafe fn finish_row_wide(&self, row: &mut [u8], lin: &[Vec<f32>; 3], n: usize) {
         #[cfg(target_arch = "x86_64")]
@@ -466,15 +484,7 @@ impl FastRenderer {
             self.geo.size,
             self.sat_cases.len(),
         );
-        let lut = SrgbLut::new();
-        let wide = lut.entries().iter().map(|&v| u32::from(v)).collect();
-        let sink = Srgb8Sink {
-            lut: &lut,
-            wide,
-            #[cfg(target_arch = "x86_64")]
-            poly: avx512::SrgbPoly::for_table(lut.entries()),
-        };
-        let mut stats = self.run(&src, reg, &set, out, &sink);
+        let mut stats = self.run(&src, reg, &set, out, Srgb8Sink::shared());
         stats.clamped = clamped;
         Ok((wy, stats))
     }
