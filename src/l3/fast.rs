@@ -93,6 +93,23 @@ impl Default for FastOptions {
     }
 }
 
+/// Whether patch size `p` uses the packed AVX-512 kernel layout (the three
+/// outputs' weights of a patch row fit one 16-lane register: patch 3 and 5).
+const fn packed(p: usize) -> bool {
+    p > 0 && 3 * p < 16
+}
+
+/// Values per class in the packed layout: `p` weight rows and the bias row, 16 lanes each.
+const fn packed_stride(p: usize) -> usize {
+    16 * (p + 1)
+}
+
+/// The lane of weight `dx` of output `o` in a packed row (and of output o's
+/// bias, dx = 0, in the bias row).
+const fn packed_lane(p: usize, o: usize, dx: usize) -> usize {
+    o * p + dx
+}
+
 /// One kernel set in both layouts.
 #[derive(Clone, Debug)]
 struct KernelSet {
@@ -104,8 +121,10 @@ struct KernelSet {
     rows: Vec<f32>,
     /// Values per class in `paired`.
     pstride: usize,
-    /// Per class, for the AVX-512 kernels: `size` rows of [X row | Y row] weights
-    /// (8 lanes each), the [X bias | Y bias] row, `size` rows of Z weights, the Z bias row.
+    /// Per class, for the AVX-512 kernels: patch 3 and 5 ([`packed`]): `size` rows
+    /// of 16 weights holding all three outputs ([`packed_lane`]) and the bias row;
+    /// patch 7: `size` rows of [X row | Y row] weights (8 lanes each), the
+    /// [X bias | Y bias] row, `size` rows of Z weights, the Z bias row.
     paired: Vec<f32>,
     /// Where the classes start in `paired` (its first 64-byte boundary, so
     /// 16-lane loads of a class never straddle cache lines).
@@ -998,6 +1017,17 @@ impl FastRenderer {
                 let applied = counts.is_some()
                     // SAFETY: as above
                     && unsafe {
+                        if packed(P) {
+                            avx512::apply_row_packed::<P>(
+                                rows,
+                                stride,
+                                &sc.offsets,
+                                tw,
+                                set.paired(),
+                                set.pstride,
+                                [&mut l0[..], &mut l1[..], &mut l2[..]],
+                            )
+                        } else {
                         avx512::apply_row::<P>(
                             rows,
                             stride,
@@ -1007,6 +1037,7 @@ impl FastRenderer {
                             set.pstride,
                             [&mut l0[..], &mut l1[..], &mut l2[..]],
                         )
+                        }
                     };
                 if let (true, Some(counts)) = (applied, counts) {
                     st.texture += counts.texture;
@@ -1432,7 +1463,12 @@ impl KernelSet {
     fn new(flat: Vec<f32>, size: usize, n_sat: usize) -> Self {
         let nf = size * size + 1;
         let stride = 3 * size * LANES + 4;
-        let pstride = 24 * (size + 1);
+        let pack = packed(size);
+        let pstride = if pack {
+            packed_stride(size)
+        } else {
+            24 * (size + 1)
+        };
         let n_classes = flat.len() / (3 * nf);
         let mut rows = vec![0f32; n_classes * stride];
         // 16 spare values to start on a 64-byte boundary
@@ -1451,7 +1487,9 @@ impl KernelSet {
                     for dx in 0..size {
                         let w = src[i * nf + dy * size + dx];
                         dst[(i * size + dy) * LANES + dx] = w;
-                        let at = if i < 2 {
+                        let at = if pack {
+                            16 * dy + packed_lane(size, i, dx)
+                        } else if i < 2 {
                             16 * dy + 8 * i + dx
                         } else {
                             z0 + 8 * dy + dx
@@ -1461,7 +1499,9 @@ impl KernelSet {
                 }
                 let bias = src[i * nf + nf - 1];
                 dst[3 * size * LANES + i] = bias;
-                let at = if i < 2 {
+                let at = if pack {
+                    16 * size + packed_lane(size, i, 0)
+                } else if i < 2 {
                     16 * size + 8 * i
                 } else {
                     z0 + 8 * size

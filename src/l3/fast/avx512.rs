@@ -18,7 +18,7 @@
 
 use std::arch::x86_64::*;
 
-use super::{CONTRAST_MARGIN, LUMINANCE_MARGIN, NO_CLASS};
+use super::{CONTRAST_MARGIN, LUMINANCE_MARGIN, NO_CLASS, packed, packed_lane, packed_stride};
 
 /// Lanes per classification step.
 pub(super) const WIDE: usize = 16;
@@ -109,8 +109,11 @@ pub(super) unsafe fn classify_row<const P: usize>(
         return None;
     }
     let (hp, op, bp) = (he.as_ptr(), ho.as_ptr(), buf.as_ptr());
-    let inv = prm.inv.map(|v| _mm512_set1_ps(v));
-    let lw = prm.lum.map(|v| _mm512_set1_ps(v));
+    let (mut inv, mut lw) = ([_mm512_setzero_ps(); 4], [_mm512_setzero_ps(); 4]);
+    for k in 0..4 {
+        inv[k] = _mm512_set1_ps(prm.inv[k]);
+        lw[k] = _mm512_set1_ps(prm.lum[k]);
+    }
     let inv_area = _mm512_set1_ps(prm.inv_area);
     let e0 = _mm512_loadu_ps(prm.edges.as_ptr());
     let e1 = _mm512_loadu_ps(prm.edges.as_ptr().add(16));
@@ -156,7 +159,10 @@ pub(super) unsafe fn classify_row<const P: usize>(
             s[base] = _mm512_add_ps(s[base], e);
             s[base + 1] = _mm512_add_ps(s[base + 1], o);
         }
-        let m = [0, 1, 2, 3].map(|k| _mm512_mul_ps(s[k], inv[k]));
+        let mut m = [_mm512_setzero_ps(); 4];
+        for k in 0..4 {
+            m[k] = _mm512_mul_ps(s[k], inv[k]);
+        }
         let lum = _mm512_add_ps(
             _mm512_add_ps(_mm512_mul_ps(s[0], lw[0]), _mm512_mul_ps(s[1], lw[1])),
             _mm512_add_ps(_mm512_mul_ps(s[2], lw[2]), _mm512_mul_ps(s[3], lw[3])),
@@ -301,6 +307,174 @@ pub(super) unsafe fn apply_row<const P: usize>(
     true
 }
 
+/// Lanes of the zero-weight pad of a packed row (it sums to 0).
+const PAD: i32 = (WIDE - 1) as i32;
+
+/// The permute indices of [`apply_row_packed`] for patch size `p`.
+struct PackedIdx {
+    /// Per pixel q of 8: lane `o·p + dx` takes input lane `q + dx`.
+    spread: [[i32; WIDE]; 8],
+    /// Two pixels → per pixel and output two partial sums (lane `6·b + 2·o + h`),
+    /// as the sum of three two-source permutes (each half of an output's lanes
+    /// has at most three).
+    pair: [[i32; WIDE]; 3],
+    /// Two pairs → per output o and pixel q of the four, one sum (lane `4·o + q`).
+    quad: [[i32; WIDE]; 2],
+    /// Two quads → [X 0..8 | Y 0..8] and [Z 0..8 | Z 0..8].
+    xy: [i32; WIDE],
+    z: [i32; WIDE],
+}
+
+impl PackedIdx {
+    const fn new(p: usize) -> Self {
+        let half = p.div_ceil(2);
+        let mut t = Self {
+            spread: [[0; WIDE]; 8],
+            pair: [[PAD; WIDE]; 3],
+            quad: [[PAD; WIDE]; 2],
+            xy: [0; WIDE],
+            z: [0; WIDE],
+        };
+        let mut k = 0;
+        while k < WIDE {
+            let mut q = 0;
+            while q < 8 {
+                t.spread[q][k] = (q + k % if p > 0 { p } else { 1 }) as i32;
+                q += 1;
+            }
+            if k < 12 {
+                // pair lanes: pixel b, output o, half h; element j of the half
+                let (b, o, h) = (k / 6, (k % 6) / 2, k % 2);
+                let mut j = 0;
+                while j < 3 {
+                    let dx = h * half + j;
+                    let inside = dx < p && (h == 1 || j < half);
+                    if inside {
+                        t.pair[j][k] = (packed_lane(p, o, dx) + 16 * b) as i32;
+                    }
+                    j += 1;
+                }
+                // quad lanes: output o, pixel q of four (pair q / 2, pixel q % 2)
+                let (o, q) = (k / 4, k % 4);
+                t.quad[0][k] = ((q % 2) * 6 + o * 2 + 16 * (q / 2)) as i32;
+                t.quad[1][k] = ((q % 2) * 6 + o * 2 + 1 + 16 * (q / 2)) as i32;
+            }
+            // quad lane 4·o + q of the first (pixels 0..4) or second (4..8) quad
+            let (o, q) = (k / 8, k % 8);
+            t.xy[k] = (o * 4 + q % 4 + 16 * (q / 4)) as i32;
+            t.z[k] = (8 + q % 4 + 16 * (q / 4)) as i32;
+            k += 1;
+        }
+        t
+    }
+}
+
+#[inline(always)]
+unsafe fn index(lanes: &[i32; WIDE]) -> __m512i {
+    _mm512_loadu_si512(lanes.as_ptr().cast())
+}
+
+/// [`apply_row`] for the packed layout (patch 3 or 5, see [`packed`]): per
+/// class, `P` rows of 16 weights holding all three outputs (output o's weight
+/// `dx` at lane `o·P + dx`, see [`packed_lane`]), then the bias row (output
+/// o's bias at lane `o·P`). Each patch row costs one permute (the input row
+/// spread to the three outputs' lanes) and one FMA; the reduction sums the
+/// lanes of 8 pixels with 18 permutes.
+///
+/// Returns `false` (and writes nothing) if a slice is too short.
+///
+/// # Safety
+/// The CPU must have AVX-512 F, VL and DQ, AVX2 and FMA.
+#[target_feature(enable = "avx512f,avx512vl,avx512dq,avx2,fma")]
+#[allow(clippy::too_many_arguments)]
+pub(super) unsafe fn apply_row_packed<const P: usize>(
+    buf: &[f32],
+    stride: usize,
+    offsets: &[u32],
+    tw: usize,
+    kernels: &[f32],
+    kstride: usize,
+    planes: [&mut [f32]; 3],
+) -> bool {
+    let n = tw.div_ceil(8) * 8;
+    if !packed(P)
+        || kstride < packed_stride(P)
+        || kernels.len() < kstride
+        || offsets.len() < n.div_ceil(WIDE) * WIDE
+        || buf.len() < (P - 1) * stride + n + 8
+        || planes.iter().any(|p| p.len() < n)
+    {
+        return false;
+    }
+    // every class's values lie inside `kernels`
+    let top = _mm512_set1_epi32((kernels.len() - kstride).min(i32::MAX as usize) as i32);
+    let mut past: __mmask16 = 0;
+    for chunk in offsets[..n.div_ceil(WIDE) * WIDE].chunks_exact(WIDE) {
+        past |= _mm512_cmpgt_epu32_mask(_mm512_loadu_si512(chunk.as_ptr().cast()), top);
+    }
+    if past != 0 {
+        return false;
+    }
+    let idx = const { PackedIdx::new(P) };
+    let mut spread = [_mm512_setzero_si512(); 8];
+    for (v, lanes) in spread.iter_mut().zip(&idx.spread) {
+        *v = index(lanes);
+    }
+    let pair = [
+        index(&idx.pair[0]),
+        index(&idx.pair[1]),
+        index(&idx.pair[2]),
+    ];
+    let quad = [index(&idx.quad[0]), index(&idx.quad[1])];
+    let (ixy, iz) = (index(&idx.xy), index(&idx.z));
+    let (bp, kp) = (buf.as_ptr(), kernels.as_ptr());
+    let [px, py, pz] = planes;
+    let mut i0 = 0;
+    while i0 < n {
+        let b = bp.add(i0);
+        let mut rows = [_mm512_setzero_ps(); P];
+        for (dy, row) in rows.iter_mut().enumerate() {
+            *row = _mm512_loadu_ps(b.add(dy * stride));
+        }
+        let mut acc = [_mm512_setzero_ps(); 8];
+        for (q, a) in acc.iter_mut().enumerate() {
+            let k = kp.add(*offsets.get_unchecked(i0 + q) as usize);
+            let mut s = _mm512_loadu_ps(k.add(WIDE * P));
+            for (dy, row) in rows.iter().enumerate() {
+                let v = _mm512_permutexvar_ps(spread[q], *row);
+                s = _mm512_fmadd_ps(v, _mm512_loadu_ps(k.add(WIDE * dy)), s);
+            }
+            *a = s;
+        }
+        let mut pairs = [_mm512_setzero_ps(); 4];
+        for (q, v) in pairs.iter_mut().enumerate() {
+            let (a, b) = (acc[2 * q], acc[2 * q + 1]);
+            *v = _mm512_add_ps(
+                _mm512_add_ps(
+                    _mm512_permutex2var_ps(a, pair[0], b),
+                    _mm512_permutex2var_ps(a, pair[1], b),
+                ),
+                _mm512_permutex2var_ps(a, pair[2], b),
+            );
+        }
+        let mut quads = [_mm512_setzero_ps(); 2];
+        for (q, v) in quads.iter_mut().enumerate() {
+            let (a, b) = (pairs[2 * q], pairs[2 * q + 1]);
+            *v = _mm512_add_ps(
+                _mm512_permutex2var_ps(a, quad[0], b),
+                _mm512_permutex2var_ps(a, quad[1], b),
+            );
+        }
+        let xy = _mm512_permutex2var_ps(quads[0], ixy, quads[1]);
+        let z = _mm512_permutex2var_ps(quads[0], iz, quads[1]);
+        _mm256_storeu_ps(px.as_mut_ptr().add(i0), _mm512_castps512_ps256(xy));
+        _mm256_storeu_ps(py.as_mut_ptr().add(i0), _mm512_extractf32x8_ps::<1>(xy));
+        _mm256_storeu_ps(pz.as_mut_ptr().add(i0), _mm512_castps512_ps256(z));
+        i0 += 8;
+    }
+    true
+}
+
 /// `[a0+a1, a2+a3, b0+b1, b2+b3]` in each 128-bit lane.
 #[inline(always)]
 unsafe fn hadd512(a: __m512, b: __m512) -> __m512 {
@@ -412,6 +586,88 @@ const INTERLEAVE: [u8; 64] = {
     t
 };
 
+/// The constants of [`srgb8_row`]'s encoder, in registers.
+struct Encoder {
+    scale: __m512,
+    half: __m512,
+    zero: __m512,
+    table: *const i32,
+    /// The polynomial encoder, if the table matched it.
+    poly: bool,
+    exps: __m512,
+    inv: __m512,
+    linear: __m512,
+    gain: __m512,
+    offset: __m512,
+    coef: [__m512; 8],
+    mid: __m512,
+    last_linear: __m512i,
+}
+
+impl Encoder {
+    #[target_feature(enable = "avx512f,avx512vl,avx512bw,avx512dq,avx512vbmi")]
+    #[inline]
+    unsafe fn new(scale: f32, table: &[u32], poly: Option<&SrgbPoly>) -> Self {
+        // the polynomial encoder's constants (unused without it)
+        let pc = poly.copied().unwrap_or(SrgbPoly {
+            exps: [0.0; 16],
+            inv: 0.0,
+            linear: 0.0,
+            gain: 0.0,
+            offset: 0.0,
+        });
+        let mut coef = [_mm512_setzero_ps(); 8];
+        for (v, &c) in coef.iter_mut().zip(&POW_5_12) {
+            *v = _mm512_set1_ps(c);
+        }
+        Self {
+            scale: _mm512_set1_ps(scale),
+            half: _mm512_set1_ps(0.5),
+            zero: _mm512_setzero_ps(),
+            table: table.as_ptr().cast(),
+            poly: poly.is_some(),
+            exps: _mm512_loadu_ps(pc.exps.as_ptr()),
+            inv: _mm512_set1_ps(pc.inv),
+            linear: _mm512_set1_ps(pc.linear),
+            gain: _mm512_set1_ps(pc.gain),
+            offset: _mm512_set1_ps(pc.offset),
+            coef,
+            mid: _mm512_set1_ps(1.5),
+            last_linear: _mm512_set1_epi32(POLY_LINEAR_LAST),
+        }
+    }
+
+    /// The sRGB codes of 16 linear values (the table has `scale + 1` entries).
+    #[target_feature(enable = "avx512f,avx512vl,avx512bw,avx512dq,avx512vbmi")]
+    #[inline]
+    unsafe fn codes(&self, v: __m512) -> __m128i {
+        // max/min return the second operand for NaN: NaN → 0, as SrgbLut::index;
+        // v · scale + 0.5 rounded twice (no FMA), as SrgbLut::index
+        let x = _mm512_add_ps(_mm512_mul_ps(v, self.scale), self.half);
+        let x = _mm512_min_ps(_mm512_max_ps(x, self.zero), self.scale);
+        let idx = _mm512_cvttps_epi32(x);
+        if !self.poly {
+            return _mm512_cvtepi32_epi8(_mm512_i32gather_epi32::<4>(idx, self.table));
+        }
+        // the table entry computed: 255 · (1.055 · x^(5/12) − 0.055), x = 2^e · m
+        let fi = _mm512_cvtepi32_ps(idx);
+        let x = _mm512_mul_ps(fi, self.inv);
+        let e = _mm512_getexp_ps(x);
+        let m = _mm512_getmant_ps::<_MM_MANT_NORM_1_2, _MM_MANT_SIGN_SRC>(x);
+        let t = _mm512_sub_ps(m, self.mid);
+        let mut acc = self.coef[7];
+        for c in self.coef[..7].iter().rev() {
+            acc = _mm512_fmadd_ps(acc, t, *c);
+        }
+        let k = _mm512_cvtps_epi32(_mm512_sub_ps(self.zero, e));
+        let q = _mm512_mul_ps(_mm512_permutexvar_ps(k, self.exps), acc);
+        let g = _mm512_fmsub_ps(q, self.gain, self.offset);
+        let small = _mm512_cmple_epi32_mask(idx, self.last_linear);
+        let g = _mm512_mask_blend_ps(small, g, _mm512_mul_ps(fi, self.linear));
+        _mm512_cvtusepi32_epi8(_mm512_cvtps_epi32(g))
+    }
+}
+
 /// Encode `n` pixels of three linear sRGB planes (white = 1) to interleaved
 /// 8-bit sRGB through `table` (the sRGB table widened to u32, indexed by
 /// `round(v · scale)` clamped to `0..=scale`, as [`SrgbLut::index`](crate::colour::SrgbLut::index)).
@@ -436,53 +692,14 @@ pub(super) unsafe fn srgb8_row(
     {
         return false;
     }
-    let vs = _mm512_set1_ps(scale);
-    let half = _mm512_set1_ps(0.5);
-    let zero = _mm512_setzero_ps();
+    let enc = Encoder::new(scale, table, poly);
     let perm = _mm512_loadu_si512(INTERLEAVE.as_ptr().cast());
-    let tp = table.as_ptr().cast::<i32>();
-    // the polynomial encoder's constants (unused without it)
-    let pc = poly.copied().unwrap_or(SrgbPoly {
-        exps: [0.0; 16],
-        inv: 0.0,
-        linear: 0.0,
-        gain: 0.0,
-        offset: 0.0,
-    });
-    let exps = _mm512_loadu_ps(pc.exps.as_ptr());
-    let (inv, linear) = (_mm512_set1_ps(pc.inv), _mm512_set1_ps(pc.linear));
-    let (gain, offset) = (_mm512_set1_ps(pc.gain), _mm512_set1_ps(pc.offset));
-    let coef = POW_5_12.map(|c| _mm512_set1_ps(c));
-    let (mid, last_linear) = (_mm512_set1_ps(1.5), _mm512_set1_epi32(POLY_LINEAR_LAST));
     let mut i = 0;
     while i < n {
-        let codes = planes.map(|p| {
-            let v = _mm512_loadu_ps(p.as_ptr().add(i));
-            // max/min return the second operand for NaN: NaN → 0, as SrgbLut::index;
-            // v · scale + 0.5 rounded twice (no FMA), as SrgbLut::index
-            let x = _mm512_add_ps(_mm512_mul_ps(v, vs), half);
-            let x = _mm512_min_ps(_mm512_max_ps(x, zero), vs);
-            let idx = _mm512_cvttps_epi32(x);
-            if poly.is_none() {
-                return _mm512_cvtepi32_epi8(_mm512_i32gather_epi32::<4>(idx, tp));
-            }
-            // the table entry computed: 255 · (1.055 · x^(5/12) − 0.055), x = 2^e · m
-            let fi = _mm512_cvtepi32_ps(idx);
-            let x = _mm512_mul_ps(fi, inv);
-            let e = _mm512_getexp_ps(x);
-            let m = _mm512_getmant_ps::<_MM_MANT_NORM_1_2, _MM_MANT_SIGN_SRC>(x);
-            let t = _mm512_sub_ps(m, mid);
-            let mut acc = coef[7];
-            for c in coef[..7].iter().rev() {
-                acc = _mm512_fmadd_ps(acc, t, *c);
-            }
-            let k = _mm512_cvtps_epi32(_mm512_sub_ps(zero, e));
-            let q = _mm512_mul_ps(_mm512_permutexvar_ps(k, exps), acc);
-            let g = _mm512_fmsub_ps(q, gain, offset);
-            let small = _mm512_cmple_epi32_mask(idx, last_linear);
-            let g = _mm512_mask_blend_ps(small, g, _mm512_mul_ps(fi, linear));
-            _mm512_cvtusepi32_epi8(_mm512_cvtps_epi32(g))
-        });
+        let mut codes = [_mm_setzero_si128(); 3];
+        for (c, p) in codes.iter_mut().zip(planes) {
+            *c = enc.codes(_mm512_loadu_ps(p.as_ptr().add(i)));
+        }
         let rgb = _mm512_inserti32x4::<2>(
             _mm512_inserti32x4::<1>(_mm512_castsi128_si512(codes[0]), codes[1]),
             codes[2],
