@@ -355,6 +355,34 @@ impl Source<'_> {
         }
     }
 
+    /// Ask the CPU to bring frame rows `rows`, columns `c0..c1` (clamped to the
+    /// frame) into its caches: a hint, so that scattered reads (the white sample
+    /// grid) wait on memory together rather than one after another.
+    #[inline]
+    fn prefetch(&self, rows: std::ops::Range<usize>, c0: usize, c1: usize) {
+        #[cfg(target_arch = "x86_64")]
+        {
+            use std::arch::x86_64::{_MM_HINT_T0, _mm_prefetch};
+            let (base, elem) = match self.mosaic {
+                Mosaic::Volts(v) => (v.as_ptr().cast::<u8>(), 4),
+                Mosaic::Dn { data, .. } => (data.as_ptr().cast::<u8>(), 2),
+            };
+            let c1 = c1.min(self.width);
+            for r in rows.start..rows.end.min(self.height) {
+                let (a, b) = ((r * self.width + c0) * elem, (r * self.width + c1) * elem);
+                let mut at = a & !63;
+                while at < b {
+                    // SAFETY: a prefetch never faults; the address lies inside the frame
+                    // (wrapping_add only avoids asserting so).
+                    unsafe { _mm_prefetch::<_MM_HINT_T0>(base.wrapping_add(at).cast()) };
+                    at += 64;
+                }
+            }
+        }
+        #[cfg(not(target_arch = "x86_64"))]
+        let _ = (rows, c0, c1);
+    }
+
     #[inline]
     fn at(&self, r: usize, c: usize) -> f32 {
         let i = r * self.width + c;
@@ -531,6 +559,11 @@ impl FastRenderer {
                     .flat_map_iter(|chunk| {
                         let mut patch = vec![0f32; self.n_features - 1];
                         let mut feat = vec![0f32; self.n_features];
+                        let rad = self.geo.radius;
+                        for &(r, c) in chunk {
+                            let c0 = c.saturating_sub(rad);
+                            src.prefetch(r.saturating_sub(rad)..r + rad + 1, c0, c + rad + 1);
+                        }
                         chunk
                             .iter()
                             .map(|&(r, c)| {
@@ -1248,8 +1281,20 @@ impl FastRenderer {
             }
         }
         let s = self.geo.size;
+        // patch rows (columns) of the centre's parity, and of the other
+        let same = (0..s).filter(|d| (d + s / 2).is_multiple_of(2)).count();
+        let other = s - same;
+        let count = [same * same, same * other, other * same, other * other].map(|n| n as f32);
+        if count
+            .iter()
+            .zip(&u.inv)
+            .any(|(n, i)| (n * i - 1.0).abs() > 1e-6)
+        {
+            return None;
+        }
         Some(avx512::ClassParams {
             inv: u.inv,
+            count,
             lum: u.lum,
             inv_area: 1.0 / (s * s) as f32,
             edges,
