@@ -5,11 +5,15 @@
 //!   luminance, the contrast, the level by a branch-free binary search over the
 //!   level edges held in registers, the contrast threshold by a register
 //!   permute, and the mask of pixels the reference code must classify;
-//! - [`apply_row`] applies the kernels of 8 pixels at a time, X and Y sharing one
-//!   16-lane FMA per patch row, and sums the lanes of all 8 pixels together
-//!   (a transposing reduction) so results leave as whole vectors;
-//! - [`srgb8_row`] encodes three planes of linear sRGB through the table with
-//!   gathers and interleaves the bytes with one permute.
+//! - [`apply_row_packed`] (patch 3 and 5) applies the kernels of 8 pixels at a
+//!   time, all three outputs sharing one 16-lane FMA per patch row (the input
+//!   row spread to their lanes by one permute), and sums the lanes of the 8
+//!   pixels with a tree of two-source permutes so results leave as whole
+//!   vectors; [`apply_row`] (patch 7) does the same with X and Y sharing one
+//!   FMA and Z in 8 lanes;
+//! - [`srgb8_row`] encodes three planes of linear sRGB (the table computed by a
+//!   polynomial checked against every entry, else gathers) and interleaves the
+//!   bytes with one permute.
 //!
 //! Every function checks the lengths of what it reads and writes before its
 //! unchecked loads; the callers run them only when the CPU has the features.
@@ -740,6 +744,80 @@ mod tests {
         other[2000] = other[2000].wrapping_add(1);
         assert!(SrgbPoly::for_table(&other).is_none());
         assert!(SrgbPoly::for_table(SrgbLut::with_entries(1024).entries()).is_none());
+    }
+
+    /// `apply_row_packed::<P>` on random data equals the dot products done
+    /// one pixel at a time, for every pixel phase within the 8-pixel groups
+    /// and a row length that is not a multiple of 8; bad offsets are refused.
+    fn packed_kernels_match_scalar<const P: usize>() {
+        use rand::{RngExt, SeedableRng};
+        let mut rng = rand::rngs::StdRng::seed_from_u64(P as u64);
+        let (tw, stride, n_classes): (usize, usize, usize) = (37, 64, 9);
+        let kstride = packed_stride(P);
+        // class weights w[c][o][dy][dx] and biases b[c][o]
+        let w: Vec<f32> = (0..n_classes * 3 * P * P)
+            .map(|_| rng.random_range(-1.0..1.0))
+            .collect();
+        let b: Vec<f32> = (0..n_classes * 3)
+            .map(|_| rng.random_range(-1.0..1.0))
+            .collect();
+        let mut kernels = vec![0f32; n_classes * kstride];
+        for c in 0..n_classes {
+            for o in 0..3 {
+                for dy in 0..P {
+                    for dx in 0..P {
+                        kernels[c * kstride + WIDE * dy + packed_lane(P, o, dx)] =
+                            w[((c * 3 + o) * P + dy) * P + dx];
+                    }
+                }
+                kernels[c * kstride + WIDE * P + packed_lane(P, o, 0)] = b[c * 3 + o];
+            }
+        }
+        let buf: Vec<f32> = (0..P * stride + 64)
+            .map(|_| rng.random_range(0.0..1.8))
+            .collect();
+        let n = tw.div_ceil(WIDE) * WIDE;
+        let classes: Vec<usize> = (0..n).map(|_| rng.random_range(0..n_classes)).collect();
+        let mut offsets: Vec<u32> = classes.iter().map(|&c| (c * kstride) as u32).collect();
+        let mut planes = [vec![0f32; n], vec![0f32; n], vec![0f32; n]];
+        if !super::super::avx512_available() {
+            return;
+        }
+        let run = |offsets: &[u32], planes: &mut [Vec<f32>; 3]| {
+            let [x, y, z] = planes;
+            // SAFETY: the CPU has the features (checked above)
+            unsafe {
+                apply_row_packed::<P>(&buf, stride, offsets, tw, &kernels, kstride, [x, y, z])
+            }
+        };
+        assert!(run(&offsets, &mut planes));
+        for (i, &c) in classes.iter().enumerate().take(tw) {
+            for (o, plane) in planes.iter().enumerate() {
+                let mut want = f64::from(b[c * 3 + o]);
+                for dy in 0..P {
+                    for dx in 0..P {
+                        want += f64::from(w[((c * 3 + o) * P + dy) * P + dx])
+                            * f64::from(buf[dy * stride + i + dx]);
+                    }
+                }
+                let got = f64::from(plane[i]);
+                assert!(
+                    (got - want).abs() < 1e-5,
+                    "P {P} pixel {i} output {o}: {got} vs {want}"
+                );
+            }
+        }
+        // an offset past the last class: refused, nothing written
+        offsets[5] = (n_classes * kstride) as u32;
+        let mut fresh = [vec![7f32; n], vec![7f32; n], vec![7f32; n]];
+        assert!(!run(&offsets, &mut fresh));
+        assert!(fresh.iter().flatten().all(|&v| v == 7.0));
+    }
+
+    #[test]
+    fn packed_kernels_match_scalar_dot_products() {
+        packed_kernels_match_scalar::<3>();
+        packed_kernels_match_scalar::<5>();
     }
 
     #[test]
