@@ -1050,18 +1050,7 @@ impl FastRenderer {
                 let applied = counts.is_some()
                     // SAFETY: as above
                     && unsafe {
-                        if packed(P) {
-                            avx512::apply_row_packed::<P>(
-                                rows,
-                                stride,
-                                &sc.offsets,
-                                tw,
-                                set.paired(),
-                                set.pstride,
-                                [&mut l0[..], &mut l1[..], &mut l2[..]],
-                            )
-                        } else {
-                        avx512::apply_row::<P>(
+                        avx512::apply_kernels::<P>(
                             rows,
                             stride,
                             &sc.offsets,
@@ -1070,7 +1059,6 @@ impl FastRenderer {
                             set.pstride,
                             [&mut l0[..], &mut l1[..], &mut l2[..]],
                         )
-                        }
                     };
                 if let (true, Some(counts)) = (applied, counts) {
                     st.texture += counts.texture;

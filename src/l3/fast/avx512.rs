@@ -252,6 +252,63 @@ pub(super) unsafe fn classify_row<const P: usize>(
     Some(counts)
 }
 
+/// Whether the kernel step's arguments are long enough for `n` pixels (a
+/// multiple of 8) of patch size `p` with classes of at least `min_kstride`
+/// values, and every offset leaves a whole class inside `kernels`.
+#[target_feature(enable = "avx512f,avx512vl,avx512dq,avx2,fma")]
+#[allow(clippy::too_many_arguments)]
+unsafe fn kernel_args_ok(
+    min_kstride: usize,
+    p: usize,
+    buf: &[f32],
+    stride: usize,
+    offsets: &[u32],
+    n: usize,
+    kernels: &[f32],
+    kstride: usize,
+    planes: &[&mut [f32]; 3],
+) -> bool {
+    let padded = n.div_ceil(WIDE) * WIDE;
+    if p == 0
+        || kstride < min_kstride
+        || kernels.len() < kstride
+        || offsets.len() < padded
+        || buf.len() < (p - 1) * stride + n + 8
+        || planes.iter().any(|pl| pl.len() < n)
+    {
+        return false;
+    }
+    let top = _mm512_set1_epi32((kernels.len() - kstride).min(i32::MAX as usize) as i32);
+    let mut past: __mmask16 = 0;
+    for chunk in offsets[..padded].chunks_exact(WIDE) {
+        past |= _mm512_cmpgt_epu32_mask(_mm512_loadu_si512(chunk.as_ptr().cast()), top);
+    }
+    past == 0
+}
+
+/// The kernel step for patch size `P`: [`apply_row_packed`] for patch 3 and 5,
+/// [`apply_row`] otherwise (same arguments).
+///
+/// # Safety
+/// The CPU must have AVX-512 F, VL and DQ, AVX2 and FMA.
+#[target_feature(enable = "avx512f,avx512vl,avx512dq,avx2,fma")]
+pub(super) unsafe fn apply_kernels<const P: usize>(
+    buf: &[f32],
+    stride: usize,
+    offsets: &[u32],
+    tw: usize,
+    kernels: &[f32],
+    kstride: usize,
+    planes: [&mut [f32]; 3],
+) -> bool {
+    let step = if packed(P) {
+        apply_row_packed::<P>
+    } else {
+        apply_row::<P>
+    };
+    step(buf, stride, offsets, tw, kernels, kstride, planes)
+}
+
 /// Apply the kernels of pixels `0..tw` (rounded up to 8) of one output row into
 /// the three output planes, with each pixel's kernels at `offsets` (from
 /// [`classify_row`]) in `kernels`, which holds per class, `kstride` values apart:
@@ -265,7 +322,7 @@ pub(super) unsafe fn classify_row<const P: usize>(
 /// The CPU must have AVX-512 F, VL and DQ, AVX2 and FMA.
 #[target_feature(enable = "avx512f,avx512vl,avx512dq,avx2,fma")]
 #[allow(clippy::too_many_arguments)]
-pub(super) unsafe fn apply_row<const P: usize>(
+unsafe fn apply_row<const P: usize>(
     buf: &[f32],
     stride: usize,
     offsets: &[u32],
@@ -276,21 +333,18 @@ pub(super) unsafe fn apply_row<const P: usize>(
 ) -> bool {
     let n = tw.div_ceil(8) * 8;
     if P == 0
-        || kstride < 24 * (P + 1)
-        || kernels.len() < kstride
-        || offsets.len() < n.div_ceil(WIDE) * WIDE
-        || buf.len() < (P - 1) * stride + n + 8
-        || planes.iter().any(|p| p.len() < n)
+        || !kernel_args_ok(
+            24 * (P + 1),
+            P,
+            buf,
+            stride,
+            offsets,
+            n,
+            kernels,
+            kstride,
+            &planes,
+        )
     {
-        return false;
-    }
-    // every class's values lie inside `kernels`
-    let top = _mm512_set1_epi32((kernels.len() - kstride).min(i32::MAX as usize) as i32);
-    let mut past: __mmask16 = 0;
-    for chunk in offsets[..n.div_ceil(WIDE) * WIDE].chunks_exact(WIDE) {
-        past |= _mm512_cmpgt_epu32_mask(_mm512_loadu_si512(chunk.as_ptr().cast()), top);
-    }
-    if past != 0 {
         return false;
     }
     let (bp, kp) = (buf.as_ptr(), kernels.as_ptr());
@@ -402,7 +456,7 @@ unsafe fn index(lanes: &[i32; WIDE]) -> __m512i {
 /// The CPU must have AVX-512 F, VL and DQ, AVX2 and FMA.
 #[target_feature(enable = "avx512f,avx512vl,avx512dq,avx2,fma")]
 #[allow(clippy::too_many_arguments)]
-pub(super) unsafe fn apply_row_packed<const P: usize>(
+unsafe fn apply_row_packed<const P: usize>(
     buf: &[f32],
     stride: usize,
     offsets: &[u32],
@@ -413,21 +467,18 @@ pub(super) unsafe fn apply_row_packed<const P: usize>(
 ) -> bool {
     let n = tw.div_ceil(8) * 8;
     if !packed(P)
-        || kstride < packed_stride(P)
-        || kernels.len() < kstride
-        || offsets.len() < n.div_ceil(WIDE) * WIDE
-        || buf.len() < (P - 1) * stride + n + 8
-        || planes.iter().any(|p| p.len() < n)
+        || !kernel_args_ok(
+            packed_stride(P),
+            P,
+            buf,
+            stride,
+            offsets,
+            n,
+            kernels,
+            kstride,
+            &planes,
+        )
     {
-        return false;
-    }
-    // every class's values lie inside `kernels`
-    let top = _mm512_set1_epi32((kernels.len() - kstride).min(i32::MAX as usize) as i32);
-    let mut past: __mmask16 = 0;
-    for chunk in offsets[..n.div_ceil(WIDE) * WIDE].chunks_exact(WIDE) {
-        past |= _mm512_cmpgt_epu32_mask(_mm512_loadu_si512(chunk.as_ptr().cast()), top);
-    }
-    if past != 0 {
         return false;
     }
     let idx = const { PackedIdx::new(P) };
