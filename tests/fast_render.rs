@@ -197,7 +197,7 @@ fn srgb8_u16_and_regions_match_the_reference_pipeline() {
     let (wy_into, _) = fast
         .render_srgb8_into(mosaic, w, h, None, WhiteLevel::Auto, &mut buf)
         .expect("into");
-    assert_eq!((wy_into, &buf), (wy_fast, &rgb));
+    assert_eq!((wy_into, &buf[..]), (wy_fast, &rgb[..]));
     let mut short = vec![0u8; w * h * 3 - 1];
     assert!(
         fast.render_srgb8_into(mosaic, w, h, None, WhiteLevel::Auto, &mut short)
@@ -211,8 +211,8 @@ fn srgb8_u16_and_regions_match_the_reference_pipeline() {
         let (o, _, _) = other
             .render_srgb8(mosaic, w, h, None, WhiteLevel::Y(wy_fast))
             .expect("srgb");
-        let off = o.iter().zip(&rgb).filter(|(a, b)| a != b).count();
-        let worst = o.iter().zip(&rgb).map(|(a, b)| a.abs_diff(*b)).max();
+        let off = o.iter().zip(rgb.iter()).filter(|(a, b)| a != b).count();
+        let worst = o.iter().zip(rgb.iter()).map(|(a, b)| a.abs_diff(*b)).max();
         println!(
             "simd {simd} avx512 {avx512}: {off} of {} codes differ",
             o.len()
@@ -222,6 +222,73 @@ fn srgb8_u16_and_regions_match_the_reference_pipeline() {
             "{off} codes differ"
         );
     }
+}
+
+/// `size × size` tiles of a small frame, shifted by an even offset (the CFA
+/// phase is kept) so that neighbouring tiles differ.
+fn tiled(volts: &[f32], w: usize, h: usize, size: (usize, usize), shift: usize) -> Vec<f32> {
+    let (tw, th) = size;
+    (0..tw * th)
+        .map(|i| {
+            let (x, y) = (i % tw, i / tw);
+            volts[((y + shift) % h) * w + (x + 2 * (y / h) + shift) % w]
+        })
+        .collect()
+}
+
+/// sRGB frames come from a pool: a frame dropped by one render serves the
+/// next, and the renderer overwrites every byte of the earlier image.
+#[test]
+fn pooled_srgb8_frames_hold_only_the_new_image() {
+    let d = design("rgbw-paper");
+    let table = train(&d, 5);
+    let kernels = tungsten_kernels(&table);
+    let fast = FastRenderer::new(&table, &kernels).expect("fast");
+    let (volts, w, h) = frame(&d, 72, 9);
+    // 1.15 MB of sRGB: large enough to be pooled (no other test here renders one)
+    let (bw, bh) = (640, 600);
+    let first = tiled(&volts, w, h, (bw, bh), 0);
+    let second = tiled(&volts, w, h, (bw, bh), 6);
+    let white = WhiteLevel::Y(0.9);
+    let (a, _, _) = fast
+        .render_srgb8(Mosaic::Volts(&first), bw, bh, None, white)
+        .expect("first");
+    let ptr = a.as_ptr();
+    drop(a);
+    let (b, _, _) = fast
+        .render_srgb8(Mosaic::Volts(&second), bw, bh, None, white)
+        .expect("second");
+    assert_eq!(b.as_ptr(), ptr, "the dropped frame served the next render");
+    let mut fresh = vec![0u8; bw * bh * 3];
+    fast.render_srgb8_into(Mosaic::Volts(&second), bw, bh, None, white, &mut fresh)
+        .expect("into");
+    assert!(b[..] == fresh[..], "bytes of the first image were left");
+    // a smaller region takes the same buffer, shortened: the crop of the whole
+    drop(b);
+    let reg = Region {
+        x: 4,
+        y: 2,
+        width: 620,
+        height: 570,
+    };
+    let (part, _, _) = fast
+        .render_srgb8(Mosaic::Volts(&first), bw, bh, Some(reg), white)
+        .expect("region");
+    assert_eq!(part.as_ptr(), ptr);
+    assert_eq!(part.len(), reg.width * reg.height * 3);
+    let (whole, _, _) = fast
+        .render_srgb8(Mosaic::Volts(&first), bw, bh, None, white)
+        .expect("whole");
+    for y in 0..reg.height {
+        let row = (reg.y + y) * bw + reg.x;
+        assert!(
+            whole[row * 3..(row + reg.width) * 3]
+                == part[y * reg.width * 3..(y + 1) * reg.width * 3]
+        );
+    }
+    // a frame taken out of the pool is a plain vector
+    let v: Vec<u8> = whole.into_vec();
+    assert_eq!(v.len(), bw * bh * 3);
 }
 
 proptest! {

@@ -4,7 +4,8 @@
 
 use crate::camera::Cfa;
 use crate::l3::{
-    ColourMatrix, FastRenderer, L3Error, L3Table, Mosaic, WhiteLevel, render_baseline, xyz_to_srgb8,
+    ColourMatrix, FastRenderer, Frame, L3Error, L3Table, Mosaic, WhiteLevel, render_baseline,
+    xyz_to_srgb8,
 };
 
 /// Name of the L3 renderer the wrappers call (recorded in the JSON).
@@ -38,7 +39,7 @@ pub fn render_srgb8(
     volts: &[f32],
     width: usize,
     height: usize,
-) -> Result<Vec<u8>, L3Error> {
+) -> Result<Frame, L3Error> {
     Ok(renderer
         .render_srgb8(
             Mosaic::Volts(volts),

@@ -29,6 +29,10 @@ use rayon::prelude::*;
 
 #[cfg(target_arch = "x86_64")]
 mod avx512;
+mod frames;
+
+pub use frames::Frame;
+use frames::output_buffer;
 
 use super::classify::sat_case_index;
 use super::output::{WhiteLevel, white_from_samples, white_sample_points};
@@ -485,7 +489,8 @@ impl FastRenderer {
 
     /// Render `region` to 8-bit sRGB, `white` Y mapping to white (Auto: the 99th
     /// percentile of Y over the frame's sample grid, as [`white_y`](super::white_y)).
-    /// Returns the pixels and the white Y used.
+    /// Returns the pixels and the white Y used. The pixels' buffer returns to a
+    /// small pool when dropped and serves a later render (see [`Frame`]).
     pub fn render_srgb8(
         &self,
         mosaic: Mosaic<'_>,
@@ -493,9 +498,9 @@ impl FastRenderer {
         height: usize,
         region: Option<Region>,
         white: WhiteLevel,
-    ) -> Result<(Vec<u8>, f64, RenderStats), L3Error> {
+    ) -> Result<(Frame, f64, RenderStats), L3Error> {
         let reg = check_region(region, width, height)?;
-        let mut out = output_buffer::<u8>(reg.width * reg.height * 3);
+        let mut out = Frame::take(reg.width * reg.height * 3);
         let (wy, stats) = self.render_srgb8_into(mosaic, width, height, region, white, &mut out)?;
         Ok((out, wy, stats))
     }
@@ -1295,34 +1300,6 @@ impl FastRenderer {
             kstride: u32::try_from(set.pstride).ok()?,
         })
     }
-}
-
-/// A zeroed buffer of `n` values for a render's output. A large one comes
-/// untouched from the kernel (a zeroed allocation), and on Linux is advised
-/// onto transparent huge pages before the render's threads first write it: a
-/// fresh 12 MP sRGB image is 36 MB, and faulting it in 4 KiB pages costs about
-/// a third of the render's CPU (measured: 14 ms against 2 ms to allocate and
-/// fill it on one thread).
-fn output_buffer<T: Copy + Default + Send + Sync>(n: usize) -> Vec<T> {
-    const HUGE: usize = 2 << 20;
-    let size = std::mem::size_of::<T>().max(1);
-    let bytes = n.saturating_mul(size);
-    // zeroed allocation: a large one comes fresh from the kernel, untouched
-    let mut v: Vec<T> = vec![T::default(); n];
-    #[cfg(target_os = "linux")]
-    if bytes >= 2 * HUGE {
-        let start = v.as_mut_ptr() as usize;
-        let first = start.next_multiple_of(HUGE);
-        let end = (start + bytes) / HUGE * HUGE;
-        if end > first {
-            // SAFETY: the range lies inside the vector's allocation; the advice only
-            // changes how the kernel backs those pages (an error is harmless and ignored).
-            unsafe {
-                libc::madvise(first as *mut libc::c_void, end - first, libc::MADV_HUGEPAGE);
-            }
-        }
-    }
-    v
 }
 
 /// The largest value of a row of clamped (finite) volts, 16 lanes at a time.

@@ -19,7 +19,7 @@ pub use correction::{
     CorrectionSource, IDENTITY, IlluminantEntry, IlluminantRegistry, MAX_MATRIX_ENTRY, Mat3,
     correction_matrix, default_reflectances,
 };
-pub use fast::{FastOptions, FastRenderer, Mosaic, Region};
+pub use fast::{FastOptions, FastRenderer, Frame, Mosaic, Region};
 pub use normal_eq::{ChannelSumConstraint, ClassSolution, Gram, RidgeChoice, solve, solve_with};
 pub use output::{
     WHITE_GRID, WhiteLevel, white_from_samples, white_sample_points, white_y, xyz_to_srgb8,

@@ -202,7 +202,7 @@ enum Input {
 
 /// What the renderer produced.
 enum Rendered8 {
-    Srgb(Vec<u8>),
+    Srgb(crate::l3::Frame),
     Xyz(Vec<f32>),
 }
 
