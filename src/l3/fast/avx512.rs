@@ -160,7 +160,9 @@ pub(super) unsafe fn classify_row<const P: usize>(
     let cmargin = _mm512_set1_ps(CONTRAST_MARGIN);
     let abs_mask = _mm512_set1_epi32(0x7fff_ffff);
     let no_class = _mm512_set1_epi32(NO_CLASS as i32);
-    let mut counts = RowCounts::default();
+    // per-lane counts of texture and reference-path pixels, summed after the row
+    let (mut n_texture, mut n_exact) = (_mm512_setzero_si512(), _mm512_setzero_si512());
+    let one_i = _mm512_set1_epi32(1);
     let mut i = 0;
     while i < tw {
         // phase sums over the patch rows
@@ -245,11 +247,14 @@ pub(super) unsafe fn classify_row<const P: usize>(
         _mm512_storeu_si512(offsets.as_mut_ptr().add(i).cast(), off);
         let c = _mm512_maskz_mov_epi32(exact, no_class);
         _mm512_storeu_si512(class.as_mut_ptr().add(i).cast(), c);
-        counts.texture += u64::from((texture & !exact & valid).count_ones());
-        counts.exact += u64::from(exact.count_ones());
+        n_texture = _mm512_mask_add_epi32(n_texture, texture & !exact & valid, n_texture, one_i);
+        n_exact = _mm512_mask_add_epi32(n_exact, exact, n_exact, one_i);
         i += WIDE;
     }
-    Some(counts)
+    Some(RowCounts {
+        texture: u64::from(_mm512_reduce_add_epi32(n_texture) as u32),
+        exact: u64::from(_mm512_reduce_add_epi32(n_exact) as u32),
+    })
 }
 
 /// Whether the kernel step's arguments are long enough for `n` pixels (a
