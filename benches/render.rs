@@ -95,14 +95,17 @@ fn bench(c: &mut Criterion) {
         })
     });
     // the same, keeping every frame (into_vec): each render faults in 36 MB of new memory
-    g.bench_function("l3_fast_u16_to_srgb8_auto_white_new_buffer_each_frame", |b| {
-        b.iter(|| {
-            let (rgb, wy, _) = fast
-                .render_srgb8(black_box(dn_frame), W, H, None, WhiteLevel::Auto)
-                .expect("render");
-            black_box((rgb.into_vec(), wy))
-        })
-    });
+    g.bench_function(
+        "l3_fast_u16_to_srgb8_auto_white_new_buffer_each_frame",
+        |b| {
+            b.iter(|| {
+                let (rgb, wy, _) = fast
+                    .render_srgb8(black_box(dn_frame), W, H, None, WhiteLevel::Auto)
+                    .expect("render");
+                black_box((rgb.into_vec(), wy))
+            })
+        },
+    );
     // the same into an output buffer reused from frame to frame (no fresh 36 MB to fault in)
     let mut reused = vec![0u8; W * H * 3];
     g.bench_function("l3_fast_u16_to_srgb8_auto_white_reused_output", |b| {

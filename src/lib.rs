@@ -16,6 +16,7 @@
 #![allow(clippy::needless_range_loop)]
 
 pub mod bench;
+pub mod buffers;
 pub mod camera;
 pub mod cli;
 pub mod colour;

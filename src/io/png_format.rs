@@ -124,7 +124,7 @@ pub fn encode_png_rgb8(
     data: &[u8],
     compression: PngCompression,
 ) -> IoResult<Vec<u8>> {
-    let mut out = Vec::with_capacity(data.len() / 2 + 1024);
+    let mut out = crate::buffers::with_capacity(data.len() / 2 + 1024);
     encode_rgb8_to(&mut out, width, height, data, compression)?;
     Ok(out)
 }
@@ -144,7 +144,7 @@ pub fn write_png_rgb8(
 
 /// Encodes a mosaic as an in-memory 16-bit grayscale PNG.
 pub fn encode_png_gray16(frame: &RawFrame, compression: PngCompression) -> IoResult<Vec<u8>> {
-    let mut out = Vec::with_capacity(frame.data.len() + 1024);
+    let mut out = crate::buffers::with_capacity(frame.data.len() + 1024);
     encode_gray16_to(&mut out, frame, compression)?;
     Ok(out)
 }

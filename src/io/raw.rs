@@ -157,7 +157,7 @@ impl RawFrame {
 
     /// Volts of every pixel: (dn − black) / (white − black) × swing, clamped to [0, swing].
     pub fn to_volts(&self, meta: &RawMeta) -> IoResult<Vec<f32>> {
-        let mut out = vec![0.0f32; self.data.len()];
+        let mut out = crate::buffers::zeroed::<f32>(self.data.len());
         self.to_volts_into(meta, &mut out)?;
         Ok(out)
     }
@@ -217,7 +217,7 @@ impl RawFrame {
         let range = f64::from(meta.white_level) - black;
         let swing = meta.voltage_swing;
         let scale = range / swing;
-        let mut data = vec![0u16; volts.len()];
+        let mut data = crate::buffers::zeroed::<u16>(volts.len());
         data.par_chunks_mut(CONVERT_CHUNK)
             .zip(volts.par_chunks(CONVERT_CHUNK))
             .for_each(|(o, v)| {
@@ -310,10 +310,10 @@ pub fn decode_raw_u16_le(
 ) -> IoResult<RawFrame> {
     limits.check(width, height)?;
     check_len("body", bytes.len(), width, height, 2, "bytes")?;
-    let data = bytes
-        .chunks_exact(2)
-        .map(|c| u16::from_le_bytes([c[0], c[1]]))
-        .collect();
+    let mut data: Vec<u16> = crate::buffers::zeroed(width * height);
+    for (d, c) in data.iter_mut().zip(bytes.chunks_exact(2)) {
+        *d = u16::from_le_bytes([c[0], c[1]]);
+    }
     Ok(RawFrame {
         width,
         height,

@@ -121,7 +121,7 @@ fn to_vec(
     capacity: usize,
     f: impl FnOnce(&mut Cursor<Vec<u8>>) -> IoResult<()>,
 ) -> IoResult<Vec<u8>> {
-    let mut cur = Cursor::new(Vec::with_capacity(capacity));
+    let mut cur = Cursor::new(crate::buffers::with_capacity(capacity));
     f(&mut cur)?;
     Ok(cur.into_inner())
 }

@@ -6,8 +6,8 @@
 //! (free page reporting) the host faults it in again as well. Two measures:
 //!
 //! - [`output_buffer`] asks for transparent huge pages on large buffers
-//!   (measured on one thread: 14 ms to allocate and fill 36 MB in 4 KiB pages,
-//!   2 ms in 2 MiB pages);
+//!   ([`crate::buffers`]; measured on one thread: 14 ms to allocate and fill
+//!   36 MB in 4 KiB pages, 2 ms in 2 MiB pages);
 //! - 8-bit frames come as a [`Frame`], which gives its buffer back to a small
 //!   process-wide pool when dropped, so the next render writes into memory
 //!   that is already mapped. The pool keeps at most [`KEEP_FRAMES`] buffers and
@@ -22,8 +22,6 @@ pub const KEEP_FRAMES: usize = 4;
 pub const KEEP_BYTES: usize = 256 << 20;
 /// Smaller buffers are not pooled: the allocator serves them from memory it keeps anyway.
 const POOL_MIN_BYTES: usize = 1 << 20;
-/// Transparent huge page size on x86-64 and most aarch64 kernels.
-const HUGE_PAGE: usize = 2 << 20;
 
 /// Buffers given back by dropped frames, up to a count and a byte budget.
 #[derive(Debug)]
@@ -92,28 +90,9 @@ impl FramePool {
     }
 }
 
-/// A zeroed buffer of `n` values for a render's output. A large one comes
-/// untouched from the kernel (a zeroed allocation), and on Linux is advised
-/// onto transparent huge pages before the render's threads first write it.
+/// A zeroed buffer of `n` values for a render's output, on huge pages when large.
 pub(super) fn output_buffer<T: Copy + Default + Send + Sync>(n: usize) -> Vec<T> {
-    let size = std::mem::size_of::<T>().max(1);
-    let bytes = n.saturating_mul(size);
-    // zeroed allocation: a large one comes fresh from the kernel, untouched
-    let mut v: Vec<T> = vec![T::default(); n];
-    #[cfg(target_os = "linux")]
-    if bytes >= 2 * HUGE_PAGE {
-        let start = v.as_mut_ptr() as usize;
-        let first = start.next_multiple_of(HUGE_PAGE);
-        let end = (start + bytes) / HUGE_PAGE * HUGE_PAGE;
-        if end > first {
-            // SAFETY: the range lies inside the vector's allocation; the advice only
-            // changes how the kernel backs those pages (an error is harmless and ignored).
-            unsafe {
-                libc::madvise(first as *mut libc::c_void, end - first, libc::MADV_HUGEPAGE);
-            }
-        }
-    }
-    v
+    crate::buffers::zeroed(n)
 }
 
 /// An 8-bit image buffer (interleaved, row-major) that returns to the pool
