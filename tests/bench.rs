@@ -84,7 +84,19 @@ fn quick_bench_writes_json_markdown_and_plot() {
             k.max_diff
         );
     }
-    assert_eq!(report.encoders.len(), 4);
+    assert_eq!(report.encoders.len(), 5);
+    // the PPM is its header and the 8-bit pixels, uncompressed
+    let ppm = report
+        .encoders
+        .iter()
+        .find(|e| e.encoding.starts_with("PPM"))
+        .expect("PPM encoder timed");
+    let png = report
+        .encoders
+        .iter()
+        .find(|e| e.encoding.starts_with("PNG fast"))
+        .expect("PNG encoder timed");
+    assert!(ppm.bytes > png.bytes && ppm.median_ms.is_finite());
     assert!(!report.pareto.is_empty() && report.pareto.iter().all(|f| !f.names.is_empty()));
 
     let md = std::fs::read_to_string(out_dir.join("bench.md")).unwrap();

@@ -69,7 +69,7 @@ async fn render_of_a_tungsten_frame_equals_l3_render_bit_for_bit() {
     );
     let table_path = d.join("table.safetensors");
     tiny_table(Some(&iset)).save(&table_path).unwrap();
-    for out in ["cli.tiff", "cli.raw", "cli.png"] {
+    for out in ["cli.tiff", "cli.raw", "cli.png", "cli.ppm"] {
         l3_cli(
             &[
                 "--iset-dir",
@@ -104,6 +104,7 @@ async fn render_of_a_tungsten_frame_equals_l3_render_bit_for_bit() {
     for (accept, file) in [
         ("image/tiff", "cli.tiff"),
         ("application/octet-stream", "cli.raw"),
+        ("image/x-portable-pixmap", "cli.ppm"),
     ] {
         let r = c
             .post(url(&server, &q))
@@ -130,7 +131,9 @@ async fn render_of_a_tungsten_frame_equals_l3_render_bit_for_bit() {
         ] {
             assert!(r.headers().contains_key(hname), "missing {hname}");
         }
+        let length = r.headers()["content-length"].to_str().unwrap().to_owned();
         let body = r.bytes().await.unwrap();
+        assert_eq!(length, body.len().to_string(), "{accept}: Content-Length");
         let cli = std::fs::read(d.join(file)).unwrap();
         assert_eq!(body.len(), cli.len(), "{file} size");
         assert!(
@@ -164,6 +167,12 @@ async fn render_of_a_tungsten_frame_equals_l3_render_bit_for_bit() {
     let cli = decode_png(&std::fs::read(d.join("cli.png")).unwrap());
     assert_eq!(ours.dimensions(), (w as u32, h as u32));
     assert!(ours == cli, "PNG pixels differ from l3 render");
+    // and the PPM holds the same pixels as the PNG
+    let ppm = std::fs::read(d.join("cli.ppm")).unwrap();
+    let ppm = image::load_from_memory_with_format(&ppm, image::ImageFormat::Pnm)
+        .unwrap()
+        .into_rgb8();
+    assert!(ppm == ours, "PPM pixels differ from the PNG's");
     server.shutdown().await.unwrap();
 }
 

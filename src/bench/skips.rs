@@ -9,7 +9,7 @@ use serde::{Deserialize, Serialize};
 
 use super::BenchError;
 use super::sweep::median;
-use crate::io::{PngCompression, encode_png_rgb8, encode_tiff_f32_rgb};
+use crate::io::{PngCompression, encode_png_rgb8, encode_ppm_rgb8, encode_tiff_f32_rgb};
 use crate::l3::{
     FastOptions, FastRenderer, IDENTITY, L3Table, Mat3, Mosaic, Region, WhiteLevel, fuse_kernels,
     xyz_to_srgb8,
@@ -336,6 +336,15 @@ pub fn run_skips(
             bytes: bytes.len(),
         });
     }
+    // (the service sends a PPM's header and then the rendered frame itself, without this copy)
+    let (ms, bytes) = time(runs, || {
+        encode_ppm_rgb8(w, h, &rgb).map_err(|e| BenchError::Invalid(e.to_string()))
+    })?;
+    enc.push(EncoderResult {
+        encoding: "PPM sRGB 8-bit (header + copy)".into(),
+        median_ms: ms,
+        bytes: bytes.len(),
+    });
     let (ms, bytes) = time(runs, || {
         encode_tiff_f32_rgb(w, h, &xyz).map_err(|e| BenchError::Invalid(e.to_string()))
     })?;

@@ -4,8 +4,8 @@ use clap::Args;
 
 use super::{Cli, CliError, iset, write_file};
 use crate::io::{
-    DecodedMosaic, Limits, PngCompression, encode_png_rgb8, encode_tiff_f32_rgb, encode_tiff_rgb16,
-    read_mosaic,
+    DecodedMosaic, Limits, PngCompression, encode_png_rgb8, encode_ppm_rgb8, encode_tiff_f32_rgb,
+    encode_tiff_rgb16, read_mosaic,
 };
 use crate::l3::{
     FastRenderer, IlluminantRegistry, L3Table, Mosaic, RenderStats, TableKind, WhiteLevel,
@@ -24,7 +24,7 @@ pub struct RenderArgs {
     /// Input mosaic: .raw (+ .json sidecar), 16-bit PNG, TIFF or PGM.
     #[arg(long = "in")]
     pub input: PathBuf,
-    /// Output: .png (sRGB 8-bit), .tiff (float XYZ), .raw (f32 XYZ).
+    /// Output: .png (sRGB 8-bit), .ppm (sRGB 8-bit, uncompressed), .tiff (float XYZ), .raw (f32 XYZ).
     #[arg(long)]
     pub out: PathBuf,
     /// `auto` or the Y that maps to white.
@@ -105,11 +105,15 @@ pub fn run(cli: &Cli, a: &RenderArgs) -> Result<(), CliError> {
     let started = std::time::Instant::now();
     let renderer = FastRenderer::new(&table, &kernels)?;
     let frame = Mosaic::Volts(&volts);
-    if fast && ext == "png" {
-        // straight to 8-bit sRGB, as the service answers a PNG request
+    if fast && (ext == "png" || ext == "ppm") {
+        // straight to 8-bit sRGB, as the service answers a PNG or PPM request
         let (rgb, _, stats) = renderer.render_srgb8(frame, w, h, None, white)?;
         let ms = started.elapsed().as_secs_f64() * 1e3;
-        let bytes = encode_png_rgb8(w, h, &rgb, PngCompression::Default)?;
+        let bytes = if ext == "ppm" {
+            encode_ppm_rgb8(w, h, &rgb)?
+        } else {
+            encode_png_rgb8(w, h, &rgb, PngCompression::Default)?
+        };
         write_file(&a.out, &bytes)?;
         report(a, &entry.name, w, h, ms, &stats);
         return Ok(());
@@ -127,6 +131,7 @@ pub fn run(cli: &Cli, a: &RenderArgs) -> Result<(), CliError> {
             &xyz_to_srgb8(&xyz, white_y(&xyz, w, h, white)),
             PngCompression::Default,
         )?,
+        "ppm" => encode_ppm_rgb8(w, h, &xyz_to_srgb8(&xyz, white_y(&xyz, w, h, white)))?,
         "tif" | "tiff" => match a.tiff.as_str() {
             "xyz" => encode_tiff_f32_rgb(w, h, &xyz)?,
             "srgb16" => encode_tiff_rgb16(w, h, &xyz_to_srgb16(&xyz, white_y(&xyz, w, h, white)))?,
@@ -139,7 +144,7 @@ pub fn run(cli: &Cli, a: &RenderArgs) -> Result<(), CliError> {
         "raw" | "bin" | "f32" => xyz.iter().flat_map(|v| v.to_le_bytes()).collect(),
         _ => {
             return Err(CliError::Usage(format!(
-                "--out {}: use .png, .tiff or .raw",
+                "--out {}: use .png, .ppm, .tiff or .raw",
                 a.out.display()
             )));
         }

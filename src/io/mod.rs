@@ -1,4 +1,4 @@
-//! File formats: raw sensor frames with JSON sidecars, PNG, TIFF and PGM.
+//! File formats: raw sensor frames with JSON sidecars, PNG, TIFF, PGM (input) and PPM (output).
 //!
 //! Every decoder treats its input as hostile: it checks the declared size against a caller's
 //! [`Limits`] before allocating pixel memory, never panics, and reports what was wrong in an
@@ -11,6 +11,7 @@ mod limits;
 mod mosaic;
 mod pgm;
 mod png_format;
+mod ppm;
 mod raw;
 mod tiff_format;
 
@@ -24,6 +25,7 @@ pub use png_format::{
     PngCompression, decode_png_rgb8, encode_png_gray16, encode_png_rgb8, write_png_gray16,
     write_png_rgb8,
 };
+pub use ppm::{encode_ppm_rgb8, ppm_header};
 pub use raw::{
     MAX_SIDECAR_BYTES, RawFrame, RawMeta, RawPaths, decode_raw_u16_le, encode_raw_u16_le, read_raw,
     read_sidecar, write_raw, write_raw_to,

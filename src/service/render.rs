@@ -19,7 +19,7 @@ use super::ServiceError;
 use super::state::AppState;
 use crate::io::{
     DecodedMosaic, Limits, PngCompression, decode_mosaic, decode_raw_u16_le, encode_png_rgb8,
-    encode_tiff_f32_rgb, encode_tiff_rgb16,
+    encode_ppm_rgb8, encode_tiff_f32_rgb, encode_tiff_rgb16, ppm_header,
 };
 use crate::l3::{Mosaic, Region, WhiteLevel, xyz_to_srgb8, xyz_to_srgb16};
 
@@ -51,6 +51,8 @@ pub struct RenderQuery {
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum OutputFormat {
     Png,
+    /// Binary PPM: 8-bit sRGB, uncompressed (encoding is a header and a copy).
+    Ppm,
     Tiff,
     F32,
 }
@@ -59,6 +61,7 @@ impl OutputFormat {
     fn content_type(self) -> &'static str {
         match self {
             OutputFormat::Png => "image/png",
+            OutputFormat::Ppm => "image/x-portable-pixmap",
             OutputFormat::Tiff => "image/tiff",
             OutputFormat::F32 => "application/octet-stream",
         }
@@ -82,6 +85,7 @@ pub fn negotiate(accept: Option<&str>) -> Result<OutputFormat, ServiceError> {
         }
         let fmt = match media.as_str() {
             "image/png" | "image/*" | "*/*" => OutputFormat::Png,
+            "image/x-portable-pixmap" => OutputFormat::Ppm,
             "image/tiff" => OutputFormat::Tiff,
             "application/octet-stream" => OutputFormat::F32,
             _ => continue,
@@ -92,7 +96,7 @@ pub fn negotiate(accept: Option<&str>) -> Result<OutputFormat, ServiceError> {
     }
     best.map(|(_, f)| f).ok_or_else(|| {
         ServiceError::NotAcceptable(format!(
-            "Accept '{accept}' allows none of image/png, image/tiff, application/octet-stream"
+            "Accept '{accept}' allows none of image/png, image/x-portable-pixmap, image/tiff, application/octet-stream"
         ))
     })
 }
@@ -206,8 +210,39 @@ enum Rendered8 {
     Xyz(Vec<f32>),
 }
 
+/// An encoded answer: one buffer, or a header followed by the rendered frame itself (PPM:
+/// the pixels are sent from the render's buffer, which returns to the pool once sent).
+enum Encoded {
+    Whole(Vec<u8>),
+    Framed {
+        header: Vec<u8>,
+        frame: crate::l3::Frame,
+    },
+}
+
+impl Encoded {
+    fn len(&self) -> usize {
+        match self {
+            Encoded::Whole(b) => b.len(),
+            Encoded::Framed { header, frame } => header.len() + frame.len(),
+        }
+    }
+
+    fn into_body(self) -> axum::body::Body {
+        match self {
+            Encoded::Whole(b) => axum::body::Body::from(b),
+            Encoded::Framed { header, frame } => {
+                let parts = [bytes::Bytes::from(header), bytes::Bytes::from_owner(frame)];
+                axum::body::Body::from_stream(futures_util::stream::iter(
+                    parts.map(Ok::<_, std::convert::Infallible>),
+                ))
+            }
+        }
+    }
+}
+
 struct Rendered {
-    bytes: Vec<u8>,
+    bytes: Encoded,
     width: usize,
     height: usize,
     in_width: usize,
@@ -216,6 +251,43 @@ struct Rendered {
     decode_ms: f64,
     render_ms: f64,
     encode_ms: f64,
+}
+
+/// Encodes a rendered image as a whole buffer (every format but a PPM of an sRGB frame).
+fn encode(
+    format: OutputFormat,
+    out: Rendered8,
+    ow: usize,
+    oh: usize,
+    wy: f64,
+    tiff_srgb16: bool,
+) -> Result<Vec<u8>, ServiceError> {
+    Ok(match (format, out) {
+        (OutputFormat::Png, Rendered8::Srgb(rgb)) => {
+            encode_png_rgb8(ow, oh, &rgb, PngCompression::Fast)?
+        }
+        (OutputFormat::Png, Rendered8::Xyz(xyz)) => {
+            encode_png_rgb8(ow, oh, &xyz_to_srgb8(&xyz, wy), PngCompression::Fast)?
+        }
+        (OutputFormat::Ppm, Rendered8::Srgb(rgb)) => encode_ppm_rgb8(ow, oh, &rgb)?,
+        (OutputFormat::Ppm, Rendered8::Xyz(xyz)) => {
+            encode_ppm_rgb8(ow, oh, &xyz_to_srgb8(&xyz, wy))?
+        }
+        (OutputFormat::Tiff, Rendered8::Xyz(xyz)) if tiff_srgb16 => {
+            encode_tiff_rgb16(ow, oh, &xyz_to_srgb16(&xyz, wy))?
+        }
+        (OutputFormat::Tiff, Rendered8::Xyz(xyz)) => encode_tiff_f32_rgb(ow, oh, &xyz)?,
+        (OutputFormat::F32, Rendered8::Xyz(xyz)) => {
+            let mut b = crate::buffers::with_capacity(xyz.len() * 4);
+            b.extend(xyz.iter().flat_map(|v| v.to_le_bytes()));
+            b
+        }
+        _ => {
+            return Err(ServiceError::Internal(
+                "render output does not match the format".into(),
+            ));
+        }
+    })
 }
 
 /// A render slot taken by [`admit`] before the body is read.
@@ -449,7 +521,8 @@ pub async fn render(
             let bad = |e: crate::l3::L3Error| ServiceError::InvalidImage(e.to_string());
             // only what the answer needs: 8-bit sRGB straight from the kernels for a PNG,
             // XYZ otherwise; only the region's pixels
-            let (out, stats, wy) = if format == OutputFormat::Png && preview == 1 {
+            let srgb8 = matches!(format, OutputFormat::Png | OutputFormat::Ppm);
+            let (out, stats, wy) = if srgb8 && preview == 1 {
                 let (rgb, wy, stats) = renderer
                     .render_srgb8(mosaic, w, h, region, white)
                     .map_err(bad)?;
@@ -472,24 +545,11 @@ pub async fn render(
                 other => (other, ow, oh),
             };
             let bytes = match (format, out) {
-                (OutputFormat::Png, Rendered8::Srgb(rgb)) => {
-                    encode_png_rgb8(ow, oh, &rgb, PngCompression::Fast)?
-                }
-                (OutputFormat::Png, Rendered8::Xyz(xyz)) => {
-                    encode_png_rgb8(ow, oh, &xyz_to_srgb8(&xyz, wy), PngCompression::Fast)?
-                }
-                (OutputFormat::Tiff, Rendered8::Xyz(xyz)) if tiff_srgb16 => {
-                    encode_tiff_rgb16(ow, oh, &xyz_to_srgb16(&xyz, wy))?
-                }
-                (OutputFormat::Tiff, Rendered8::Xyz(xyz)) => encode_tiff_f32_rgb(ow, oh, &xyz)?,
-                (OutputFormat::F32, Rendered8::Xyz(xyz)) => {
-                    xyz.iter().flat_map(|v| v.to_le_bytes()).collect()
-                }
-                _ => {
-                    return Err(ServiceError::Internal(
-                        "render output does not match the format".into(),
-                    ));
-                }
+                (OutputFormat::Ppm, Rendered8::Srgb(frame)) => Encoded::Framed {
+                    header: ppm_header(ow, oh)?,
+                    frame,
+                },
+                (format, out) => Encoded::Whole(encode(format, out, ow, oh, wy, tiff_srgb16)?),
             };
             let t3 = Instant::now();
             let ms = |a: Instant, b: Instant| (b - a).as_secs_f64() * 1e3;
@@ -515,13 +575,16 @@ pub async fn render(
         .await
         .map_err(|_| ServiceError::Internal("the render task was lost".into()))??;
     state.metrics.rendered((r.in_width * r.in_height) as u64);
-    let mut resp = r.bytes.into_response();
+    let length = r.bytes.len();
+    let mut resp = r.bytes.into_body().into_response();
     let h = resp.headers_mut();
     h.insert(
         header::CONTENT_TYPE,
         HeaderValue::from_static(format.content_type()),
     );
     h.insert(header::VARY, HeaderValue::from_static("Accept"));
+    // (a PPM body is a stream of two parts: its length is still known)
+    h.insert(header::CONTENT_LENGTH, HeaderValue::from(length));
     let mut put = |name: &'static str, v: String| {
         if let Ok(v) = HeaderValue::from_str(&v) {
             h.insert(HeaderName::from_static(name), v);
@@ -560,6 +623,10 @@ mod tests {
         assert_eq!(negotiate(None).unwrap(), OutputFormat::Png);
         assert_eq!(negotiate(Some("*/*")).unwrap(), OutputFormat::Png);
         assert_eq!(negotiate(Some("image/tiff")).unwrap(), OutputFormat::Tiff);
+        assert_eq!(
+            negotiate(Some("image/x-portable-pixmap, image/png;q=0.9")).unwrap(),
+            OutputFormat::Ppm
+        );
         assert_eq!(
             negotiate(Some("image/png;q=0.5, application/octet-stream")).unwrap(),
             OutputFormat::F32
