@@ -65,6 +65,19 @@ fn max_abs_diff(a: &[f32], b: &[f32]) -> f32 {
         .fold(0.0, f32::max)
 }
 
+/// `part` (3 bytes per pixel) is `reg` cut from `whole`, an image `width` pixels wide.
+fn assert_is_crop(whole: &[u8], width: usize, part: &[u8], reg: Region) {
+    assert_eq!(part.len(), reg.width * reg.height * 3);
+    for y in 0..reg.height {
+        let row = (reg.y + y) * width + reg.x;
+        assert!(
+            whole[row * 3..(row + reg.width) * 3]
+                == part[y * reg.width * 3..(y + 1) * reg.width * 3],
+            "row {y} of the region differs"
+        );
+    }
+}
+
 fn tungsten_kernels(table: &L3Table) -> Vec<f32> {
     let grid = WavelengthGrid::default();
     let mut reg = IlluminantRegistry::with_defaults(grid, None).expect("registry");
@@ -185,13 +198,7 @@ fn srgb8_u16_and_regions_match_the_reference_pipeline() {
     let (part, _, _) = fast
         .render_srgb8(mosaic, w, h, Some(reg), WhiteLevel::Y(wy_fast))
         .expect("region");
-    for y in 0..reg.height {
-        let row = (reg.y + y) * w + reg.x;
-        assert_eq!(
-            &rgb[row * 3..(row + reg.width) * 3],
-            &part[y * reg.width * 3..(y + 1) * reg.width * 3]
-        );
-    }
+    assert_is_crop(&rgb, w, &part, reg);
     // into a caller's buffer (reused, so first filled with garbage): the same bytes
     let mut buf = vec![7u8; w * h * 3];
     let (wy_into, _) = fast
@@ -275,17 +282,10 @@ fn pooled_srgb8_frames_hold_only_the_new_image() {
         .render_srgb8(Mosaic::Volts(&first), bw, bh, Some(reg), white)
         .expect("region");
     assert_eq!(part.as_ptr(), ptr);
-    assert_eq!(part.len(), reg.width * reg.height * 3);
     let (whole, _, _) = fast
         .render_srgb8(Mosaic::Volts(&first), bw, bh, None, white)
         .expect("whole");
-    for y in 0..reg.height {
-        let row = (reg.y + y) * bw + reg.x;
-        assert!(
-            whole[row * 3..(row + reg.width) * 3]
-                == part[y * reg.width * 3..(y + 1) * reg.width * 3]
-        );
-    }
+    assert_is_crop(&whole, bw, &part, reg);
     // a frame taken out of the pool is a plain vector
     let v: Vec<u8> = whole.into_vec();
     assert_eq!(v.len(), bw * bh * 3);
