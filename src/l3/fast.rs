@@ -32,7 +32,6 @@ mod avx512;
 mod frames;
 
 pub use frames::Frame;
-use frames::output_buffer;
 
 use super::classify::sat_case_index;
 use super::output::{WhiteLevel, white_from_samples, white_sample_points};
@@ -481,7 +480,7 @@ impl FastRenderer {
     ) -> Result<(Vec<f32>, RenderStats), L3Error> {
         let (src, clamped) = self.source(mosaic, width, height)?;
         let reg = check_region(region, width, height)?;
-        let mut out = output_buffer::<f32>(reg.width * reg.height * 3);
+        let mut out = crate::buffers::zeroed::<f32>(reg.width * reg.height * 3);
         let mut stats = self.run(&src, reg, &self.xyz, &mut out, &XyzSink);
         stats.clamped = clamped;
         Ok((out, stats))

@@ -5,8 +5,8 @@
 //! first write, and on virtual machines that hand freed memory back to the host
 //! (free page reporting) the host faults it in again as well. Two measures:
 //!
-//! - [`output_buffer`] asks for transparent huge pages on large buffers
-//!   ([`crate::buffers`]; measured on one thread: 14 ms to allocate and fill
+//! - new buffers come from [`crate::buffers::zeroed`], which asks for
+//!   transparent huge pages on large buffers (measured on one thread: 14 ms to allocate and fill
 //!   36 MB in 4 KiB pages, 2 ms in 2 MiB pages);
 //! - 8-bit frames come as a [`Frame`], which gives its buffer back to a small
 //!   process-wide pool when dropped, so the next render writes into memory
@@ -66,7 +66,7 @@ impl FramePool {
                 b.resize(len, 0);
                 b
             }
-            None => output_buffer::<u8>(len),
+            None => crate::buffers::zeroed::<u8>(len),
         };
         Frame { buf, pool: self }
     }
@@ -88,11 +88,6 @@ impl FramePool {
         let free = self.free();
         (free.len(), free.iter().map(Vec::capacity).sum())
     }
-}
-
-/// A zeroed buffer of `n` values for a render's output, on huge pages when large.
-pub(super) fn output_buffer<T: Copy + Default + Send + Sync>(n: usize) -> Vec<T> {
-    crate::buffers::zeroed(n)
 }
 
 /// An 8-bit image buffer (interleaved, row-major) that returns to the pool
