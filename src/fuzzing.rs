@@ -115,7 +115,6 @@ pub fn synthetic_frame(
         .collect();
     let pattern = [0usize, 1, 2, 3]; // R G / W B
     let mut volts = vec![0f32; size * size];
-    let mut clean = vec![0f32; size * size];
     let mut xyz = vec![0f32; size * size * 3];
     for r in 0..size {
         for c in 0..size {
@@ -124,7 +123,6 @@ pub fn synthetic_frame(
             let v: f32 = (0..3).map(|k| SYNTH_SENSOR[ch][k] * col[k]).sum();
             let n = (2.0 * rng.next_f32() - 1.0) * noise;
             volts[r * size + c] = (v + n).clamp(0.0, 1.8);
-            clean[r * size + c] = v.clamp(0.0, 1.8);
             xyz[(r * size + c) * 3..(r * size + c) * 3 + 3].copy_from_slice(&col);
         }
     }
@@ -133,7 +131,6 @@ pub fn synthetic_frame(
         height: size,
         volts,
         xyz,
-        clean: Some(clean),
         cfa_shift: shift,
     }
 }
@@ -200,6 +197,7 @@ pub fn train_tiny_table() -> Result<L3Table, L3Error> {
                 (i % 2, (i / 2) % 2),
             )])
         },
+        None,
         &ctl,
     )?;
     package(synthetic_meta(&params)?, learned)

@@ -192,6 +192,13 @@ fn simulate_train_render_eval() {
         mean.is_finite() && mean > 0.0 && mean < 6.0,
         "mean ΔE {mean}"
     );
+    // the figure is written beside the JSON
+    let svg = std::fs::read_to_string(d.join("report.svg")).unwrap();
+    assert!(
+        svg.contains("<svg") && svg.contains("d. Worst patches"),
+        "{svg}"
+    );
+    assert!(out.contains("report.svg"), "{out}");
 }
 
 #[test]

@@ -75,7 +75,7 @@ where
         progress: &|_, _| {},
         cancel: &cancel,
     };
-    learn(&geo, params, noise_model(), n, frames, &ctl)
+    learn(&geo, params, noise_model(), n, frames, None, &ctl)
 }
 
 /// Checks a table: finite kernels, bounded norms; prints norms and
@@ -153,9 +153,6 @@ fn flat_frame(
             s ^= s << 17;
             let n = ((s >> 40) as f32 / (1u64 << 24) as f32 * 2.0 - 1.0) * noise;
             f.volts[r * size + c] = (v + n).clamp(0.0, 1.8);
-            if let Some(cl) = f.clean.as_mut() {
-                cl[r * size + c] = v.clamp(0.0, 1.8);
-            }
             f.xyz[(r * size + c) * 3..(r * size + c) * 3 + 3].copy_from_slice(&xyz);
         }
     }
@@ -178,7 +175,6 @@ fn zero_samples_is_an_error() {
             height: 0,
             volts: vec![],
             xyz: vec![],
-            clean: None,
             cfa_shift: (0, 0),
         }])
     })
@@ -193,7 +189,6 @@ fn zero_samples_is_an_error() {
             height: 8,
             volts: vec![0.1; 10],
             xyz: vec![0.1; 30],
-            clean: None,
             cfa_shift: (0, 0),
         }])
     })
@@ -379,15 +374,11 @@ fn camera_frames(
             let mean = mosaic(&rates, &cfa.shifted(dr, dc)).unwrap();
             let seed = (scene_index * 16 + shift) as u64;
             let volts = camera.capture(&mean, exposure, noise, seed).unwrap();
-            let clean = camera
-                .capture(&mean, exposure, &NoiseSwitches::none(), seed)
-                .unwrap();
             TrainingFrame {
                 width: cols,
                 height: rows,
                 volts: volts.into_raw_vec_and_offset().0,
                 xyz: xyz_rates.iter().map(|v| v * exposure as f32).collect(),
-                clean: Some(clean.into_raw_vec_and_offset().0),
                 cfa_shift: (dr, dc),
             }
         })
@@ -419,7 +410,7 @@ fn learn_camera(
         dsnu_v: design.dsnu_v(),
         prnu_fraction: design.prnu_fraction(),
     };
-    let learned = learn(&geo, params, nm, n, |i| Ok(frames(i)), &ctl)?;
+    let learned = learn(&geo, params, nm, n, |i| Ok(frames(i)), None, &ctl)?;
     let mut meta = synthetic_meta(params).unwrap();
     meta.cfa = camera.cfa().clone();
     meta.voltage_swing = design.voltage_swing_v;

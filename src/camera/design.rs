@@ -250,21 +250,27 @@ impl FilterSpec {
                 column,
                 scale,
             } => {
+                // absolute: that file; relative: the ISET data directory's
+                // copy if it has one, else the built-in copy
                 let p = Path::new(path);
-                let full = if p.is_absolute() {
-                    p.to_path_buf()
+                let in_iset = iset.map(|d| d.root().join(p)).filter(|f| f.is_file());
+                let table = if p.is_absolute() {
+                    crate::spectral::load_csv(p)?
+                } else if let Some(full) = in_iset {
+                    crate::spectral::load_csv(&full)?
+                } else if let Some(t) = crate::spectral::bundled_table(path) {
+                    t?
                 } else {
-                    match iset {
-                        Some(d) => d.root().join(p),
-                        None => {
-                            return Err(CameraError::InvalidDesign(format!(
-                                "{what}: csv path '{path}' is relative to the ISET data \
-                                 directory, which was not found (set L3_ISET_DIR)"
-                            )));
-                        }
-                    }
+                    return Err(CameraError::InvalidDesign(format!(
+                        "{what}: csv path '{path}' is neither in the ISET data directory ({}) \
+                         nor built in (built in: {})",
+                        iset.map(|d| d.root().display().to_string())
+                            .unwrap_or_else(|| "not found; set L3_ISET_DIR".into()),
+                        crate::spectral::bundled_paths()
+                            .collect::<Vec<_>>()
+                            .join(", ")
+                    )));
                 };
-                let table = crate::spectral::load_csv(&full)?;
                 table
                     .samples(column)?
                     .resample(grid, Extrapolation::Zero)

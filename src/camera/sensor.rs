@@ -228,6 +228,42 @@ impl Camera {
         self.xyz_scale
     }
 
+    /// Noise-free channel responses and volts-equivalent XYZ of a uniform
+    /// surface with `reflectance` under `illuminant`, without optics, in a
+    /// common scale (per unit radiance scale and exposure): the data colour
+    /// maps are fitted on. Channels in CFA order.
+    pub fn reflectance_response(
+        &self,
+        reflectance: &Spectrum,
+        illuminant: &Spectrum,
+    ) -> Result<(Vec<f64>, [f64; 3]), CameraError> {
+        let e = reflectance.product(illuminant)?;
+        if e.grid() != &self.grid {
+            return Err(CameraError::GridMismatch {
+                what: "reflectance × illuminant".into(),
+                expected: self.grid,
+                got: *e.grid(),
+            });
+        }
+        let chans = self
+            .electron_weights
+            .iter()
+            .map(|w| {
+                w.iter().zip(e.values()).map(|(a, b)| a * b).sum::<f64>()
+                    * self.design.conversion_gain_v()
+                    * self.design.analog_gain
+            })
+            .collect();
+        let xyz = [0, 1, 2].map(|k| {
+            self.xyz_weights[k]
+                .iter()
+                .zip(e.values())
+                .map(|(a, b)| a * b)
+                .sum::<f64>()
+        });
+        Ok((chans, xyz))
+    }
+
     /// The optical image of `scene` sampled at this sensor's pixel pitch.
     pub fn optical_image(&self, scene: &crate::scene::Scene) -> Result<OpticalImage, CameraError> {
         self.optics.image(scene, self.design.pixel_size_um)

@@ -166,6 +166,11 @@ pub fn run(cli: &Cli, a: &EvalArgs) -> Result<(), CliError> {
     let json = serde_json::to_vec_pretty(&report).map_err(|e| CliError::Usage(e.to_string()))?;
     write_file(&out, &json)?;
     println!("wrote {}", out.display());
+    let svg = out.with_extension("svg");
+    if svg != out {
+        write_file(&svg, crate::eval::report_svg(&report)?.as_bytes())?;
+        println!("wrote {}", svg.display());
+    }
     Ok(())
 }
 

@@ -4,7 +4,7 @@
 
 use serde::{Deserialize, Serialize};
 
-use super::workflow::{ChartSetup, chart_scene, reflectance_response};
+use super::workflow::{ChannelSet, ChartSetup, ColourFit, chart_scene, fit_colour_matrix};
 use super::{ErrorStats, EvalError, summarize};
 use crate::camera::Camera;
 use crate::colour::{Cmfs, D65_WHITE_XYZ, Xyz, ciede2000, mat3_mul_vec, xyz_to_lab};
@@ -93,15 +93,26 @@ pub fn error_budget(
         .collect();
     let chans: Vec<Vec<f64>> = patches
         .iter()
-        .map(|p| reflectance_response(camera, &p.reflectance, &acq).map(|r| r.0))
+        .map(|p| {
+            camera
+                .reflectance_response(&p.reflectance, &acq)
+                .map(|r| r.0)
+                .map_err(|e| EvalError::Invalid(e.to_string()))
+        })
         .collect::<Result<_, _>>()?;
     let floor_m = ColourMatrix::fit(&chans, &truth)?;
     let apply = |m: &ColourMatrix, c: &[f64]| -> Xyz {
         [0, 1, 2].map(|k| c.iter().enumerate().map(|(j, v)| m.m[j][k] * v).sum())
     };
     let floor: Vec<Xyz> = chans.iter().map(|c| apply(&floor_m, c)).collect();
-    let si_m = super::workflow::fit_colour_matrix(camera, &[acquisition.to_string()], iset, false)?
-        .then(&correction.t);
+    let acq_list = [acquisition.to_string()];
+    let si_fit = ColourFit {
+        illuminants: &acq_list,
+        kind: crate::l3::TableKind::SameIlluminant,
+        channels: ChannelSet::All,
+        preserve_white: false,
+    };
+    let si_m = fit_colour_matrix(camera, &si_fit, iset)?.then(&correction.t);
     let si: Vec<Xyz> = chans.iter().map(|c| apply(&si_m, c)).collect();
     let (a, b, c) = (
         per_patch(&t_only, &truth, white),

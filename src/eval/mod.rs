@@ -2,20 +2,23 @@
 //! chart's ideal XYZ under D65 (DESIGN.md §7), as a stable JSON report.
 
 mod budget;
+mod figure;
 mod paper_table;
 mod report;
 mod workflow;
 
 pub use budget::{ErrorBudget, error_budget};
+pub use figure::report_svg;
 pub use paper_table::{
     PAPER_TABLE1, PaperOptions, PaperRow, PaperTable, StorageComparison, run_paper_table,
 };
 pub use report::{
     ChartTruth, DeltaEReport, ErrorStats, PatchResult, PixelStats, REPORT_SCHEMA, evaluate_chart,
-    patch_means, summarize,
+    interior, patch_means, summarize,
 };
 pub use workflow::{
-    ChartSetup, Method, chart_scene, evaluate_method, fit_baseline_matrix, fit_colour_matrix,
+    ChannelSet, ChartSetup, ColourFit, Method, chart_scene, evaluate_method, fit_baseline_matrix,
+    fit_colour_matrix,
 };
 
 /// Errors of the evaluation layer.

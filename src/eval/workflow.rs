@@ -2,17 +2,18 @@
 //! under the acquisition illuminant, render with the method, compare with
 //! the chart's ideal XYZ under D65.
 
+use nalgebra::{DMatrix, DVector};
 use serde::{Deserialize, Serialize};
 
 use super::{ChartTruth, DeltaEReport, EvalError, evaluate_chart};
 use crate::camera::{Camera, Exposure, NoiseSwitches, simulate};
-use crate::colour::Cmfs;
 use crate::l3::{
     ColourMatrix, FastRenderer, IlluminantEntry, L3Table, Mosaic, TableKind, fuse_kernels,
     render_baseline,
 };
 use crate::scene::{Scene, SceneOptions, natural100_or_ces_chart};
-use crate::spectral::{Extrapolation, IlluminantSpec, IsetData, cie_illuminant};
+use crate::spectral::{Extrapolation, IlluminantSpec, IsetData, Spectrum, cie_illuminant};
+use crate::training::colour_samples;
 
 /// A rendering method under evaluation.
 pub enum Method<'a> {
@@ -150,42 +151,88 @@ pub fn fit_baseline_matrix(
     illuminants: &[String],
     iset: Option<&IsetData>,
 ) -> Result<ColourMatrix, EvalError> {
-    fit_colour_matrix(camera, illuminants, iset, true)
+    let fit = ColourFit {
+        illuminants,
+        kind: TableKind::SameIlluminant,
+        channels: ChannelSet::Rgb,
+        preserve_white: false,
+    };
+    fit_colour_matrix(camera, &fit, iset)
 }
 
-/// [`fit_baseline_matrix`], or with every channel when `rgb_only` is false.
+/// Which channels a colour matrix uses.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum ChannelSet {
+    /// R, G and B only (a conventional 3×3), when the CFA has them; every
+    /// channel otherwise.
+    Rgb,
+    /// Every CFA channel.
+    All,
+}
+
+/// What a colour matrix is fitted on: the training reflectances under
+/// `illuminants`, to XYZ under the same light (`SameIlluminant`) or under
+/// D65 (`CrossIlluminant`), on `channels`. With `preserve_white` the fit is
+/// constrained to map a perfect white exactly (a white-balanced camera
+/// matrix, as an ISP's); otherwise it is plain least squares in XYZ.
+#[derive(Clone, Debug)]
+pub struct ColourFit<'a> {
+    pub illuminants: &'a [String],
+    pub kind: TableKind,
+    pub channels: ChannelSet,
+    pub preserve_white: bool,
+}
+
+/// [`fit_baseline_matrix`]'s general form: see [`ColourFit`].
 pub fn fit_colour_matrix(
     camera: &Camera,
-    illuminants: &[String],
+    fit: &ColourFit,
     iset: Option<&IsetData>,
-    rgb_only: bool,
 ) -> Result<ColourMatrix, EvalError> {
     let grid = *camera.grid();
-    let refl = crate::scene::training_reflectances(&grid, iset)?;
+    let refl: Vec<Spectrum> = crate::scene::training_reflectances(&grid, iset)?
+        .into_iter()
+        .map(|(_, s)| s)
+        .collect();
+    let spds = fit
+        .illuminants
+        .iter()
+        .map(|spec| {
+            Ok(IlluminantSpec::parse(spec)?
+                .resolve(iset)?
+                .spd
+                .resample(&grid, Extrapolation::Zero))
+        })
+        .collect::<Result<Vec<_>, EvalError>>()?;
+    let d65 = cie_illuminant("D65")
+        .ok_or_else(|| EvalError::Invalid("D65 missing".into()))?
+        .resample(&grid, Extrapolation::Zero);
+    let samples = colour_samples(camera, &spds, fit.kind, &d65, &refl)
+        .map_err(|e| EvalError::Invalid(e.to_string()))?;
     let cfa = camera.cfa();
     let rgb: Option<Vec<usize>> = ["R", "G", "B"]
         .iter()
         .map(|n| cfa.channel_index(n))
         .collect();
-    let used: Vec<usize> = match rgb {
-        Some(v) if rgb_only => v,
+    let used: Vec<usize> = match (fit.channels, rgb) {
+        (ChannelSet::Rgb, Some(v)) => v,
         _ => (0..cfa.n_channels()).collect(),
     };
-    let mut chans = Vec::new();
-    let mut xyz = Vec::new();
-    for spec in illuminants {
-        let named = IlluminantSpec::parse(spec)?.resolve(iset)?;
-        let ill = named.spd.resample(&grid, Extrapolation::Zero);
-        for (_, r) in &refl {
-            let (c, x) = reflectance_response(camera, r, &ill)?;
-            chans.push(used.iter().map(|&i| c[i]).collect::<Vec<f64>>());
-            xyz.push(x);
-        }
-    }
-    let sub = ColourMatrix::fit(&chans, &xyz)?;
+    let pick = |c: &[f64]| used.iter().map(|&i| c[i]).collect::<Vec<f64>>();
+    let chans: Vec<Vec<f64>> = samples.channels.iter().map(|c| pick(c)).collect();
+    let mut sub = if fit.preserve_white {
+        // the white under the first illuminant: its channels and target XYZ
+        let white = Spectrum::constant(grid, 1.0);
+        let w = colour_samples(camera, &spds[..1], fit.kind, &d65, &[white])
+            .map_err(|e| EvalError::Invalid(e.to_string()))?;
+        fit_preserving(&chans, &samples.xyz, &pick(&w.channels[0]), w.xyz[0])?
+    } else {
+        ColourMatrix::fit(&chans, &samples.xyz)?
+    };
     let mut m = vec![[0.0; 3]; cfa.n_channels()];
     for (k, &i) in used.iter().enumerate() {
-        m[i] = sub.m[k];
+        m[i] = std::mem::take(&mut sub.m[k]);
     }
     Ok(ColourMatrix {
         m,
@@ -193,34 +240,41 @@ pub fn fit_colour_matrix(
     })
 }
 
-/// Noise-free channel volts and volts-equivalent XYZ of a uniform
-/// reflectance under `illuminant` (common scale: per unit irradiance and
-/// exposure), from the camera's public description.
-pub fn reflectance_response(
-    camera: &Camera,
-    reflectance: &crate::spectral::Spectrum,
-    illuminant: &crate::spectral::Spectrum,
-) -> Result<(Vec<f64>, [f64; 3]), EvalError> {
-    const H: f64 = 6.626_070_15e-34;
-    const C: f64 = 299_792_458.0;
-    let d = camera.design();
-    let grid = camera.grid();
-    let e = reflectance.product(illuminant)?;
-    let base =
-        d.pixel_area_m2() * d.fill_factor * d.conversion_gain_v() * d.analog_gain * grid.step_nm;
-    let chans = camera
-        .responsivity()
-        .iter()
-        .map(|resp| {
-            (0..grid.n)
-                .map(|b| e.values()[b] * grid.wavelength(b) * 1e-9 / (H * C) * resp.values()[b])
-                .sum::<f64>()
-                * base
-        })
-        .collect();
-    let cmfs = Cmfs::cie1931(grid);
-    let xyz = cmfs
-        .tristimulus(&e)?
-        .map(|v| v / grid.step_nm * base * camera.xyz_scale());
-    Ok((chans, xyz))
+/// Least squares `XYZ = M · c` subject to `M · white_c = white_xyz`.
+fn fit_preserving(
+    chans: &[Vec<f64>],
+    xyz: &[[f64; 3]],
+    white_c: &[f64],
+    white_xyz: [f64; 3],
+) -> Result<ColourMatrix, EvalError> {
+    let n = chans.len();
+    let nc = white_c.len();
+    if n < nc || nc == 0 {
+        return Err(EvalError::Invalid(
+            "too few samples for a colour matrix".into(),
+        ));
+    }
+    let a = DMatrix::from_fn(n, nc, |i, j| chans[i][j]);
+    let ata = a.transpose() * &a;
+    let chol = ata
+        .cholesky()
+        .ok_or_else(|| EvalError::Invalid("the colour matrix fit is singular".into()))?;
+    let w = DVector::from_column_slice(white_c);
+    let hw = chol.solve(&w);
+    let denom = w.dot(&hw);
+    if !(denom > 0.0 && denom.is_finite()) {
+        return Err(EvalError::Invalid(
+            "the white has no channel response".into(),
+        ));
+    }
+    let mut m = vec![[0.0; 3]; nc];
+    for k in 0..3 {
+        let b = DVector::from_fn(n, |i, _| xyz[i][k]);
+        let m0 = chol.solve(&(a.transpose() * b));
+        let mk = &m0 - &hw * ((w.dot(&m0) - white_xyz[k]) / denom);
+        for c in 0..nc {
+            m[c][k] = mk[c];
+        }
+    }
+    Ok(ColourMatrix { m, n_channels: nc })
 }

@@ -4,6 +4,7 @@
 
 mod baseline;
 mod classify;
+mod colour_map;
 mod correction;
 mod fast;
 mod normal_eq;
@@ -15,6 +16,9 @@ mod trainer;
 
 pub use baseline::{ColourMatrix, bilinear_demosaic, render_baseline};
 pub use classify::{MAX_CHANNELS, PatchGeometry, PatchStats, mirror, sat_case_index};
+pub use colour_map::{
+    ColourMapFit, ColourSamples, DEFAULT_AVERAGING_PX, least_squares_map, level_maps,
+};
 pub use correction::{
     CorrectionSource, IDENTITY, IlluminantEntry, IlluminantRegistry, MAX_MATRIX_ENTRY, Mat3,
     correction_matrix, default_reflectances,

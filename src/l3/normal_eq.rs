@@ -147,8 +147,13 @@ pub struct ClassSolution {
     /// `kernel[k * n_features + j]`: weight of feature j for output k (X, Y, Z).
     pub kernel: Vec<f64>,
     pub lambda: f64,
-    /// Condition number of the centred covariance (largest / smallest eigenvalue).
+    /// Condition number of the centred covariance of the active regressors
+    /// (largest / smallest eigenvalue; 1 when none is active).
     pub condition: f64,
+    /// Regressors (patch pixels) with non-zero variance.
+    pub active: usize,
+    /// Eigenvalues above 1e-12 of the largest.
+    pub rank: usize,
     pub samples: u64,
     /// Mean squared training residual per output at the chosen λ.
     pub rss_per_sample: f64,
@@ -205,15 +210,23 @@ pub fn solve_with(
     if !(cxx.iter().all(|v| v.is_finite()) && cxy.iter().all(|v| v.is_finite())) {
         return Err(L3Error::Table("non-finite normal equations".into()));
     }
-    let eig = SymmetricEigen::new(cxx);
+    let eig = SymmetricEigen::new(cxx.clone());
     let evals: Vec<f64> = eig.eigenvalues.iter().map(|&e| e.max(0.0)).collect();
     let emax = evals.iter().copied().fold(0.0, f64::max);
     let emin = evals.iter().copied().fold(f64::INFINITY, f64::min);
     let mean_e = (evals.iter().sum::<f64>() / p as f64).max(f64::MIN_POSITIVE);
-    let condition = if emax <= 0.0 {
-        f64::INFINITY
+    // Regressors with no variance (zeroed saturated channels, a constant
+    // patch) add exact zero eigenvalues: the condition number is that of the
+    // active regressors, and the rank counts directions above 1e-12 of the
+    // largest.
+    let active = (0..p).filter(|&i| cxx[(i, i)] > 0.0).count();
+    let mut sorted = evals.clone();
+    sorted.sort_by(|a, b| b.total_cmp(a));
+    let rank = sorted.iter().filter(|&&e| e > emax * 1e-12).count();
+    let condition = if active == 0 || emax <= 0.0 {
+        1.0
     } else {
-        emax / emin.max(emax * 1e-16)
+        emax / sorted[active - 1].max(emax * 1e-16)
     };
     let q = eig.eigenvectors.transpose() * &cxy; // p × 3
     let qn: Vec<f64> = (0..p)
@@ -314,6 +327,8 @@ pub fn solve_with(
         kernel,
         lambda,
         condition,
+        active,
+        rank,
         samples: n,
         rss_per_sample: rss(lambda) / 3.0,
     })
@@ -368,6 +383,7 @@ mod tests {
         let s = solve(&mut g, RidgeChoice::Gcv, 0.0).unwrap();
         assert!(s.kernel.iter().all(|v| v.is_finite()));
         assert!(s.condition > 1e6);
+        assert_eq!((s.active, s.rank), (2, 1));
         // all regressors constant (a fully saturated, zeroed class)
         let mut z = Gram::new(4);
         for _ in 0..30 {

@@ -1,6 +1,6 @@
 use serde::{Deserialize, Serialize};
 
-use super::{L3Error, RidgeChoice};
+use super::{ColourMapFit, L3Error, RidgeChoice};
 
 /// ISET's tuned RGBW luminance levels for a 1.8 V swing (DESIGN.md §5), volts.
 pub const DEFAULT_LEVELS_1V8: [f64; 20] = [
@@ -31,15 +31,11 @@ pub struct L3Params {
     pub ridge: RidgeChoice,
     /// Average flat kernels with their mirror images where the CFA allows.
     pub symmetrize_flat: bool,
-    /// Constrain flat unsaturated kernels to map flat patches exactly as the
-    /// noise-free colour map of their class does (no colour bias from
-    /// errors-in-variables shrinkage; the spatial weights still denoise).
-    #[serde(default = "default_true")]
-    pub unbiased_flat: bool,
-}
-
-fn default_true() -> bool {
-    true
+    /// How the per-level colour maps that fix the channel sums of every
+    /// unsaturated kernel were fitted (see [`super::colour_map`]); `None`
+    /// when the kernels were learned without them.
+    #[serde(default)]
+    pub colour_map: Option<ColourMapFit>,
 }
 
 impl Default for L3Params {
@@ -52,10 +48,10 @@ impl Default for L3Params {
             contrast_classes: true,
             saturation_classes: true,
             min_saturation_case_fraction: 0.002,
-            min_class_samples: 200,
+            min_class_samples: 2000,
             ridge: RidgeChoice::Gcv,
             symmetrize_flat: true,
-            unbiased_flat: true,
+            colour_map: Some(ColourMapFit::default()),
         }
     }
 }
@@ -115,6 +111,9 @@ impl L3Params {
         }
         if !(0.0..=0.5).contains(&self.min_saturation_case_fraction) {
             return bad("min_saturation_case_fraction must be within 0–0.5".into());
+        }
+        if let Some(fit) = &self.colour_map {
+            fit.validate()?;
         }
         self.ridge.validate()
     }

@@ -70,11 +70,72 @@ pub struct TableMeta {
 pub struct ClassReport {
     pub samples: u64,
     pub lambda: f64,
+    /// Condition number of the covariance of the class's active regressors
+    /// (1 for an intercept-only class).
     pub condition: f64,
     pub kernel_norm: f64,
     /// Level whose data filled this class when it had too few samples
     /// (−1: its own data).
     pub filled_from: i32,
+    /// Output noise, volts-equivalent XYZ: the largest per-output weight norm
+    /// (intercept excluded) × the sensor's per-pixel noise σ at the level.
+    /// 0 in tables written before it was recorded.
+    pub noise_sigma: f64,
+    /// Patch pixels with non-zero variance in the class's data (saturated
+    /// channels are zeroed); `None` in older tables.
+    pub active: Option<u32>,
+    /// Numerical rank of the active regressors' covariance.
+    pub rank: Option<u32>,
+}
+
+impl ClassReport {
+    /// The report of a solved class with `n_features` regressors (the last
+    /// the constant) at a level with per-pixel noise `sigma` volts.
+    pub fn new(
+        samples: u64,
+        filled_from: i32,
+        sol: &super::ClassSolution,
+        n_features: usize,
+        sigma: f64,
+    ) -> Self {
+        let gain = sol
+            .kernel
+            .chunks(n_features.max(1))
+            .map(|row| {
+                row[..row.len().saturating_sub(1)]
+                    .iter()
+                    .map(|v| v * v)
+                    .sum::<f64>()
+                    .sqrt()
+            })
+            .fold(0.0, f64::max);
+        Self {
+            samples,
+            lambda: sol.lambda,
+            condition: sol.condition,
+            kernel_norm: sol.kernel.iter().map(|v| v * v).sum::<f64>().sqrt(),
+            filled_from,
+            noise_sigma: gain * sigma,
+            active: Some(sol.active as u32),
+            rank: Some(sol.rank as u32),
+        }
+    }
+
+    /// A short explanation of an unusual class, for reports.
+    pub fn note(&self) -> Option<String> {
+        match (self.active, self.rank) {
+            (Some(0), _) => Some(
+                "intercept only: every patch pixel is saturated or constant, so the kernel \
+                 returns the class's mean XYZ"
+                    .into(),
+            ),
+            (Some(a), Some(r)) if r < a => Some(format!(
+                "{r} of {a} pixel directions vary in the training data (uniform or \
+                 collinear patches); the ridge sets the rest"
+            )),
+            _ => None,
+        }
+    }
 }
 
 /// A trained L3 table.
@@ -203,6 +264,10 @@ impl L3Table {
         let cond: Vec<f64> = r.iter().map(|c| c.condition.min(f64::MAX)).collect();
         let norm: Vec<f64> = r.iter().map(|c| c.kernel_norm).collect();
         let filled: Vec<f64> = r.iter().map(|c| c.filled_from as f64).collect();
+        let sigma: Vec<f64> = r.iter().map(|c| c.noise_sigma).collect();
+        let opt = |v: Option<u32>| v.map(f64::from).unwrap_or(-1.0);
+        let active: Vec<f64> = r.iter().map(|c| opt(c.active)).collect();
+        let rank: Vec<f64> = r.iter().map(|c| opt(c.rank)).collect();
         let tensors: Vec<(&str, Dtype, Vec<usize>, Vec<u8>)> = vec![
             ("kernels", Dtype::F32, vec![nc, 3, nf], kernels),
             (
@@ -221,6 +286,9 @@ impl L3Table {
                 vec![nc],
                 f64_bytes(&filled),
             ),
+            ("class_noise_sigma", Dtype::F64, vec![nc], f64_bytes(&sigma)),
+            ("class_active", Dtype::F64, vec![nc], f64_bytes(&active)),
+            ("class_rank", Dtype::F64, vec![nc], f64_bytes(&rank)),
         ];
         let digest = checksum(&meta_json, tensors.iter().map(|t| (t.0, &t.3[..])));
         let mut info = HashMap::new();
@@ -266,8 +334,24 @@ impl L3Table {
             "class_kernel_norm",
             "class_filled_from",
         ];
+        // written since the reports gained noise and rank; optional on load
+        let optional = ["class_noise_sigma", "class_active", "class_rank"];
         let mut views = Vec::new();
         for n in names {
+            let v = st
+                .tensor(n)
+                .map_err(|_| bad(format!("tensor '{n}' is missing")))?;
+            views.push(v);
+        }
+        let present: Vec<&str> = optional
+            .into_iter()
+            .filter(|n| st.tensor(n).is_ok())
+            .collect();
+        if !(present.is_empty() || present.len() == optional.len()) {
+            return Err(bad("class report columns are incomplete".into()));
+        }
+        let names: Vec<&str> = names.into_iter().chain(present.iter().copied()).collect();
+        for n in &present {
             let v = st
                 .tensor(n)
                 .map_err(|_| bad(format!("tensor '{n}' is missing")))?;
@@ -314,6 +398,13 @@ impl L3Table {
                 condition: cols[2][i],
                 kernel_norm: cols[3][i],
                 filled_from: cols[4][i] as i32,
+                noise_sigma: cols.get(5).map(|c| c[i]).unwrap_or(0.0),
+                active: cols
+                    .get(6)
+                    .and_then(|c| (c[i] >= 0.0).then_some(c[i] as u32)),
+                rank: cols
+                    .get(7)
+                    .and_then(|c| (c[i] >= 0.0).then_some(c[i] as u32)),
             })
             .collect();
         let t = L3Table {

@@ -56,7 +56,6 @@ fn synth_frame(
         height: size,
         volts,
         xyz,
-        clean: None,
         cfa_shift: shift,
     }
 }
@@ -117,6 +116,7 @@ fn train_synthetic(noise: f32) -> L3Table {
                 ((i / 5) % 2, (i / 10) % 2),
             )])
         },
+        None,
         &ctl,
     )
     .unwrap();

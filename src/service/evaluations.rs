@@ -293,10 +293,102 @@ pub async fn list(State(state): State<AppState>) -> Result<Json<Value>, ServiceE
     Ok(Json(json!({ "items": items })))
 }
 
-/// `GET /v1/evaluations/{id}`
+/// What `GET /v1/evaluations/{id}` answers with.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum EvaluationFormat {
+    /// The evaluation as JSON (`application/json`).
+    Json,
+    /// The report's figure (`image/svg+xml`): ΔE histogram, chromaticity, lightness and the
+    /// worst patches' swatches.
+    Svg,
+}
+
+impl EvaluationFormat {
+    fn content_type(self) -> &'static str {
+        match self {
+            EvaluationFormat::Json => "application/json",
+            EvaluationFormat::Svg => "image/svg+xml",
+        }
+    }
+}
+
+/// Chooses the answer of `GET /v1/evaluations/{id}` from an `Accept` header (q-values
+/// honoured, the first of equal preference wins). JSON unless the client prefers
+/// `image/svg+xml` (or `image/*`); a header naming neither also gets JSON.
+pub fn negotiate(accept: Option<&str>) -> EvaluationFormat {
+    let Some(accept) = accept.map(str::trim).filter(|a| !a.is_empty()) else {
+        return EvaluationFormat::Json;
+    };
+    let mut best: Option<(f64, EvaluationFormat)> = None;
+    for item in accept.split(',') {
+        let mut parts = item.split(';');
+        let media = parts.next().unwrap_or("").trim().to_ascii_lowercase();
+        let mut q = 1.0;
+        for p in parts {
+            if let Some(v) = p.trim().strip_prefix("q=") {
+                q = v.trim().parse().unwrap_or(0.0);
+            }
+        }
+        let fmt = match media.as_str() {
+            "application/json" | "application/*" | "*/*" => EvaluationFormat::Json,
+            "image/svg+xml" | "image/*" => EvaluationFormat::Svg,
+            _ => continue,
+        };
+        if q > 0.0 && best.is_none_or(|(bq, _)| q > bq) {
+            best = Some((q, fmt));
+        }
+    }
+    best.map_or(EvaluationFormat::Json, |(_, f)| f)
+}
+
+/// `GET /v1/evaluations/{id}`: the evaluation as JSON, or its figure as SVG (by `Accept`).
 pub async fn get(
     State(state): State<AppState>,
     UrlPath(id): UrlPath<String>,
-) -> Result<Json<Value>, ServiceError> {
-    Ok(Json(evaluation_json(&evaluation_row(&state, &id).await?)?))
+    headers: HeaderMap,
+) -> Result<Response, ServiceError> {
+    let format = negotiate(headers.get(header::ACCEPT).and_then(|v| v.to_str().ok()));
+    let row = evaluation_row(&state, &id).await?;
+    let mut resp = match format {
+        EvaluationFormat::Json => Json(evaluation_json(&row)?).into_response(),
+        EvaluationFormat::Svg => {
+            let report: crate::eval::DeltaEReport =
+                serde_json::from_str(&row.try_get::<String, _>("report_json")?)
+                    .map_err(|e| ServiceError::Internal(format!("stored report {id}: {e}")))?;
+            let svg = crate::eval::report_svg(&report)
+                .map_err(|e| ServiceError::Internal(format!("figure of evaluation {id}: {e}")))?;
+            svg.into_response()
+        }
+    };
+    let h = resp.headers_mut();
+    h.insert(
+        header::CONTENT_TYPE,
+        HeaderValue::from_static(format.content_type()),
+    );
+    h.insert(header::VARY, HeaderValue::from_static("Accept"));
+    Ok(resp)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn accept_negotiation() {
+        use EvaluationFormat::{Json, Svg};
+        assert_eq!(negotiate(None), Json);
+        assert_eq!(negotiate(Some("")), Json);
+        assert_eq!(negotiate(Some("*/*")), Json);
+        assert_eq!(negotiate(Some("application/json")), Json);
+        assert_eq!(negotiate(Some("image/svg+xml")), Svg);
+        assert_eq!(negotiate(Some("IMAGE/SVG+XML; charset=utf-8")), Svg);
+        assert_eq!(
+            negotiate(Some("application/json;q=0.5, image/svg+xml")),
+            Svg
+        );
+        assert_eq!(negotiate(Some("image/svg+xml;q=0.4, */*;q=0.8")), Json);
+        assert_eq!(negotiate(Some("image/svg+xml;q=0, application/json")), Json);
+        assert_eq!(negotiate(Some("text/html, image/*;q=0.2")), Svg);
+        assert_eq!(negotiate(Some("text/html")), Json);
+    }
 }

@@ -2,6 +2,7 @@
 //! area-preserving resampling, CSV loading, and the built-in CIE data.
 
 mod builtin;
+mod bundled;
 mod csv;
 mod grid;
 mod illuminant;
@@ -12,6 +13,7 @@ pub use builtin::{
     CIE_ILLUMINANT_NAMES, ces_reflectances, cie_daylight, cie_illuminant, cie1931_cmfs,
     munsell_reflectances, planck,
 };
+pub use bundled::{bundled_paths, bundled_table};
 pub use csv::{SpectralTable, load_csv};
 pub use grid::WavelengthGrid;
 pub use illuminant::{IlluminantSpec, NamedSpd};

@@ -2,6 +2,7 @@
 //! the frames simulated from them, and the call into the learner
 //! (DESIGN.md §5). Shared by the CLI and the service's training jobs.
 
+mod colour_samples;
 mod scenes;
 
 use std::sync::atomic::AtomicBool;
@@ -13,8 +14,9 @@ use serde::{Deserialize, Serialize};
 
 use crate::camera::{Camera, CameraError, NoiseSwitches, SensorDesign, mosaic};
 use crate::l3::{
-    L3Error, L3Params, L3Table, NoiseModel, PatchGeometry, RidgeChoice, TABLE_FORMAT_VERSION,
-    TableKind, TableMeta, TrainControl, TrainingFrame, learn, package,
+    ColourMatrix, L3Error, L3Params, L3Table, NoiseModel, PatchGeometry, RidgeChoice,
+    TABLE_FORMAT_VERSION, TableKind, TableMeta, TrainControl, TrainingFrame, learn, level_maps,
+    package,
 };
 use crate::scene::SceneError;
 use crate::spectral::{
@@ -22,6 +24,7 @@ use crate::spectral::{
 };
 
 pub use crate::scene::training_reflectances;
+pub use colour_samples::colour_samples;
 pub use scenes::TrainingScenes;
 
 /// Errors of a training run.
@@ -81,6 +84,14 @@ pub struct TrainingSpec {
     /// Mean scene luminance of the training scenes, cd/m² (exposure is set per level).
     #[serde(default = "default_luminance")]
     pub mean_luminance: f64,
+    /// Pixels per channel whose mean each level's colour map is made best
+    /// for under the sensor's noise (0: the noise-free map at every level).
+    #[serde(default = "default_averaging")]
+    pub colour_averaging_px: f64,
+}
+
+fn default_averaging() -> f64 {
+    crate::l3::DEFAULT_AVERAGING_PX
 }
 
 fn default_kind() -> TableKind {
@@ -122,6 +133,7 @@ impl Default for TrainingSpec {
             contrast_classes: true,
             saturation_classes: true,
             mean_luminance: default_luminance(),
+            colour_averaging_px: default_averaging(),
         }
     }
 }
@@ -147,6 +159,10 @@ impl TrainingSpec {
         if !(16..=1024).contains(&self.scene_size) {
             return bad(format!("scene_size {} (16 to 1024)", self.scene_size));
         }
+        let px = self.colour_averaging_px;
+        if !(px.is_finite() && (px == 0.0 || px >= 1.0)) {
+            return bad(format!("colour_averaging_px {px} (0, or at least 1)"));
+        }
         if !(self.mean_luminance.is_finite() && self.mean_luminance > 0.0) {
             return bad(format!("mean_luminance {}", self.mean_luminance));
         }
@@ -168,6 +184,10 @@ impl TrainingSpec {
                 None if self.noise => RidgeChoice::Gcv,
                 None => RidgeChoice::NoiseVariance,
             },
+            colour_map: Some(crate::l3::ColourMapFit {
+                averaging_px: (self.colour_averaging_px > 0.0).then_some(self.colour_averaging_px),
+                perceptual: true,
+            }),
             ..L3Params::default()
         };
         p.validate()?;
@@ -273,22 +293,11 @@ pub fn train_table(
                     .capture(&mean, exposure, &noise, seed)
                     .map_err(TrainError::from)?;
                 let t = exposure as f32;
-                let volts = volts.into_raw_vec_and_offset().0;
-                let clean = if spec.noise {
-                    camera
-                        .capture(&mean, exposure, &NoiseSwitches::none(), seed)
-                        .map_err(TrainError::from)?
-                        .into_raw_vec_and_offset()
-                        .0
-                } else {
-                    volts.clone()
-                };
                 frames.push(TrainingFrame {
                     width: cols,
                     height: rows,
-                    volts,
+                    volts: volts.into_raw_vec_and_offset().0,
                     xyz: xyz_rates.iter().map(|v| v * t).collect(),
-                    clean: Some(clean),
                     cfa_shift: (dr, dc),
                 });
             }
@@ -302,7 +311,16 @@ pub fn train_table(
         dsnu_v: design.dsnu_v(),
         prnu_fraction: design.prnu_fraction(),
     };
-    let learned = learn(&geo, &params, nm, n_batches, frame, &ctl)?;
+    let maps = match &params.colour_map {
+        Some(fit) => {
+            let spds: Vec<_> = illuminants.iter().map(|(_, s)| s.clone()).collect();
+            let refl: Vec<_> = scenes.reflectances().to_vec();
+            let samples = colour_samples(&camera, &spds, spec.kind, &d65, &refl)?;
+            Some(level_maps(&samples, &params.levels, &nm, swing, fit)?)
+        }
+        None => None,
+    };
+    let learned = learn(&geo, &params, nm, n_batches, frame, maps.as_deref(), &ctl)?;
     let samples = learned.samples;
     let meta = TableMeta {
         format: "l3-table".into(),
@@ -336,11 +354,22 @@ pub fn train_table(
             "batches": n_batches,
             "frames": n_batches * levels.len() * cfa.n_positions(),
             "samples": samples,
+            "colour_maps": maps.as_deref().map(map_summary),
         }),
     };
     let mut table = package(meta, learned)?;
     table.meta.training_seconds = started.elapsed().as_secs_f64();
     Ok(table)
+}
+
+/// The per-level colour maps as JSON for the table's summary: `[level][channel]
+/// = [X, Y, Z]` weights.
+fn map_summary(maps: &[ColourMatrix]) -> serde_json::Value {
+    serde_json::Value::from(
+        maps.iter()
+            .map(|m| serde_json::json!(m.m))
+            .collect::<Vec<_>>(),
+    )
 }
 
 /// A well-mixed 64-bit seed from three inputs (SplitMix64 finaliser).

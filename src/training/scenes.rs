@@ -41,6 +41,11 @@ impl TrainingScenes {
         })
     }
 
+    /// The training reflectances on the grid.
+    pub fn reflectances(&self) -> &[Spectrum] {
+        &self.reflectances
+    }
+
     pub fn reflectance_count(&self) -> usize {
         self.reflectances.len()
     }

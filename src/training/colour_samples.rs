@@ -1,0 +1,58 @@
+//! The spectral data a table's colour maps are fitted on: noise-free channel
+//! responses and target XYZ of the training reflectances under the training
+//! illuminants (DESIGN.md §5, `super::super::l3::colour_map`). The same
+//! samples give the evaluation's matching linear map and the conventional
+//! baseline's colour matrix, so every comparison is fitted on one set.
+
+use crate::camera::Camera;
+use crate::l3::{ColourSamples, TableKind};
+use crate::spectral::Spectrum;
+
+use super::TrainError;
+
+/// Colour samples of `reflectances` under each of `illuminants` (on the
+/// camera's grid). The target is XYZ under the same illuminant for
+/// same-illuminant tables and under `d65` for cross-illuminant ones (scaled
+/// so a perfect white keeps its luminance, as the simulation relights a
+/// scene at the same mean luminance). Each illuminant's samples are
+/// normalised so a perfect white's mean channel response is 1, so an
+/// ensemble weighs its illuminants equally.
+pub fn colour_samples(
+    camera: &Camera,
+    illuminants: &[Spectrum],
+    kind: TableKind,
+    d65: &Spectrum,
+    reflectances: &[Spectrum],
+) -> Result<ColourSamples, TrainError> {
+    let grid = *camera.grid();
+    let white = Spectrum::constant(grid, 1.0);
+    let mut out = ColourSamples::default();
+    for ill in illuminants {
+        let (wc, wx) = camera.reflectance_response(&white, ill)?;
+        let (_, wd) = camera.reflectance_response(&white, d65)?;
+        let norm = wc.iter().sum::<f64>() / wc.len().max(1) as f64;
+        if !(norm > 0.0 && norm.is_finite() && wd[1] > 0.0 && wx[1] > 0.0) {
+            return Err(TrainError::Invalid(
+                "the sensor does not respond to a white surface under a training illuminant".into(),
+            ));
+        }
+        let relight = wx[1] / wd[1];
+        let target_white = match kind {
+            TableKind::SameIlluminant => wx,
+            TableKind::CrossIlluminant => wd.map(|v| v * relight),
+        };
+        for r in reflectances {
+            let (c, x) = camera.reflectance_response(r, ill)?;
+            let x = match kind {
+                TableKind::SameIlluminant => x,
+                TableKind::CrossIlluminant => {
+                    camera.reflectance_response(r, d65)?.1.map(|v| v * relight)
+                }
+            };
+            out.channels.push(c.iter().map(|v| v / norm).collect());
+            out.xyz.push(x.map(|v| v / norm));
+            out.white.push(target_white.map(|v| v / norm));
+        }
+    }
+    Ok(out)
+}
