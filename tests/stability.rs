@@ -251,8 +251,14 @@ fn one_sample_per_position_gives_finite_kernels() {
     assert_eq!(learned.samples, 4);
     let t = package_synthetic(&p, learned);
     check_table("1 sample per position", &t);
-    // a class of one sample has a singular covariance
-    assert!(t.reports.iter().any(|r| r.condition.is_infinite()));
+    // a class of one sample has no varying regressor: an intercept-only
+    // class, reported as such (condition 1, no active pixels), never `inf`
+    assert!(t.reports.iter().all(|r| r.condition.is_finite()));
+    assert!(
+        t.reports
+            .iter()
+            .any(|r| r.active == Some(0) && r.note().is_some_and(|n| n.contains("intercept")))
+    );
     // a 1×1 frame only has position 0: the other positions have no samples
     let e = learn_synthetic(&p, 1, |_| Ok(vec![flat_frame(0, 1, [0.2; 3], 0.0, (0, 0))]))
         .err()

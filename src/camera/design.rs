@@ -758,9 +758,20 @@ mod tests {
         let gi = d.cfa.channel_index("G").unwrap();
         assert!((curves[gi].values()[15] - manual).abs() < 1e-12);
         assert!(manual > 0.9, "G peaks near 550 nm: {manual}");
-        // Without the ISET directory the relative paths cannot resolve.
-        let e = d.resolve_curves(&grid, None).unwrap_err().to_string();
-        assert!(e.contains("ISET"), "{e}");
+        // Without the ISET directory the built-in copy gives the same curves.
+        let builtin = d.resolve_curves(&grid, None).unwrap();
+        assert_eq!(builtin, curves);
+        // A path that is in neither says where it looked.
+        let mut missing = d.clone();
+        if let Some(f) = missing.filters.values_mut().next() {
+            *f = FilterSpec::Csv {
+                path: "sensor/none.csv".into(),
+                column: "x".into(),
+                scale: 1.0,
+            };
+        }
+        let e = missing.resolve_curves(&grid, None).unwrap_err().to_string();
+        assert!(e.contains("ISET") && e.contains("built in"), "{e}");
     }
 
     #[test]

@@ -18,7 +18,7 @@ pub use report::{
 };
 pub use workflow::{
     ChannelSet, ChartSetup, ColourFit, Method, chart_scene, evaluate_method, fit_baseline_matrix,
-    fit_colour_matrix,
+    fit_colour_matrix, linear_table, matching_linear_map,
 };
 
 /// Errors of the evaluation layer.

@@ -7,7 +7,10 @@ use std::sync::atomic::AtomicBool;
 
 use serde::{Deserialize, Serialize};
 
-use super::workflow::{ChartSetup, Method, evaluate_method, fit_baseline_matrix};
+use super::workflow::{
+    ChannelSet, ChartSetup, ColourFit, Method, evaluate_method, fit_colour_matrix, linear_table,
+    matching_linear_map,
+};
 use super::{DeltaEReport, EvalError};
 use crate::camera::{Camera, SensorDesign};
 use crate::l3::{IlluminantRegistry, L3Table, TableKind};
@@ -57,6 +60,11 @@ pub struct PaperRow {
     pub p90: f64,
     pub max: f64,
     pub pixel_mean: f64,
+    /// L3 rows: mean ΔE of the matching linear map (a table whose every class
+    /// holds the least-squares map fitted on the same reflectances,
+    /// illuminants and target), evaluated on the same frame.
+    #[serde(default)]
+    pub linear_mean: Option<f64>,
     /// The paper's (mean, std, p90) for this row, tungsten only.
     pub paper: Option<[f64; 3]>,
     pub training_seconds: Option<f64>,
@@ -97,16 +105,29 @@ impl PaperTable {
             "Natural-100 chart ({}), sensor `{}`, CIEDE2000 of patch means\n\n",
             self.chart, self.sensor
         );
-        s.push_str("| acquisition | method | mean ΔE (std) | median | p90 | max | per-pixel mean | paper mean (std) / p90 |\n");
-        s.push_str("|---|---|---|---|---|---|---|---|\n");
+        s.push_str("| acquisition | method | mean ΔE (std) | median | p90 | max | per-pixel mean | matching linear map | paper mean (std) / p90 |\n");
+        s.push_str("|---|---|---|---|---|---|---|---|---|\n");
         for r in &self.rows {
             let paper = r
                 .paper
                 .map(|p| format!("{:.1} ({:.1}) / {:.1}", p[0], p[1], p[2]))
                 .unwrap_or_else(|| "—".into());
+            let linear = r
+                .linear_mean
+                .map(|v| format!("{v:.2}"))
+                .unwrap_or_else(|| "—".into());
             s.push_str(&format!(
-                "| {} | {} | {:.2} ({:.2}) | {:.2} | {:.2} | {:.2} | {:.2} | {} |\n",
-                r.acquisition, r.method, r.mean, r.std, r.median, r.p90, r.max, r.pixel_mean, paper
+                "| {} | {} | {:.2} ({:.2}) | {:.2} | {:.2} | {:.2} | {:.2} | {} | {} |\n",
+                r.acquisition,
+                r.method,
+                r.mean,
+                r.std,
+                r.median,
+                r.p90,
+                r.max,
+                r.pixel_mean,
+                linear,
+                paper
             ));
         }
         let st = &self.storage;
@@ -165,8 +186,19 @@ pub fn run_paper_table(
     } else {
         None
     };
-    progress("fitting the baseline colour matrix (D65)");
-    let baseline = fit_baseline_matrix(&camera, &["D65".to_string()], iset)?;
+    progress("fitting the baseline colour matrices");
+    let d65_list = ["D65".to_string()];
+    let fit_matrix = |ills: &[String], kind: TableKind, channels: ChannelSet| {
+        let fit = ColourFit {
+            illuminants: ills,
+            kind,
+            channels,
+            preserve_white: kind == TableKind::CrossIlluminant,
+        };
+        fit_colour_matrix(&camera, &fit, iset)
+    };
+    let d65_rgb = fit_matrix(&d65_list, TableKind::SameIlluminant, ChannelSet::Rgb)?;
+    let d65_all = fit_matrix(&d65_list, TableKind::SameIlluminant, ChannelSet::All)?;
     let mut rows = Vec::new();
     let mut reports = Vec::new();
     let mut chart_name = String::new();
@@ -210,10 +242,43 @@ pub fn run_paper_table(
                 Some(t.meta.training_seconds),
             ));
         }
-        methods.push(("Baseline+T".into(), Method::Baseline(&baseline), None));
+        let acq_list = [acq.to_string()];
+        let acq_rgb = fit_matrix(&acq_list, TableKind::CrossIlluminant, ChannelSet::Rgb)?;
+        let acq_all = fit_matrix(&acq_list, TableKind::CrossIlluminant, ChannelSet::All)?;
+        // the acquisition-fit baselines are white-balanced cross maps: no T
+        let identity = crate::l3::IlluminantEntry {
+            t: crate::l3::IDENTITY,
+            ..corr.clone()
+        };
+        methods.push(("Baseline+T".into(), Method::Baseline(&d65_rgb), None));
+        methods.push(("Baseline+T all".into(), Method::Baseline(&d65_all), None));
+        methods.push((format!("Baseline_{tag}"), Method::Baseline(&acq_rgb), None));
+        methods.push((
+            format!("Baseline_{tag} all"),
+            Method::Baseline(&acq_all),
+            None,
+        ));
         for (name, method, secs) in methods {
             progress(&format!("evaluating {name} under {acq}"));
-            let rep = evaluate_method(&camera, &method, &name, acq, &corr, iset, &opts.chart)?;
+            let is_acq_baseline = name.starts_with("Baseline_");
+            let c = if is_acq_baseline { &identity } else { &corr };
+            let rep = evaluate_method(&camera, &method, &name, acq, c, iset, &opts.chart)?;
+            let linear_mean = match method {
+                Method::Table(t) => {
+                    let lt = linear_table(t, &matching_linear_map(&camera, t, iset)?)?;
+                    let lin = evaluate_method(
+                        &camera,
+                        &Method::Table(&lt),
+                        &format!("linear {name}"),
+                        acq,
+                        &corr,
+                        iset,
+                        &opts.chart,
+                    )?;
+                    Some(lin.summary.mean)
+                }
+                Method::Baseline(_) => None,
+            };
             chart_name = rep.chart.clone();
             let is_tungsten = tag == "Tun";
             rows.push(PaperRow {
@@ -225,6 +290,7 @@ pub fn run_paper_table(
                 p90: rep.summary.p90,
                 max: rep.summary.max,
                 pixel_mean: rep.per_pixel.mean,
+                linear_mean,
                 paper: if is_tungsten {
                     paper.get(name.as_str()).copied()
                 } else {

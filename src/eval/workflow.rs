@@ -278,3 +278,61 @@ fn fit_preserving(
     }
     Ok(ColourMatrix { m, n_channels: nc })
 }
+
+/// The matching linear map of `table`: the plain least-squares channel →
+/// XYZ map fitted on the same training reflectances, illuminants and target
+/// (same-illuminant or D65) as the table, on every channel.
+pub fn matching_linear_map(
+    camera: &Camera,
+    table: &L3Table,
+    iset: Option<&IsetData>,
+) -> Result<ColourMatrix, EvalError> {
+    let fit = ColourFit {
+        illuminants: &table.meta.train_illuminants,
+        kind: table.meta.kind,
+        channels: ChannelSet::All,
+        preserve_white: false,
+    };
+    fit_colour_matrix(camera, &fit, iset)
+}
+
+/// `table` with every class holding `map`: each kernel weighs the patch
+/// pixels of channel c by `map[c] / (their count)` with no intercept, so it
+/// renders the map applied to the patch's channel means. A valid L3 table
+/// that any trained table should match or beat.
+pub fn linear_table(table: &L3Table, map: &ColourMatrix) -> Result<L3Table, EvalError> {
+    let geo = table.geometry()?;
+    let nf = table.n_features();
+    let nch = geo.n_channels();
+    if map.m.len() != nch {
+        return Err(EvalError::Invalid(format!(
+            "a {}-channel map for a {nch}-channel table",
+            map.m.len()
+        )));
+    }
+    let mut out = table.clone();
+    for pos in 0..table.n_positions() {
+        let chans = geo.channels_of(pos);
+        let mut count = vec![0f64; nch];
+        for &c in chans {
+            count[c as usize] += 1.0;
+        }
+        let mut kernel = vec![0f32; 3 * nf];
+        for k in 0..3 {
+            for (j, &c) in chans.iter().enumerate() {
+                let c = c as usize;
+                kernel[k * nf + j] = (map.m[c][k] / count[c].max(1.0)) as f32;
+            }
+        }
+        for l in 0..table.n_levels() {
+            for s in 0..table.n_sat_cases() {
+                for texture in [false, true] {
+                    let cl = table.class_index(pos, l, s, texture);
+                    out.kernels[cl * 3 * nf..(cl + 1) * 3 * nf].copy_from_slice(&kernel);
+                }
+            }
+        }
+    }
+    out.validate()?;
+    Ok(out)
+}
