@@ -319,26 +319,12 @@ pub fn negotiate(accept: Option<&str>) -> EvaluationFormat {
     let Some(accept) = accept.map(str::trim).filter(|a| !a.is_empty()) else {
         return EvaluationFormat::Json;
     };
-    let mut best: Option<(f64, EvaluationFormat)> = None;
-    for item in accept.split(',') {
-        let mut parts = item.split(';');
-        let media = parts.next().unwrap_or("").trim().to_ascii_lowercase();
-        let mut q = 1.0;
-        for p in parts {
-            if let Some(v) = p.trim().strip_prefix("q=") {
-                q = v.trim().parse().unwrap_or(0.0);
-            }
-        }
-        let fmt = match media.as_str() {
-            "application/json" | "application/*" | "*/*" => EvaluationFormat::Json,
-            "image/svg+xml" | "image/*" => EvaluationFormat::Svg,
-            _ => continue,
-        };
-        if q > 0.0 && best.is_none_or(|(bq, _)| q > bq) {
-            best = Some((q, fmt));
-        }
-    }
-    best.map_or(EvaluationFormat::Json, |(_, f)| f)
+    super::accept::preferred(accept, |media| match media {
+        "application/json" | "application/*" | "*/*" => Some(EvaluationFormat::Json),
+        "image/svg+xml" | "image/*" => Some(EvaluationFormat::Svg),
+        _ => None,
+    })
+    .unwrap_or(EvaluationFormat::Json)
 }
 
 /// `GET /v1/evaluations/{id}`: the evaluation as JSON, or its figure as SVG (by `Accept`).

@@ -2,6 +2,7 @@
 //! ΔE evaluations, health, metrics and the OpenAPI document. It depends on the numeric core;
 //! the core knows nothing of it. CPU work runs on rayon, never on the async runtime's threads.
 
+mod accept;
 mod config;
 mod error;
 mod evaluations;

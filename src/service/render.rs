@@ -73,28 +73,14 @@ pub fn negotiate(accept: Option<&str>) -> Result<OutputFormat, ServiceError> {
     let Some(accept) = accept.map(str::trim).filter(|a| !a.is_empty()) else {
         return Ok(OutputFormat::Png);
     };
-    let mut best: Option<(f64, OutputFormat)> = None;
-    for item in accept.split(',') {
-        let mut parts = item.split(';');
-        let media = parts.next().unwrap_or("").trim().to_ascii_lowercase();
-        let mut q = 1.0;
-        for p in parts {
-            if let Some(v) = p.trim().strip_prefix("q=") {
-                q = v.trim().parse().unwrap_or(0.0);
-            }
-        }
-        let fmt = match media.as_str() {
-            "image/png" | "image/*" | "*/*" => OutputFormat::Png,
-            "image/x-portable-pixmap" => OutputFormat::Ppm,
-            "image/tiff" => OutputFormat::Tiff,
-            "application/octet-stream" => OutputFormat::F32,
-            _ => continue,
-        };
-        if q > 0.0 && best.is_none_or(|(bq, _)| q > bq) {
-            best = Some((q, fmt));
-        }
-    }
-    best.map(|(_, f)| f).ok_or_else(|| {
+    super::accept::preferred(accept, |media| match media {
+        "image/png" | "image/*" | "*/*" => Some(OutputFormat::Png),
+        "image/x-portable-pixmap" => Some(OutputFormat::Ppm),
+        "image/tiff" => Some(OutputFormat::Tiff),
+        "application/octet-stream" => Some(OutputFormat::F32),
+        _ => None,
+    })
+    .ok_or_else(|| {
         ServiceError::NotAcceptable(format!(
             "Accept '{accept}' allows none of image/png, image/x-portable-pixmap, image/tiff, application/octet-stream"
         ))
