@@ -46,8 +46,8 @@ fn quick_bench_writes_json_markdown_and_plot() {
     assert_eq!(json["schema"], "l3.bench.v1");
     assert!(json["renderer"].as_str().is_some_and(|s| !s.is_empty()));
     let report: l3::bench::BenchReport = serde_json::from_value(json.clone()).unwrap();
-    // 2 configurations + baseline + copy
-    assert_eq!(report.configs.len(), 4);
+    // 2 configurations + 3 baselines + copy
+    assert_eq!(report.configs.len(), 6);
     assert_eq!(report.acquisitions, ["Tungsten", "Fluorescent"]);
     for c in &report.configs {
         let has_colour = c.kind != l3::bench::ConfigKind::Copy;
@@ -55,6 +55,18 @@ fn quick_bench_writes_json_markdown_and_plot() {
         assert_eq!(c.training_seconds.is_some(), has_colour, "{}", c.name);
         assert_eq!(c.one_thread.runs, 2);
         assert_eq!(c.one_thread.threads, 1);
+    }
+    // a tenth of the light: every baseline's per-pixel error grows, and the
+    // per-light baselines are white-balanced cross maps (no T)
+    for c in report
+        .configs
+        .iter()
+        .filter(|c| c.kind == l3::bench::ConfigKind::Baseline)
+    {
+        for col in &c.colour {
+            let low = col.low_light_pixel_mean.expect("low-light column");
+            assert!(low > col.pixel_mean, "{} {}: {low}", c.name, col.illuminant);
+        }
     }
     let mut nums = Vec::new();
     numbers(&json, "", &mut nums);
@@ -108,4 +120,56 @@ fn quick_bench_writes_json_markdown_and_plot() {
         svg.contains("class=\"pareto-front\""),
         "no Pareto front element"
     );
+}
+
+#[test]
+fn sensor_sweep_runs_every_sensor_in_one_go() {
+    let Some(iset) = l3::spectral::IsetData::for_tests() else {
+        return;
+    };
+    let tmp = tempfile::tempdir().unwrap();
+    let out_dir = tmp.path().join("sweep");
+    let root = env!("CARGO_MANIFEST_DIR");
+    let sensors = format!(
+        "{root}/config/sensors/rgbw-iset.toml,{root}/config/sensors/bayer-nikon-d5100.toml"
+    );
+    let out = Command::new(env!("CARGO_BIN_EXE_l3"))
+        .arg("--iset-dir")
+        .arg(iset.root())
+        .args(["bench", "--quick", "--sensor", &sensors, "--out"])
+        .arg(&out_dir)
+        .output()
+        .expect("run l3");
+    let stdout = String::from_utf8_lossy(&out.stdout);
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(out.status.success(), "l3 bench failed: {stdout}{stderr}");
+    let sweep: l3::bench::SensorSweep =
+        serde_json::from_slice(&std::fs::read(out_dir.join("sensors.json")).unwrap()).unwrap();
+    let names: Vec<&str> = sweep.reports.iter().map(|r| r.sensor.as_str()).collect();
+    assert_eq!(names, ["rgbw-iset", "bayer-nikon-d5100"]);
+    for r in &sweep.reports {
+        // default + I tables, 3 baselines, copy; no skips in a sweep
+        assert_eq!(r.configs.len(), 6, "{}", r.sensor);
+        assert!(r.skips.is_empty());
+        for c in r
+            .configs
+            .iter()
+            .filter(|c| c.kind != l3::bench::ConfigKind::Copy)
+        {
+            for col in &c.colour {
+                assert!(col.mean.is_finite() && col.mean > 0.0);
+                assert!(
+                    col.low_light_pixel_mean
+                        .is_some_and(|v| v.is_finite() && v > 0.0)
+                );
+            }
+        }
+    }
+    let md = std::fs::read_to_string(out_dir.join("sensors.md")).unwrap();
+    // 2 sensors × 2 L3 configurations × 2 lights
+    let rows = md
+        .lines()
+        .filter(|l| l.starts_with("| rgbw-iset |") || l.starts_with("| bayer-nikon-d5100 |"))
+        .count();
+    assert_eq!(rows, 8, "{md}");
 }

@@ -199,6 +199,50 @@ fn simulate_train_render_eval() {
         "{svg}"
     );
     assert!(out.contains("report.svg"), "{out}");
+
+    // light level: a tenth of the exposure, and the same light given as a
+    // scene luminance (10 cd/m² at the longest exposure)
+    let low_light = |flag: &str, value: &str, name: &str| {
+        let path = d.join(name);
+        let (ok, out, err) = l3(
+            &[
+                "--iset-dir",
+                &iset,
+                "eval",
+                "--table",
+                table.to_str().unwrap(),
+                flag,
+                value,
+                "--out",
+                path.to_str().unwrap(),
+            ],
+            d,
+        );
+        assert!(ok, "eval {flag} {value} failed: {out}{err}");
+        serde_json::from_slice::<serde_json::Value>(&std::fs::read(&path).unwrap()).unwrap()
+    };
+    let dim = low_light("--exposure", "0.1", "dim.json");
+    let lum = low_light("--scene-luminance", "10", "lum.json");
+    let px = |v: &serde_json::Value| v["per_pixel"]["mean"].as_f64().unwrap();
+    assert!(px(&dim) > px(&r), "0.1×: {} vs {}", px(&dim), px(&r));
+    assert!(
+        (px(&dim) - px(&lum)).abs() < 0.05,
+        "{} vs {}",
+        px(&dim),
+        px(&lum)
+    );
+    assert_eq!(dim["context"]["setup"]["exposure_factor"], 0.1);
+    let (ok, _, err) = l3(
+        &[
+            "eval",
+            "--table",
+            table.to_str().unwrap(),
+            "--exposure",
+            "2",
+        ],
+        d,
+    );
+    assert!(!ok && err.contains("exposure factor 2"), "{err}");
 }
 
 #[test]

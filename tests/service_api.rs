@@ -459,6 +459,37 @@ async fn every_read_endpoint_tables_illuminants_and_evaluations() {
     let list = json(c.get(url(&server, "/v1/evaluations")).send().await.unwrap()).await;
     assert_eq!(list["items"][0]["id"], v["id"]);
     assert!(list["items"][0]["report"].get("patches").is_none());
+    // light level: a tenth of the exposure is noisier per pixel
+    let dim = c
+        .post(url(&server, "/v1/evaluations"))
+        .json(&serde_json::json!({"acquisition_illuminant": acq, "patch_px": 8, "exposure_factor": 0.1}))
+        .send()
+        .await
+        .unwrap();
+    assert_eq!(dim.status(), 201);
+    let dim = json(dim).await;
+    assert_eq!(dim["report"]["context"]["setup"]["exposure_factor"], 0.1);
+    assert!(
+        dim["report"]["per_pixel"]["mean"].as_f64().unwrap()
+            > v["report"]["per_pixel"]["mean"].as_f64().unwrap()
+    );
+    for bad in [
+        serde_json::json!({"exposure_factor": 1.5}),
+        serde_json::json!({"exposure_factor": 0}),
+        serde_json::json!({"scene_luminance": -3}),
+        serde_json::json!({"exposure_factor": 0.5, "scene_luminance": 10}),
+    ] {
+        problem(
+            c.post(url(&server, "/v1/evaluations"))
+                .json(&bad)
+                .send()
+                .await
+                .unwrap(),
+            400,
+            "bad_request",
+        )
+        .await;
+    }
     problem(
         c.get(url(&server, "/v1/evaluations/eval_nope"))
             .send()

@@ -8,6 +8,9 @@
 //! - every L3 row better on patch means than the conventional baseline
 //!   fitted under the acquisition light (the better of its RGB 3×3 and
 //!   all-channel variants);
+//! - every L3 row against its like-for-like baseline: no worse by more than
+//!   0.1 on patch means, better per pixel at every exposure (1, 0.5, 0.25,
+//!   0.1×), by a quarter or more at 0.1×;
 //! - the storage comparison.
 //!
 //! `l3 eval --paper-table --sensor config/sensors/rgbw-iset.toml` runs the
@@ -30,6 +33,7 @@ fn table1_on_the_papers_sensor() {
         scene_size: 96,
         seed: 1,
         chart: ChartSetup::default(),
+        ..PaperOptions::default()
     };
     let t = run_paper_table(&design, Some(&iset), &opts, &|m| eprintln!("{m}")).unwrap();
     println!("{}", t.markdown());
@@ -63,6 +67,30 @@ fn table1_on_the_papers_sensor() {
                 "{} {} does not beat the acquisition-fit baseline {base}",
                 r.method,
                 r.mean
+            );
+        }
+    }
+    // like with like: every L3 row against its baseline family (the better
+    // of RGB and all channels), on patch means and per pixel at every
+    // exposure, by a quarter at a tenth of the light
+    assert_eq!(t.comparisons.len(), 4, "{:?}", t.comparisons);
+    for c in &t.comparisons {
+        assert!(
+            c.mean_difference <= 0.1,
+            "{} is {:+.2} against {}",
+            c.method,
+            c.mean_difference,
+            c.baseline
+        );
+        let factors: Vec<f64> = c.pixel_ratios.iter().map(|p| p.0).collect();
+        assert_eq!(factors, [1.0, 0.5, 0.25, 0.1], "{}", c.method);
+        for (f, ratio) in &c.pixel_ratios {
+            let bound = if *f <= 0.1 { 0.75 } else { 1.0 };
+            assert!(
+                *ratio < bound,
+                "{} per pixel at {f}×: {ratio:.2} of {}",
+                c.method,
+                c.baseline
             );
         }
     }

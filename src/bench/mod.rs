@@ -12,11 +12,12 @@ pub use plot::{PlotError, pareto_front, svg_plot};
 pub use render::{
     BENCH_WHITE_Y, RENDERER, render_baseline_srgb8, render_baseline_xyz, render_srgb8, render_xyz,
 };
-pub use report::{BENCH_SCHEMA, markdown_table};
+pub use report::{BENCH_SCHEMA, markdown_table, sensor_sweep_markdown};
 pub use skips::{EncoderResult, SkipInputs, SkipResult, run_skips};
 pub use sweep::{
-    BenchOptions, BenchReport, ColourResult, ConfigKind, ConfigResult, FrameInfo, L3Config,
-    ParetoFront, TableChoice, Throughput, default_sweep, median, run_bench,
+    BaselineChoice, BenchOptions, BenchReport, ColourResult, ConfigKind, ConfigResult, FrameInfo,
+    L3Config, ParetoFront, SensorSweep, TableChoice, Throughput, default_sweep, median, run_bench,
+    run_sensor_sweep,
 };
 
 /// Errors of a benchmark run.

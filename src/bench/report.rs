@@ -1,7 +1,7 @@
 //! The benchmark's markdown table (the JSON is the serde form of
 //! [`BenchReport`], schema [`BENCH_SCHEMA`]).
 
-use super::sweep::{BenchReport, ConfigKind};
+use super::sweep::{BenchReport, ConfigKind, SensorSweep};
 
 /// Identifier of the benchmark JSON's schema.
 pub const BENCH_SCHEMA: &str = "l3.bench.v1";
@@ -28,8 +28,11 @@ pub fn markdown_table(r: &BenchReport) -> String {
         r.chart
     );
     s.push_str("| configuration | training (s) |");
+    let low = r.options.low_light_factor;
     for a in &r.acquisitions {
-        s.push_str(&format!(" ΔE {a} mean | ΔE {a} p90 |"));
+        s.push_str(&format!(
+            " ΔE {a} mean | ΔE {a} p90 | per-pixel {a} | per-pixel {a} at {low}× |"
+        ));
     }
     s.push_str(&format!(
         " Mpix/s (1 thread) | Mpix/s ({} threads) | ms/Mpix ({} threads) | time ÷ copy | Pareto front |\n",
@@ -37,7 +40,7 @@ pub fn markdown_table(r: &BenchReport) -> String {
     ));
     s.push_str("|---|---:|");
     for _ in &r.acquisitions {
-        s.push_str("---:|---:|");
+        s.push_str("---:|---:|---:|---:|");
     }
     s.push_str("---:|---:|---:|---:|---|\n");
     for c in &r.configs {
@@ -49,9 +52,11 @@ pub fn markdown_table(r: &BenchReport) -> String {
         for a in &r.acquisitions {
             let col = c.colour_under(a);
             s.push_str(&format!(
-                " {} | {} |",
+                " {} | {} | {} | {} |",
                 opt(col.map(|x| x.mean), 2),
-                opt(col.map(|x| x.p90), 2)
+                opt(col.map(|x| x.p90), 2),
+                opt(col.map(|x| x.pixel_mean), 2),
+                opt(col.and_then(|x| x.low_light_pixel_mean), 2)
             ));
         }
         let fronts: Vec<&str> = r
@@ -112,6 +117,68 @@ pub fn markdown_table(r: &BenchReport) -> String {
     s
 }
 
+/// The sensor sweep as one markdown table: per sensor and light, the default
+/// L3 configuration against the better per-light baseline (RGB or all
+/// channels, by patch-mean ΔE at full exposure).
+pub fn sensor_sweep_markdown(sweep: &SensorSweep) -> String {
+    let low = sweep
+        .reports
+        .first()
+        .map(|r| r.options.low_light_factor)
+        .unwrap_or(0.1);
+    let mut s = format!(
+        "Sensor sweep: each L3 configuration against the better conventional baseline fitted under each light \
+         (RGB or all channels, by patch mean at full exposure). ΔE2000 of patch means; per-pixel ΔE at full and \
+         {low}× exposure; sRGB 8-bit throughput, all threads.\n\n\
+         | sensor | light | L3 configuration | L3 mean | L3 per-pixel | L3 per-pixel {low}× | baseline | baseline mean | baseline per-pixel | baseline per-pixel {low}× | L3/baseline per-pixel {low}× | L3 Mpix/s | baseline Mpix/s |\n\
+         |---|---|---|---:| L3 per-pixel | L3 per-pixel {low}× | baseline | baseline mean | baseline per-pixel | baseline per-pixel {low}× | L3/baseline per-pixel {low}× | L3 Mpix/s | baseline Mpix/s |\n\
+         |---|---|---:|---:|---:|---|---:|---:|---:|---:|---:|---:|\n"
+    );
+    for r in &sweep.reports {
+        for (l3, a) in r
+            .configs
+            .iter()
+            .filter(|c| c.kind == ConfigKind::L3)
+            .flat_map(|c| r.acquisitions.iter().map(move |a| (c, a)))
+        {
+            let Some(lc) = l3.colour_under(a) else {
+                continue;
+            };
+            let best = r
+                .configs
+                .iter()
+                .filter(|c| c.kind == ConfigKind::Baseline && c.name.contains("per light"))
+                .filter_map(|c| c.colour_under(a).map(|x| (c, x)))
+                .min_by(|x, y| x.1.mean.total_cmp(&y.1.mean));
+            let (bname, bc, bspeed) = match best {
+                Some((c, x)) => (c.name.as_str(), Some(x), Some(c.all_threads.mpix_per_s)),
+                None => ("—", None, None),
+            };
+            let ratio = lc
+                .low_light_pixel_mean
+                .zip(bc.and_then(|b| b.low_light_pixel_mean))
+                .map(|(l, b)| l / b);
+            s.push_str(&format!(
+                "| {} | {} | {} | {} | {} | {} | {} | {} | {} | {} | {} | {} | {} |\n",
+                r.sensor,
+                a,
+                l3.name,
+                opt(Some(lc.mean), 2),
+                opt(Some(lc.pixel_mean), 2),
+                opt(lc.low_light_pixel_mean, 2),
+                bname,
+                opt(bc.map(|b| b.mean), 2),
+                opt(bc.map(|b| b.pixel_mean), 2),
+                opt(bc.and_then(|b| b.low_light_pixel_mean), 2),
+                opt(ratio, 2),
+                opt(Some(l3.all_threads.mpix_per_s), 1),
+                opt(bspeed, 1),
+            ));
+        }
+    }
+    s
+}
+
 #[cfg(test)]
 pub(super) mod test_support {
     use crate::bench::sweep::*;
@@ -137,6 +204,7 @@ pub(super) mod test_support {
             p90: mean * 2.0,
             max: mean * 3.0,
             pixel_mean: mean * 1.5,
+            low_light_pixel_mean: Some(mean * 3.0),
         }
     }
 

@@ -11,11 +11,15 @@ use super::render::{
 };
 use super::skips::{EncoderResult, SkipInputs, SkipResult, run_skips};
 use super::{BenchError, pareto_front};
-use crate::camera::{Camera, Exposure, NoiseSwitches, SensorDesign, mosaic, simulate};
-use crate::eval::{ChartSetup, ChartTruth, chart_scene, evaluate_chart, fit_baseline_matrix};
-use crate::l3::{IlluminantEntry, IlluminantRegistry, L3Table, TableKind, fuse_kernels};
-use crate::scene::{DeadLeavesParams, Patch, SceneOptions, dead_leaves, training_reflectances};
-use crate::spectral::{Extrapolation, IlluminantSpec, IsetData, WavelengthGrid, cie_illuminant};
+use crate::camera::{Camera, NoiseSwitches, SensorDesign, mosaic};
+use crate::eval::{
+    ChannelSet, ChartCapture, ChartSetup, ColourFit, LightLevel, fit_colour_matrix, simulate_chart,
+};
+use crate::l3::{
+    ColourMatrix, IlluminantEntry, IlluminantRegistry, L3Table, TableKind, fuse_kernels,
+};
+use crate::scene::{DeadLeavesParams, SceneOptions, dead_leaves, training_reflectances};
+use crate::spectral::{IlluminantSpec, IsetData, WavelengthGrid};
 use crate::training::{TrainingSpec, train_table};
 
 /// Which tables an L3 configuration trains.
@@ -93,6 +97,20 @@ pub struct BenchOptions {
     /// throughput frame is simulated under the first).
     pub acquisitions: Vec<String>,
     pub chart: ChartSetup,
+    /// Exposure factor of the low-light column (relative to auto-exposure).
+    #[serde(default = "default_low_light")]
+    pub low_light_factor: f64,
+    /// Measure the skips and encoders on the default table.
+    #[serde(default = "yes")]
+    pub skips: bool,
+}
+
+fn default_low_light() -> f64 {
+    0.1
+}
+
+fn yes() -> bool {
+    true
 }
 
 impl BenchOptions {
@@ -110,6 +128,8 @@ impl BenchOptions {
             tile_height: 750,
             acquisitions: vec!["Tungsten".into(), "Fluorescent".into()],
             chart: ChartSetup::default(),
+            low_light_factor: default_low_light(),
+            skips: true,
         }
     }
 
@@ -153,12 +173,83 @@ impl BenchOptions {
         if self.acquisitions.is_empty() {
             return bad("no acquisition illuminant".into());
         }
+        if !(self.low_light_factor > 0.0 && self.low_light_factor <= 1.0) {
+            return bad(format!(
+                "low-light exposure factor {} (0 to 1)",
+                self.low_light_factor
+            ));
+        }
         let mut names: Vec<&str> = self.configs.iter().map(|c| c.name.as_str()).collect();
         names.sort_unstable();
         if names.windows(2).any(|w| w[0] == w[1]) {
             return bad("configuration names must be unique".into());
         }
         Ok(())
+    }
+}
+
+/// The conventional pipelines of the benchmark: bilinear demosaic of every
+/// CFA channel and a least-squares colour matrix.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum BaselineChoice {
+    /// R, G, B → XYZ fitted under the acquisition light, white-balanced.
+    AcquisitionRgb,
+    /// Every channel → XYZ fitted under the acquisition light, white-balanced.
+    AcquisitionAll,
+    /// R, G, B → XYZ fitted under D65, then T.
+    D65RgbThenT,
+}
+
+impl BaselineChoice {
+    pub const ALL: [BaselineChoice; 3] = [
+        BaselineChoice::AcquisitionRgb,
+        BaselineChoice::AcquisitionAll,
+        BaselineChoice::D65RgbThenT,
+    ];
+
+    /// The row name.
+    pub fn name(self) -> &'static str {
+        match self {
+            BaselineChoice::AcquisitionRgb => "baseline (bilinear + RGB matrix per light)",
+            BaselineChoice::AcquisitionAll => "baseline (bilinear + all-channel matrix per light)",
+            BaselineChoice::D65RgbThenT => "baseline (bilinear + 3×3 D65 + T)",
+        }
+    }
+
+    fn label(self, acquisition: &str) -> String {
+        match self {
+            BaselineChoice::AcquisitionRgb => format!("Baseline_{acquisition}"),
+            BaselineChoice::AcquisitionAll => format!("Baseline_{acquisition} all"),
+            BaselineChoice::D65RgbThenT => "Baseline+T".into(),
+        }
+    }
+
+    /// The matrix for `acquisition`, T folded in where the choice uses it.
+    fn matrix(
+        self,
+        camera: &Camera,
+        acquisition: &str,
+        correction: &IlluminantEntry,
+        iset: Option<&IsetData>,
+    ) -> Result<ColourMatrix, BenchError> {
+        let acq = [acquisition.to_string()];
+        let d65 = ["D65".to_string()];
+        let (ills, kind, channels) = match self {
+            BaselineChoice::AcquisitionRgb => (&acq, TableKind::CrossIlluminant, ChannelSet::Rgb),
+            BaselineChoice::AcquisitionAll => (&acq, TableKind::CrossIlluminant, ChannelSet::All),
+            BaselineChoice::D65RgbThenT => (&d65, TableKind::SameIlluminant, ChannelSet::Rgb),
+        };
+        let fit = ColourFit {
+            illuminants: ills,
+            kind,
+            channels,
+            preserve_white: kind == TableKind::CrossIlluminant,
+        };
+        let m = fit_colour_matrix(camera, &fit, iset)?;
+        Ok(match kind {
+            TableKind::SameIlluminant => m.then(&correction.t),
+            TableKind::CrossIlluminant => m,
+        })
     }
 }
 
@@ -212,6 +303,9 @@ pub struct ColourResult {
     pub max: f64,
     /// Mean per-pixel ΔE2000 over patch interiors (noise included).
     pub pixel_mean: f64,
+    /// The same at [`BenchOptions::low_light_factor`] of the exposure.
+    #[serde(default)]
+    pub low_light_pixel_mean: Option<f64>,
 }
 
 /// One row of the benchmark.
@@ -311,16 +405,13 @@ pub fn median(v: &[f64]) -> f64 {
     }
 }
 
-/// The chart simulated once under one acquisition illuminant.
+/// The chart simulated once under one acquisition illuminant, at full
+/// exposure and at the low-light exposure.
 struct ChartCase {
     name: String,
-    chart: String,
     correction: IlluminantEntry,
-    patches: Vec<Patch>,
-    ideal: Vec<crate::colour::Xyz>,
-    volts: Vec<f32>,
-    width: usize,
-    height: usize,
+    full: ChartCapture,
+    low: ChartCapture,
 }
 
 impl ChartCase {
@@ -329,61 +420,32 @@ impl ChartCase {
         acquisition: &str,
         registry: &mut IlluminantRegistry,
         iset: Option<&IsetData>,
-        setup: &ChartSetup,
+        opts: &BenchOptions,
     ) -> Result<Self, BenchError> {
         let correction = registry.resolve(acquisition, iset)?;
-        let (scene, name) = chart_scene(camera, acquisition, iset, setup)?;
-        let noise = if setup.noise {
-            NoiseSwitches::all()
-        } else {
-            NoiseSwitches::none()
-        };
-        let cap = simulate(
-            camera,
-            &scene,
-            Exposure::Auto {
-                target_fraction: setup.exposure_fraction,
-            },
-            &noise,
-            setup.seed,
-        )?;
-        let (height, width) = cap.volts.dim();
-        // The truth, as in `eval::evaluate_method`: the noise-free XYZ of
-        // the same optical image relit by D65, averaged per patch interior.
-        let d65 = cie_illuminant("D65")
-            .ok_or_else(|| BenchError::Invalid("D65 missing".into()))?
-            .resample(camera.grid(), Extrapolation::Zero);
-        let optical = camera.optical_image(&scene)?;
-        let ideal_img = camera.xyz_rates(&optical, &d65)?;
-        let ideal =
-            crate::eval::patch_means(&scene.patches, ideal_img.as_slice().unwrap_or(&[]), width);
+        let full = simulate_chart(camera, acquisition, iset, &opts.chart)?;
+        let low_setup = LightLevel::ExposureFactor(opts.low_light_factor).apply(&opts.chart)?;
+        let low = simulate_chart(camera, acquisition, iset, &low_setup)?;
         Ok(Self {
-            name,
-            chart: scene.name.clone(),
+            name: full.acquisition.clone(),
             correction,
-            patches: scene.patches,
-            ideal,
-            volts: cap.volts.into_raw_vec_and_offset().0,
-            width,
-            height,
+            full,
+            low,
         })
     }
 
-    fn evaluate(&self, xyz: &[f32], method: &str) -> Result<ColourResult, BenchError> {
-        let truth = ChartTruth {
-            name: &self.chart,
-            patches: &self.patches,
-            ideal_d65: &self.ideal,
+    /// Render both captures with `render(volts, width, height)` and score them.
+    fn evaluate(
+        &self,
+        method: &str,
+        render: impl Fn(&[f32], usize, usize) -> Result<Vec<f32>, BenchError>,
+    ) -> Result<ColourResult, BenchError> {
+        let score = |cap: &ChartCapture| -> Result<crate::eval::DeltaEReport, BenchError> {
+            let xyz = render(&cap.volts, cap.width, cap.height)?;
+            Ok(cap.score(&xyz, method, serde_json::Value::Null)?)
         };
-        let rep = evaluate_chart(
-            &truth,
-            xyz,
-            self.width,
-            self.height,
-            &self.name,
-            method,
-            serde_json::Value::Null,
-        )?;
+        let rep = score(&self.full)?;
+        let low = score(&self.low)?;
         Ok(ColourResult {
             illuminant: self.name.clone(),
             method: method.to_string(),
@@ -393,6 +455,7 @@ impl ChartCase {
             p90: rep.summary.p90,
             max: rep.summary.max,
             pixel_mean: rep.per_pixel.mean,
+            low_light_pixel_mean: Some(low.per_pixel.mean),
         })
     }
 }
@@ -524,7 +587,7 @@ pub fn run_bench(
     progress(&format!("simulating the chart under {}", acqs.join(", ")));
     let cases = acqs
         .iter()
-        .map(|a| ChartCase::new(&camera, a, &mut registry, iset, &opts.chart))
+        .map(|a| ChartCase::new(&camera, a, &mut registry, iset, opts))
         .collect::<Result<Vec<_>, _>>()?;
     progress(&format!(
         "simulating the {}×{} throughput frame under {}",
@@ -622,8 +685,7 @@ pub fn run_bench(
         for (case, (ti, kernels, label)) in cases.iter().zip(&per_case) {
             progress(&format!("[{}] ΔE under {}", c.name, case.name));
             let renderer = prepare(&tables[*ti], kernels)?;
-            let xyz = render_xyz(&renderer, &case.volts, case.width, case.height)?;
-            colour.push(case.evaluate(&xyz, label)?);
+            colour.push(case.evaluate(label, |v, w, h| Ok(render_xyz(&renderer, v, w, h)?))?);
         }
         progress(&format!(
             "[{}] timing {} runs on {:.1} Mpix",
@@ -646,32 +708,38 @@ pub fn run_bench(
         });
     }
 
-    progress("[baseline] fitting the colour matrix (D65)");
-    let t0 = Instant::now();
-    let matrix = fit_baseline_matrix(&camera, &["D65".to_string()], iset)?;
-    let training_seconds = t0.elapsed().as_secs_f64();
-    let mut colour = Vec::new();
-    for case in &cases {
-        let m = matrix.then(&case.correction.t);
-        let xyz = render_baseline_xyz(&case.volts, case.width, case.height, camera.cfa(), &m)?;
-        colour.push(case.evaluate(&xyz, "Baseline+T")?);
+    for b in BaselineChoice::ALL {
+        progress(&format!("[baseline] fitting {}", b.name()));
+        let t0 = Instant::now();
+        // one matrix per case, T folded in where the choice uses T
+        let matrices = cases
+            .iter()
+            .map(|case| b.matrix(&camera, &case.name, &case.correction, iset))
+            .collect::<Result<Vec<_>, BenchError>>()?;
+        let training_seconds = t0.elapsed().as_secs_f64();
+        let cfa = camera.cfa();
+        let mut colour = Vec::new();
+        for (case, m) in cases.iter().zip(&matrices) {
+            colour.push(case.evaluate(&b.label(&case.name), |v, w, h| {
+                Ok(render_baseline_xyz(v, w, h, cfa, m)?)
+            })?);
+        }
+        progress(&format!("[baseline] timing {} runs", opts.runs));
+        let m0 = &matrices[0];
+        let (one, all) = measure(&single, opts.runs, mpix, || {
+            Ok(render_baseline_srgb8(&frame, w, h, cfa, m0)?)
+        })?;
+        rows.push(ConfigResult {
+            name: b.name().into(),
+            kind: ConfigKind::Baseline,
+            config: None,
+            training_seconds: Some(training_seconds),
+            colour,
+            time_vs_copy: all.median_ms / copy_ms,
+            one_thread: one,
+            all_threads: all,
+        });
     }
-    progress(&format!("[baseline] timing {} runs", opts.runs));
-    let m0 = matrix.then(&cases[0].correction.t);
-    let cfa = camera.cfa();
-    let (one, all) = measure(&single, opts.runs, mpix, || {
-        Ok(render_baseline_srgb8(&frame, w, h, cfa, &m0)?)
-    })?;
-    rows.push(ConfigResult {
-        name: "baseline (bilinear + 3×3 + T)".into(),
-        kind: ConfigKind::Baseline,
-        config: None,
-        training_seconds: Some(training_seconds),
-        colour,
-        time_vs_copy: all.median_ms / copy_ms,
-        one_thread: one,
-        all_threads: all,
-    });
 
     let pareto = cases
         .iter()
@@ -694,7 +762,7 @@ pub fn run_bench(
             }
         })
         .collect();
-    let (skips, encoders) = match &skip_table {
+    let (skips, encoders) = match skip_table.as_ref().filter(|_| opts.skips) {
         Some((_, table)) => run_skips(
             &SkipInputs {
                 table,
@@ -714,7 +782,7 @@ pub fn run_bench(
         schema: super::BENCH_SCHEMA.into(),
         renderer: RENDERER.into(),
         sensor: design.name.clone(),
-        chart: cases[0].chart.clone(),
+        chart: cases[0].full.scene.name.clone(),
         acquisitions: cases.iter().map(|c| c.name.clone()).collect(),
         frame: frame_info,
         threads: rayon::current_num_threads(),
@@ -722,6 +790,47 @@ pub fn run_bench(
         pareto,
         total_seconds: started.elapsed().as_secs_f64(),
         options: opts.clone(),
+    })
+}
+
+/// The benchmark's sensor sweep: the default configuration on each sensor.
+#[derive(Clone, Debug, Serialize, Deserialize)]
+pub struct SensorSweep {
+    /// Always [`super::BENCH_SCHEMA`].
+    pub schema: String,
+    pub reports: Vec<BenchReport>,
+    pub total_seconds: f64,
+}
+
+/// Run the default L3 configuration (SI ensemble + T), the I tables and the
+/// baselines on every sensor (no skips), so that a regression on any sensor
+/// shows in one run.
+pub fn run_sensor_sweep(
+    designs: &[SensorDesign],
+    iset: Option<&IsetData>,
+    opts: &BenchOptions,
+    progress: &(dyn Fn(&str) + Sync),
+) -> Result<SensorSweep, BenchError> {
+    if designs.is_empty() {
+        return Err(BenchError::Invalid(
+            "the sensor sweep needs a sensor".into(),
+        ));
+    }
+    let started = Instant::now();
+    let mut o = opts.clone();
+    o.configs = default_sweep()
+        .into_iter()
+        .filter(|c| *c == L3Config::default_config() || c.tables == TableChoice::CrossPerIlluminant)
+        .collect();
+    o.skips = false;
+    let reports = designs
+        .iter()
+        .map(|d| run_bench(d, iset, &o, &|m| progress(&format!("[{}] {m}", d.name))))
+        .collect::<Result<Vec<_>, _>>()?;
+    Ok(SensorSweep {
+        schema: super::BENCH_SCHEMA.into(),
+        reports,
+        total_seconds: started.elapsed().as_secs_f64(),
     })
 }
 

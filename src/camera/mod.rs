@@ -90,6 +90,17 @@ pub fn simulate(
             camera.auto_exposure(&rates, &cfa, target_fraction)?
         }
         Exposure::Seconds(t) => t,
+        Exposure::Scaled {
+            target_fraction,
+            factor,
+        } => {
+            if !(factor.is_finite() && factor > 0.0) {
+                return Err(CameraError::InvalidArgument(format!(
+                    "exposure factor {factor} must be finite and positive"
+                )));
+            }
+            camera.auto_exposure(&rates, &cfa, target_fraction)? * factor
+        }
     };
     let volts = camera.capture(&mean, exposure_s, noise, seed)?;
     let t = exposure_s as f32;

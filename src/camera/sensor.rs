@@ -87,6 +87,9 @@ pub enum Exposure {
     Auto { target_fraction: f64 },
     /// A fixed exposure time in seconds.
     Seconds(f64),
+    /// `factor` times the auto-exposure time (`factor` < 1: less light than
+    /// the auto-exposure collects, as at a longest-exposure limit in dim light).
+    Scaled { target_fraction: f64, factor: f64 },
 }
 
 impl Default for Exposure {

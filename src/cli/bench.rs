@@ -3,7 +3,9 @@ use std::path::PathBuf;
 use clap::Args;
 
 use super::{Cli, CliError, iset, load_sensor, write_file};
-use crate::bench::{BenchOptions, markdown_table, run_bench, svg_plot};
+use crate::bench::{
+    BenchOptions, markdown_table, run_bench, run_sensor_sweep, sensor_sweep_markdown, svg_plot,
+};
 
 #[derive(Args, Debug)]
 pub struct BenchArgs {
@@ -19,14 +21,38 @@ pub struct BenchArgs {
     /// A tiny run (2 configurations, 6 scenes, a 0.6 MP frame, 2 runs) for smoke tests.
     #[arg(long)]
     pub quick: bool,
-    /// Sensor design TOML (default: the paper's RGBW sensor).
-    #[arg(long)]
-    pub sensor: Option<PathBuf>,
+    /// Sensor design TOML (default: the paper's RGBW sensor). Several (repeat
+    /// it, or a comma-separated list) run the sensor sweep: the default
+    /// configuration and the baselines on each sensor.
+    #[arg(long, value_delimiter = ',')]
+    pub sensor: Vec<PathBuf>,
+    /// The sensor sweep over every shipped sensor (`config/sensors/*.toml`).
+    #[arg(long, conflicts_with = "sensor")]
+    pub all_sensors: bool,
+}
+
+/// The shipped sensor designs: `config/sensors/*.toml`, sorted by name.
+fn shipped_sensors() -> Result<Vec<PathBuf>, CliError> {
+    let dir = PathBuf::from("config/sensors");
+    let rd = std::fs::read_dir(&dir).map_err(|source| CliError::File {
+        path: format!("{} (run from the repository root)", dir.display()),
+        source,
+    })?;
+    let mut v: Vec<PathBuf> = rd
+        .filter_map(|e| e.ok().map(|e| e.path()))
+        .filter(|p| p.extension().is_some_and(|x| x == "toml"))
+        .collect();
+    v.sort();
+    Ok(v)
 }
 
 pub fn run(cli: &Cli, a: &BenchArgs) -> Result<(), CliError> {
     let iset = iset(&cli.iset_dir)?;
-    let design = load_sensor(&a.sensor, iset.as_ref())?;
+    let sensors = if a.all_sensors {
+        shipped_sensors()?
+    } else {
+        a.sensor.clone()
+    };
     let mut opts = if a.quick {
         BenchOptions::quick()
     } else {
@@ -41,6 +67,25 @@ pub fn run(cli: &Cli, a: &BenchArgs) -> Result<(), CliError> {
         }
         opts.runs = r;
     }
+    if sensors.len() > 1 {
+        let designs = sensors
+            .iter()
+            .map(|p| load_sensor(&Some(p.clone()), iset.as_ref()))
+            .collect::<Result<Vec<_>, _>>()?;
+        let sweep = run_sensor_sweep(&designs, iset.as_ref(), &opts, &|m| eprintln!("… {m}"))?;
+        let mut md = sensor_sweep_markdown(&sweep);
+        for r in &sweep.reports {
+            md.push('\n');
+            md.push_str(&markdown_table(r));
+        }
+        let json = serde_json::to_vec_pretty(&sweep).map_err(|e| CliError::Usage(e.to_string()))?;
+        write_file(&a.out.join("sensors.json"), &json)?;
+        write_file(&a.out.join("sensors.md"), md.as_bytes())?;
+        println!("{md}");
+        println!("wrote {0}/sensors.json and {0}/sensors.md", a.out.display());
+        return Ok(());
+    }
+    let design = load_sensor(&sensors.first().cloned(), iset.as_ref())?;
     let report = run_bench(&design, iset.as_ref(), &opts, &|m| eprintln!("… {m}"))?;
     let md = markdown_table(&report);
     let svg = svg_plot(&report).map_err(crate::bench::BenchError::from)?;

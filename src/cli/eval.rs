@@ -5,7 +5,8 @@ use clap::Args;
 use super::{Cli, CliError, iset, load_sensor, write_file};
 use crate::camera::Camera;
 use crate::eval::{
-    ChartSetup, Method, PaperOptions, evaluate_method, fit_baseline_matrix, run_paper_table,
+    ChartSetup, LightLevel, Method, PaperOptions, evaluate_method, fit_baseline_matrix,
+    paper_summary, run_paper_table,
 };
 use crate::l3::{IlluminantRegistry, L3Table};
 use crate::spectral::WavelengthGrid;
@@ -24,14 +25,25 @@ pub struct EvalArgs {
     /// Acquisition illuminant(s); comma-separated with --paper-table.
     #[arg(long, default_value = "Tungsten", value_delimiter = ',')]
     pub illuminant: Vec<String>,
-    /// Sensor design TOML (default: the paper's RGBW sensor).
-    #[arg(long)]
-    pub sensor: Option<PathBuf>,
+    /// Sensor design TOML (default: the paper's RGBW sensor). With
+    /// --paper-table, repeat it (or give a comma-separated list) to run the
+    /// table on several sensors in one go.
+    #[arg(long, value_delimiter = ',')]
+    pub sensor: Vec<PathBuf>,
     #[arg(long, default_value_t = 7)]
     pub seed: u64,
     /// Simulate the chart without noise (isolates colour error from noise).
     #[arg(long)]
     pub no_noise: bool,
+    /// Exposure time relative to auto-exposure, in (0, 1]: 0.1 is a tenth of
+    /// the light (low light).
+    #[arg(long, conflicts_with = "scene_luminance")]
+    pub exposure: Option<f64>,
+    /// Mean chart luminance in cd/m². Below 100 cd/m² the camera holds its
+    /// longest exposure (auto-exposure's time at 100 cd/m²), so the signal
+    /// falls with the light.
+    #[arg(long)]
+    pub scene_luminance: Option<f64>,
     /// Training scenes per table (with --paper-table).
     #[arg(long, default_value_t = 48)]
     pub scenes: usize,
@@ -52,40 +64,36 @@ pub fn table_sensor(table: &L3Table) -> Result<crate::camera::SensorDesign, CliE
     Ok(d)
 }
 
-pub fn run(cli: &Cli, a: &EvalArgs) -> Result<(), CliError> {
-    let iset = iset(&cli.iset_dir)?;
-    let design = load_sensor(&a.sensor, iset.as_ref())?;
+/// The chart set-up the arguments describe.
+fn chart_setup(a: &EvalArgs) -> Result<ChartSetup, CliError> {
     let chart = ChartSetup {
         seed: a.seed,
         noise: !a.no_noise,
         ..ChartSetup::default()
     };
+    let light = match (a.exposure, a.scene_luminance) {
+        (Some(f), _) => Some(LightLevel::ExposureFactor(f)),
+        (None, Some(l)) => Some(LightLevel::SceneLuminance(l)),
+        (None, None) => None,
+    };
+    Ok(match light {
+        Some(l) => l.apply(&chart)?,
+        None => chart,
+    })
+}
+
+pub fn run(cli: &Cli, a: &EvalArgs) -> Result<(), CliError> {
+    let iset = iset(&cli.iset_dir)?;
+    let chart = chart_setup(a)?;
     if a.paper_table {
-        let opts = PaperOptions {
-            acquisitions: if a.illuminant == ["Tungsten"] {
-                vec!["Tungsten".into(), "Fluorescent".into()]
-            } else {
-                a.illuminant.clone()
-            },
-            scenes: a.scenes,
-            scene_size: a.scene_size,
-            seed: a.seed,
-            chart,
-        };
-        let started = std::time::Instant::now();
-        let t = run_paper_table(&design, iset.as_ref(), &opts, &|m| eprintln!("… {m}"))?;
-        let md = t.markdown();
-        println!("{md}");
-        println!("(took {:.1} s)", started.elapsed().as_secs_f64());
-        let json = serde_json::to_vec_pretty(&t).map_err(|e| CliError::Usage(e.to_string()))?;
-        write_file(&a.out.join("paper_table.json"), &json)?;
-        write_file(&a.out.join("paper_table.md"), md.as_bytes())?;
-        println!(
-            "wrote {}/paper_table.json and paper_table.md",
-            a.out.display()
-        );
-        return Ok(());
+        return run_paper_tables(a, iset.as_ref(), chart);
     }
+    if a.sensor.len() > 1 {
+        return Err(CliError::Usage(
+            "several --sensor files are for --paper-table; evaluate one sensor at a time".into(),
+        ));
+    }
+    let design = load_sensor(&a.sensor.first().cloned(), iset.as_ref())?;
     let acq = a
         .illuminant
         .first()
@@ -103,7 +111,7 @@ pub fn run(cli: &Cli, a: &EvalArgs) -> Result<(), CliError> {
                 .ok_or_else(|| CliError::Usage("--table is required with --method l3".into()))?;
             let table = L3Table::load(path)?;
             let table_camera;
-            let camera = if a.sensor.is_none() {
+            let camera = if a.sensor.is_empty() {
                 // evaluate on the sensor the table was trained for
                 table_camera = Camera::new(&table_sensor(&table)?, grid, iset.as_ref())?;
                 &table_camera
@@ -170,6 +178,74 @@ pub fn run(cli: &Cli, a: &EvalArgs) -> Result<(), CliError> {
     if svg != out {
         write_file(&svg, crate::eval::report_svg(&report)?.as_bytes())?;
         println!("wrote {}", svg.display());
+    }
+    Ok(())
+}
+
+/// Table 1 on every `--sensor` (the default sensor when none is given):
+/// one folder of JSON, markdown and figures per sensor, and a summary.
+fn run_paper_tables(
+    a: &EvalArgs,
+    iset: Option<&crate::spectral::IsetData>,
+    chart: ChartSetup,
+) -> Result<(), CliError> {
+    let sensors: Vec<Option<PathBuf>> = if a.sensor.is_empty() {
+        vec![None]
+    } else {
+        a.sensor.iter().cloned().map(Some).collect()
+    };
+    let opts = PaperOptions {
+        acquisitions: if a.illuminant == ["Tungsten"] {
+            vec!["Tungsten".into(), "Fluorescent".into()]
+        } else {
+            a.illuminant.clone()
+        },
+        scenes: a.scenes,
+        scene_size: a.scene_size,
+        seed: a.seed,
+        chart,
+        ..PaperOptions::default()
+    };
+    let mut tables = Vec::new();
+    for s in &sensors {
+        let design = load_sensor(s, iset)?;
+        let started = std::time::Instant::now();
+        let t = run_paper_table(&design, iset, &opts, &|m| {
+            eprintln!("… [{}] {m}", design.name)
+        })?;
+        let md = t.markdown();
+        println!("{md}");
+        println!("(took {:.1} s)", started.elapsed().as_secs_f64());
+        let dir = if sensors.len() > 1 {
+            a.out.join(&design.name)
+        } else {
+            a.out.clone()
+        };
+        let json = serde_json::to_vec_pretty(&t).map_err(|e| CliError::Usage(e.to_string()))?;
+        write_file(&dir.join("paper_table.json"), &json)?;
+        write_file(&dir.join("paper_table.md"), md.as_bytes())?;
+        for r in &t.reports {
+            let file = format!(
+                "{}_{}.svg",
+                r.acquisition_illuminant,
+                r.method.replace(['+', ' ', '/'], "_")
+            );
+            write_file(
+                &dir.join("figures").join(file),
+                crate::eval::report_svg(r)?.as_bytes(),
+            )?;
+        }
+        println!(
+            "wrote {0}/paper_table.json, {0}/paper_table.md and {0}/figures/",
+            dir.display()
+        );
+        tables.push(t);
+    }
+    if tables.len() > 1 {
+        let md = paper_summary(&tables);
+        println!("{md}");
+        write_file(&a.out.join("summary.md"), md.as_bytes())?;
+        println!("wrote {}/summary.md", a.out.display());
     }
     Ok(())
 }

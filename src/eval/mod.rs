@@ -10,15 +10,17 @@ mod workflow;
 pub use budget::{ErrorBudget, error_budget};
 pub use figure::report_svg;
 pub use paper_table::{
-    PAPER_TABLE1, PaperOptions, PaperRow, PaperTable, StorageComparison, run_paper_table,
+    BaselineComparison, BaselineFamily, ExposurePoint, PAPER_TABLE1, PaperOptions, PaperRow,
+    PaperTable, StorageComparison, paper_summary, run_paper_table,
 };
 pub use report::{
     ChartTruth, DeltaEReport, ErrorStats, PatchResult, PixelStats, REPORT_SCHEMA, evaluate_chart,
     interior, patch_means, summarize,
 };
 pub use workflow::{
-    ChannelSet, ChartSetup, ColourFit, Method, chart_scene, evaluate_method, fit_baseline_matrix,
-    fit_colour_matrix, linear_table, matching_linear_map,
+    ChannelSet, ChartCapture, ChartSetup, ColourFit, LightLevel, Method, REFERENCE_LUMINANCE,
+    chart_scene, evaluate_capture, evaluate_method, fit_baseline_matrix, fit_colour_matrix,
+    linear_table, matching_linear_map, render_method, simulate_chart,
 };
 
 /// Errors of the evaluation layer.

@@ -8,8 +8,8 @@ use std::sync::atomic::AtomicBool;
 use serde::{Deserialize, Serialize};
 
 use super::workflow::{
-    ChannelSet, ChartSetup, ColourFit, Method, evaluate_method, fit_colour_matrix, linear_table,
-    matching_linear_map,
+    ChannelSet, ChartSetup, ColourFit, LightLevel, Method, evaluate_capture, fit_colour_matrix,
+    linear_table, matching_linear_map, simulate_chart,
 };
 use super::{DeltaEReport, EvalError};
 use crate::camera::{Camera, SensorDesign};
@@ -35,6 +35,14 @@ pub struct PaperOptions {
     pub scene_size: usize,
     pub seed: u64,
     pub chart: ChartSetup,
+    /// Exposure factors (relative to the chart's) at which every row is also
+    /// evaluated; the smallest is the low-light column.
+    #[serde(default = "default_exposures")]
+    pub exposures: Vec<f64>,
+}
+
+fn default_exposures() -> Vec<f64> {
+    LightLevel::SWEEP[1..].to_vec()
 }
 
 impl Default for PaperOptions {
@@ -45,8 +53,20 @@ impl Default for PaperOptions {
             scene_size: 96,
             seed: 1,
             chart: ChartSetup::default(),
+            exposures: default_exposures(),
         }
     }
+}
+
+/// A row's error at a lower exposure.
+#[derive(Clone, Debug, Serialize, Deserialize)]
+pub struct ExposurePoint {
+    /// Exposure time relative to auto-exposure.
+    pub factor: f64,
+    /// Patch-mean ΔE2000.
+    pub mean: f64,
+    /// Mean per-pixel ΔE2000 over patch interiors.
+    pub pixel_mean: f64,
 }
 
 /// One row of the table.
@@ -65,9 +85,43 @@ pub struct PaperRow {
     /// illuminants and target), evaluated on the same frame.
     #[serde(default)]
     pub linear_mean: Option<f64>,
+    /// The same row at the lower exposures of [`PaperOptions::exposures`].
+    #[serde(default)]
+    pub exposures: Vec<ExposurePoint>,
+    /// L3 rows: the conventional baseline they are judged against.
+    #[serde(default)]
+    pub baseline: Option<BaselineFamily>,
     /// The paper's (mean, std, p90) for this row, tungsten only.
     pub paper: Option<[f64; 3]>,
     pub training_seconds: Option<f64>,
+}
+
+/// Which conventional baseline an L3 row is compared with: like with like.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum BaselineFamily {
+    /// The white-balanced matrix fitted under the acquisition light
+    /// (`Baseline_<acq>` and `Baseline_<acq> all`): for cross tables and for
+    /// SI tables trained under the acquisition light alone.
+    AcquisitionFit,
+    /// The matrix fitted under D65, then T (`Baseline+T` and `Baseline+T
+    /// all`): for SI tables trained under D65 or an ensemble of lights, which
+    /// like this matrix serve every light through T.
+    D65FitThenT,
+}
+
+/// One L3 row against its baseline (the better of the RGB and all-channel
+/// variants by patch-mean ΔE at full exposure).
+#[derive(Clone, Debug, Serialize, Deserialize)]
+pub struct BaselineComparison {
+    pub acquisition: String,
+    pub method: String,
+    pub baseline: String,
+    /// L3 patch-mean ΔE minus the baseline's, full exposure.
+    pub mean_difference: f64,
+    /// (exposure factor, L3 per-pixel ΔE / baseline per-pixel ΔE), full
+    /// exposure first.
+    pub pixel_ratios: Vec<(f64, f64)>,
 }
 
 /// Storage of one SI table plus N matrices against N cross-illuminant tables.
@@ -89,6 +143,9 @@ pub struct PaperTable {
     pub storage: StorageComparison,
     pub reports: Vec<DeltaEReport>,
     pub options: PaperOptions,
+    /// Every L3 row against its baseline.
+    #[serde(default)]
+    pub comparisons: Vec<BaselineComparison>,
 }
 
 impl PaperTable {
@@ -99,14 +156,64 @@ impl PaperTable {
             .find(|r| r.acquisition.eq_ignore_ascii_case(acquisition) && r.method == method)
     }
 
+    /// The baseline row an L3 row is judged against: of the RGB and
+    /// all-channel variants of its family, the one with the lower patch-mean
+    /// ΔE at full exposure.
+    pub fn baseline_for(&self, row: &PaperRow) -> Option<&PaperRow> {
+        let stem = match row.baseline? {
+            BaselineFamily::AcquisitionFit => format!("Baseline_{}", short(&row.acquisition)),
+            BaselineFamily::D65FitThenT => "Baseline+T".to_string(),
+        };
+        [stem.clone(), format!("{stem} all")]
+            .iter()
+            .filter_map(|m| self.row(&row.acquisition, m))
+            .min_by(|a, b| a.mean.total_cmp(&b.mean))
+    }
+
+    fn compare_with_baselines(&self) -> Vec<BaselineComparison> {
+        self.rows
+            .iter()
+            .filter_map(|r| {
+                let b = self.baseline_for(r)?;
+                let ratio = |l: f64, b: f64| if b > 0.0 { l / b } else { f64::NAN };
+                let mut pixel_ratios = vec![(1.0, ratio(r.pixel_mean, b.pixel_mean))];
+                for p in &r.exposures {
+                    if let Some(q) = b.exposures.iter().find(|q| q.factor == p.factor) {
+                        pixel_ratios.push((p.factor, ratio(p.pixel_mean, q.pixel_mean)));
+                    }
+                }
+                Some(BaselineComparison {
+                    acquisition: r.acquisition.clone(),
+                    method: r.method.clone(),
+                    baseline: b.method.clone(),
+                    mean_difference: r.mean - b.mean,
+                    pixel_ratios,
+                })
+            })
+            .collect()
+    }
+
+    /// The lowest exposure factor evaluated (the low-light column).
+    fn low_light(row: &PaperRow) -> Option<&ExposurePoint> {
+        row.exposures
+            .iter()
+            .min_by(|a, b| a.factor.total_cmp(&b.factor))
+    }
+
     /// A markdown rendering beside the paper's figures.
     pub fn markdown(&self) -> String {
         let mut s = format!(
             "Natural-100 chart ({}), sensor `{}`, CIEDE2000 of patch means\n\n",
             self.chart, self.sensor
         );
-        s.push_str("| acquisition | method | mean ΔE (std) | median | p90 | max | per-pixel mean | matching linear map | paper mean (std) / p90 |\n");
-        s.push_str("|---|---|---|---|---|---|---|---|---|\n");
+        let low = self
+            .rows
+            .first()
+            .and_then(Self::low_light)
+            .map(|p| format!("per-pixel at {}×", p.factor))
+            .unwrap_or_else(|| "low light".into());
+        s.push_str(&format!("| acquisition | method | mean ΔE (std) | median | p90 | max | per-pixel mean | {low} | matching linear map | paper mean (std) / p90 |\n"));
+        s.push_str("|---|---|---|---|---|---|---|---|---|---|\n");
         for r in &self.rows {
             let paper = r
                 .paper
@@ -116,8 +223,11 @@ impl PaperTable {
                 .linear_mean
                 .map(|v| format!("{v:.2}"))
                 .unwrap_or_else(|| "—".into());
+            let low = Self::low_light(r)
+                .map(|p| format!("{:.2}", p.pixel_mean))
+                .unwrap_or_else(|| "—".into());
             s.push_str(&format!(
-                "| {} | {} | {:.2} ({:.2}) | {:.2} | {:.2} | {:.2} | {:.2} | {} | {} |\n",
+                "| {} | {} | {:.2} ({:.2}) | {:.2} | {:.2} | {:.2} | {:.2} | {} | {} | {} |\n",
                 r.acquisition,
                 r.method,
                 r.mean,
@@ -126,9 +236,29 @@ impl PaperTable {
                 r.p90,
                 r.max,
                 r.pixel_mean,
+                low,
                 linear,
                 paper
             ));
+        }
+        if !self.comparisons.is_empty() {
+            s.push_str("\nEach L3 row against its conventional baseline (the better of RGB and all channels at full exposure): patch-mean difference, and per-pixel ΔE as a ratio L3 / baseline at each exposure factor.\n\n");
+            s.push_str("| acquisition | method | baseline | Δ patch mean | per-pixel L3/baseline |\n|---|---|---|---|---|\n");
+            for c in &self.comparisons {
+                let ratios: Vec<String> = c
+                    .pixel_ratios
+                    .iter()
+                    .map(|(f, r)| format!("{f}×: {r:.2}"))
+                    .collect();
+                s.push_str(&format!(
+                    "| {} | {} | {} | {:+.2} | {} |\n",
+                    c.acquisition,
+                    c.method,
+                    c.baseline,
+                    c.mean_difference,
+                    ratios.join(", ")
+                ));
+            }
         }
         let st = &self.storage;
         s.push_str(&format!(
@@ -142,6 +272,43 @@ impl PaperTable {
         ));
         s
     }
+}
+
+/// One markdown table over several sensors' Table 1 runs: every L3 row with
+/// its matching linear map and its baseline, so that a regression on any
+/// sensor shows in one place.
+pub fn paper_summary(tables: &[PaperTable]) -> String {
+    let mut s = String::from(
+        "Table 1 on every sensor (patch-mean ΔE2000; per-pixel ΔE at full and lowest exposure)\n\n\
+         | sensor | acquisition | method | mean | matching linear map | per-pixel | low light per-pixel | baseline | Δ mean vs baseline | low light L3/baseline |\n\
+         |---|---|---|---|---|---|---|---|---|---|\n",
+    );
+    let f2 = |v: Option<f64>| v.map(|v| format!("{v:.2}")).unwrap_or_else(|| "—".into());
+    for t in tables {
+        for r in t.rows.iter().filter(|r| r.linear_mean.is_some()) {
+            let b = t.baseline_for(r);
+            let low = PaperTable::low_light(r);
+            let low_b = b.and_then(PaperTable::low_light);
+            s.push_str(&format!(
+                "| {} | {} | {} | {:.2} | {} | {:.2} | {} | {} | {} | {} |\n",
+                t.sensor,
+                r.acquisition,
+                r.method,
+                r.mean,
+                f2(r.linear_mean),
+                r.pixel_mean,
+                f2(low.map(|p| p.pixel_mean)),
+                b.map(|b| format!("{} {:.2}", b.method, b.mean))
+                    .unwrap_or_else(|| "—".into()),
+                b.map(|b| format!("{:+.2}", r.mean - b.mean))
+                    .unwrap_or_else(|| "—".into()),
+                f2(low
+                    .zip(low_b)
+                    .map(|(l, b)| l.pixel_mean / b.pixel_mean.max(1e-12))),
+            ));
+        }
+    }
+    s
 }
 
 fn short(name: &str) -> String {
@@ -258,27 +425,56 @@ pub fn run_paper_table(
             Method::Baseline(&acq_all),
             None,
         ));
+        let cap = simulate_chart(&camera, acq, iset, &opts.chart)?;
+        let lower = opts
+            .exposures
+            .iter()
+            .map(|&f| {
+                let setup = LightLevel::ExposureFactor(f).apply(&opts.chart)?;
+                Ok((f, simulate_chart(&camera, acq, iset, &setup)?, setup))
+            })
+            .collect::<Result<Vec<_>, EvalError>>()?;
         for (name, method, secs) in methods {
             progress(&format!("evaluating {name} under {acq}"));
             let is_acq_baseline = name.starts_with("Baseline_");
             let c = if is_acq_baseline { &identity } else { &corr };
-            let rep = evaluate_method(&camera, &method, &name, acq, c, iset, &opts.chart)?;
-            let linear_mean = match method {
+            let rep = evaluate_capture(&camera, &cap, &method, &name, c, &opts.chart)?;
+            let (linear_mean, baseline) = match method {
                 Method::Table(t) => {
                     let lt = linear_table(t, &matching_linear_map(&camera, t, iset)?)?;
-                    let lin = evaluate_method(
+                    let lin = evaluate_capture(
                         &camera,
+                        &cap,
                         &Method::Table(&lt),
                         &format!("linear {name}"),
-                        acq,
                         &corr,
-                        iset,
                         &opts.chart,
                     )?;
-                    Some(lin.summary.mean)
+                    // like with like: a table for this light alone against
+                    // the matrix for this light; one table for several
+                    // lights (then T) against one matrix (then T)
+                    let only_acq = matches!(t.meta.train_illuminants.as_slice(),
+                        [i] if i.eq_ignore_ascii_case(acq));
+                    let family = if only_acq || t.meta.kind == TableKind::CrossIlluminant {
+                        BaselineFamily::AcquisitionFit
+                    } else {
+                        BaselineFamily::D65FitThenT
+                    };
+                    (Some(lin.summary.mean), Some(family))
                 }
-                Method::Baseline(_) => None,
+                Method::Baseline(_) => (None, None),
             };
+            let exposures = lower
+                .iter()
+                .map(|(f, lc, ls)| {
+                    let r = evaluate_capture(&camera, lc, &method, &name, c, ls)?;
+                    Ok(ExposurePoint {
+                        factor: *f,
+                        mean: r.summary.mean,
+                        pixel_mean: r.per_pixel.mean,
+                    })
+                })
+                .collect::<Result<Vec<_>, EvalError>>()?;
             chart_name = rep.chart.clone();
             let is_tungsten = tag == "Tun";
             rows.push(PaperRow {
@@ -291,6 +487,8 @@ pub fn run_paper_table(
                 max: rep.summary.max,
                 pixel_mean: rep.per_pixel.mean,
                 linear_mean,
+                exposures,
+                baseline,
                 paper: if is_tungsten {
                     paper.get(name.as_str()).copied()
                 } else {
@@ -307,7 +505,7 @@ pub fn run_paper_table(
     let table_bytes = si_ens.kernel_bytes();
     let matrix_bytes = 9 * 8;
     let cross_bytes = cross_bytes / opts.acquisitions.len().max(1) * n;
-    Ok(PaperTable {
+    let mut table = PaperTable {
         sensor: design.name.clone(),
         chart: chart_name,
         rows,
@@ -320,5 +518,8 @@ pub fn run_paper_table(
         },
         reports,
         options: opts.clone(),
-    })
+        comparisons: Vec::new(),
+    };
+    table.comparisons = table.compare_with_baselines();
+    Ok(table)
 }

@@ -32,17 +32,74 @@ pub struct ChartSetup {
     pub exposure_fraction: f64,
     pub seed: u64,
     pub noise: bool,
+    /// The exposure time relative to auto-exposure (1 = auto; 0.1 = a tenth
+    /// of the light, ten times the relative shot and read noise).
+    #[serde(default = "one")]
+    pub exposure_factor: f64,
+}
+
+fn one() -> f64 {
+    1.0
 }
 
 impl Default for ChartSetup {
     fn default() -> Self {
         Self {
             patch_px: 24,
-            mean_luminance: 100.0,
+            mean_luminance: REFERENCE_LUMINANCE,
             exposure_fraction: 0.95,
             seed: 7,
             noise: true,
+            exposure_factor: 1.0,
         }
+    }
+}
+
+/// The chart luminance (cd/m²) at which auto-exposure reaches the camera's
+/// longest exposure time: dimmer charts get that time and less signal.
+pub const REFERENCE_LUMINANCE: f64 = 100.0;
+
+/// How much light the evaluation chart gives the sensor.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum LightLevel {
+    /// Exposure time relative to auto-exposure, in (0, 1].
+    ExposureFactor(f64),
+    /// Mean chart luminance in cd/m². Up to [`REFERENCE_LUMINANCE`] the
+    /// camera holds its longest exposure (the auto-exposure time at the
+    /// reference luminance), so the signal falls with the luminance; above
+    /// it, auto-exposure shortens the time and the frame looks as at the
+    /// reference.
+    SceneLuminance(f64),
+}
+
+impl LightLevel {
+    /// The exposure factors of the low-light sweep.
+    pub const SWEEP: [f64; 4] = [1.0, 0.5, 0.25, 0.1];
+
+    /// Apply to a chart setup, or say why the level is out of range.
+    pub fn apply(self, setup: &ChartSetup) -> Result<ChartSetup, EvalError> {
+        let mut s = setup.clone();
+        match self {
+            LightLevel::ExposureFactor(f) => {
+                if !(f.is_finite() && f > 0.0 && f <= 1.0) {
+                    return Err(EvalError::Invalid(format!(
+                        "exposure factor {f}: expected a value in (0, 1] (relative to auto-exposure)"
+                    )));
+                }
+                s.exposure_factor = f;
+            }
+            LightLevel::SceneLuminance(l) => {
+                if !(l.is_finite() && (0.01..=1e5).contains(&l)) {
+                    return Err(EvalError::Invalid(format!(
+                        "scene luminance {l} cd/m²: expected 0.01 to 100000"
+                    )));
+                }
+                s.mean_luminance = l;
+                s.exposure_factor = (l / REFERENCE_LUMINANCE).min(1.0);
+            }
+        }
+        Ok(s)
     }
 }
 
@@ -62,9 +119,120 @@ pub fn chart_scene(
     Ok((scene, named.name))
 }
 
+/// The chart simulated once under one acquisition illuminant, with its truth.
+#[derive(Clone, Debug)]
+pub struct ChartCapture {
+    pub scene: Scene,
+    /// The acquisition illuminant's resolved name.
+    pub acquisition: String,
+    /// The raw mosaic in volts, row-major `width × height`.
+    pub volts: Vec<f32>,
+    pub width: usize,
+    pub height: usize,
+    pub exposure_s: f64,
+    /// Per patch: the ideal (noise-free) XYZ of the same optical image relit
+    /// by D65, averaged over the patch interior — what a perfect camera
+    /// behind this lens would record. The lens's flare is not the
+    /// pipeline's error.
+    pub ideal_d65: Vec<crate::colour::Xyz>,
+}
+
+impl ChartCapture {
+    /// Score a rendered XYZ image of this capture.
+    pub fn score(
+        &self,
+        xyz: &[f32],
+        method_name: &str,
+        context: serde_json::Value,
+    ) -> Result<DeltaEReport, EvalError> {
+        let truth = ChartTruth {
+            name: &self.scene.name,
+            patches: &self.scene.patches,
+            ideal_d65: &self.ideal_d65,
+        };
+        evaluate_chart(
+            &truth,
+            xyz,
+            self.width,
+            self.height,
+            &self.acquisition,
+            method_name,
+            context,
+        )
+    }
+}
+
+/// Simulate the evaluation chart under `acquisition` as `setup` says (noise,
+/// seed, exposure factor).
+pub fn simulate_chart(
+    camera: &Camera,
+    acquisition: &str,
+    iset: Option<&IsetData>,
+    setup: &ChartSetup,
+) -> Result<ChartCapture, EvalError> {
+    let (scene, acq_name) = chart_scene(camera, acquisition, iset, setup)?;
+    let noise = if setup.noise {
+        NoiseSwitches::all()
+    } else {
+        NoiseSwitches::none()
+    };
+    let invalid = |e: crate::camera::CameraError| EvalError::Invalid(e.to_string());
+    let cap = simulate(
+        camera,
+        &scene,
+        Exposure::Scaled {
+            target_fraction: setup.exposure_fraction,
+            factor: setup.exposure_factor,
+        },
+        &noise,
+        setup.seed,
+    )
+    .map_err(invalid)?;
+    let (height, width) = cap.volts.dim();
+    let d65 = cie_illuminant("D65")
+        .ok_or_else(|| EvalError::Invalid("D65 missing".into()))?
+        .resample(camera.grid(), Extrapolation::Zero);
+    let optical = camera.optical_image(&scene).map_err(invalid)?;
+    let ideal_img = camera.xyz_rates(&optical, &d65).map_err(invalid)?;
+    let ideal_d65 =
+        super::report::patch_means(&scene.patches, ideal_img.as_slice().unwrap_or(&[]), width);
+    Ok(ChartCapture {
+        scene,
+        acquisition: acq_name,
+        volts: cap.volts.into_raw_vec_and_offset().0,
+        width,
+        height,
+        exposure_s: cap.exposure_s,
+        ideal_d65,
+    })
+}
+
+/// Render a mosaic with `method`, correcting with `correction` (ignored for
+/// cross-illuminant tables, whose output is already under D65). XYZ out.
+pub fn render_method(
+    method: &Method,
+    correction: &IlluminantEntry,
+    volts: &[f32],
+    width: usize,
+    height: usize,
+    cfa: &crate::camera::Cfa,
+) -> Result<Vec<f32>, EvalError> {
+    Ok(match method {
+        Method::Table(t) => {
+            let kernels = match t.meta.kind {
+                TableKind::SameIlluminant => fuse_kernels(t, &correction.t),
+                TableKind::CrossIlluminant => t.kernels.clone(),
+            };
+            FastRenderer::new(t, &kernels)?
+                .render_xyz(Mosaic::Volts(volts), width, height, None)?
+                .0
+        }
+        Method::Baseline(m) => render_baseline(volts, width, height, cfa, &m.then(&correction.t))?,
+    })
+}
+
 /// Evaluate `method` on the chart acquired under `acquisition`, correcting
-/// with `correction` (ignored for cross-illuminant tables, whose output is
-/// already under D65).
+/// with `correction` (ignored for cross-illuminant tables).
 pub fn evaluate_method(
     camera: &Camera,
     method: &Method,
@@ -74,70 +242,39 @@ pub fn evaluate_method(
     iset: Option<&IsetData>,
     setup: &ChartSetup,
 ) -> Result<DeltaEReport, EvalError> {
-    let (scene, acq_name) = chart_scene(camera, acquisition, iset, setup)?;
-    let noise = if setup.noise {
-        NoiseSwitches::all()
-    } else {
-        NoiseSwitches::none()
-    };
-    let cap = simulate(
-        camera,
-        &scene,
-        Exposure::Auto {
-            target_fraction: setup.exposure_fraction,
-        },
-        &noise,
-        setup.seed,
-    )
-    .map_err(|e| EvalError::Invalid(e.to_string()))?;
-    let (h, w) = cap.volts.dim();
-    let volts = cap.volts.as_slice().unwrap_or(&[]).to_vec();
+    let cap = simulate_chart(camera, acquisition, iset, setup)?;
+    evaluate_capture(camera, &cap, method, method_name, correction, setup)
+}
+
+/// Evaluate `method` on an already simulated chart.
+pub fn evaluate_capture(
+    camera: &Camera,
+    cap: &ChartCapture,
+    method: &Method,
+    method_name: &str,
+    correction: &IlluminantEntry,
+    setup: &ChartSetup,
+) -> Result<DeltaEReport, EvalError> {
     let started = std::time::Instant::now();
-    let xyz = match method {
-        Method::Table(t) => {
-            let kernels = match t.meta.kind {
-                TableKind::SameIlluminant => fuse_kernels(t, &correction.t),
-                TableKind::CrossIlluminant => t.kernels.clone(),
-            };
-            FastRenderer::new(t, &kernels)?
-                .render_xyz(Mosaic::Volts(&volts), w, h, None)?
-                .0
-        }
-        Method::Baseline(m) => {
-            let mt = m.then(&correction.t);
-            render_baseline(&volts, w, h, camera.cfa(), &mt)?
-        }
-    };
+    let xyz = render_method(
+        method,
+        correction,
+        &cap.volts,
+        cap.width,
+        cap.height,
+        camera.cfa(),
+    )?;
     let render_ms = started.elapsed().as_secs_f64() * 1e3;
-    // The truth: the ideal (noise-free) XYZ image of the same optical image
-    // relit by D65, averaged over each patch interior — what a perfect
-    // camera behind this lens would record. The lens's flare is not the
-    // pipeline's error.
-    let d65 = cie_illuminant("D65")
-        .ok_or_else(|| EvalError::Invalid("D65 missing".into()))?
-        .resample(camera.grid(), Extrapolation::Zero);
-    let optical = camera
-        .optical_image(&scene)
-        .map_err(|e| EvalError::Invalid(e.to_string()))?;
-    let ideal_img = camera
-        .xyz_rates(&optical, &d65)
-        .map_err(|e| EvalError::Invalid(e.to_string()))?;
-    let ideal = super::report::patch_means(&scene.patches, ideal_img.as_slice().unwrap_or(&[]), w);
-    let truth = ChartTruth {
-        name: &scene.name,
-        patches: &scene.patches,
-        ideal_d65: &ideal,
-    };
     let ctx = serde_json::json!({
         "exposure_s": cap.exposure_s,
-        "width": w,
-        "height": h,
+        "width": cap.width,
+        "height": cap.height,
         "render_ms": render_ms,
         "correction": correction.name,
         "setup": setup,
         "sensor": camera.design().name,
     });
-    evaluate_chart(&truth, &xyz, w, h, &acq_name, method_name, ctx)
+    cap.score(&xyz, method_name, ctx)
 }
 
 /// The least-squares colour matrix of the conventional baseline for
@@ -335,4 +472,43 @@ pub fn linear_table(table: &L3Table, map: &ColourMatrix) -> Result<L3Table, Eval
     }
     out.validate()?;
     Ok(out)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn light_levels_set_the_exposure_factor() {
+        let base = ChartSetup::default();
+        let s = LightLevel::ExposureFactor(0.25).apply(&base).unwrap();
+        assert_eq!(s.exposure_factor, 0.25);
+        assert_eq!(s.mean_luminance, base.mean_luminance);
+        // dimmer than the reference: the longest exposure, less signal
+        let s = LightLevel::SceneLuminance(10.0).apply(&base).unwrap();
+        assert_eq!((s.mean_luminance, s.exposure_factor), (10.0, 0.1));
+        // brighter: auto-exposure shortens the time
+        let s = LightLevel::SceneLuminance(400.0).apply(&base).unwrap();
+        assert_eq!((s.mean_luminance, s.exposure_factor), (400.0, 1.0));
+        for bad in [0.0, -0.5, 1.5, f64::NAN, f64::INFINITY] {
+            assert!(
+                LightLevel::ExposureFactor(bad).apply(&base).is_err(),
+                "{bad}"
+            );
+        }
+        for bad in [0.0, -1.0, 1e9, f64::NAN] {
+            assert!(
+                LightLevel::SceneLuminance(bad).apply(&base).is_err(),
+                "{bad}"
+            );
+        }
+    }
+
+    #[test]
+    fn setups_without_a_factor_read_as_full_exposure() {
+        let v = serde_json::json!({"patch_px": 24, "mean_luminance": 100.0,
+            "exposure_fraction": 0.95, "seed": 7, "noise": true});
+        let s: ChartSetup = serde_json::from_value(v).unwrap();
+        assert_eq!(s.exposure_factor, 1.0);
+    }
 }

@@ -14,7 +14,7 @@ use sqlx::Row;
 use super::ServiceError;
 use super::state::{AppState, new_id, now_ms};
 use crate::camera::{Camera, SensorDesign};
-use crate::eval::{ChartSetup, Method, evaluate_method, fit_baseline_matrix};
+use crate::eval::{ChartSetup, LightLevel, Method, evaluate_method, fit_baseline_matrix};
 use crate::l3::L3Table;
 use crate::spectral::WavelengthGrid;
 
@@ -43,6 +43,38 @@ pub struct EvaluationRequest {
     /// Side of each chart patch in pixels (8–64, default 24).
     #[serde(default = "default_patch_px")]
     pub patch_px: usize,
+    /// Exposure time relative to auto-exposure, in (0, 1] (default 1).
+    #[serde(default)]
+    pub exposure_factor: Option<f64>,
+    /// Mean chart luminance in cd/m² (instead of `exposure_factor`): below
+    /// 100 cd/m² the camera holds its longest exposure.
+    #[serde(default)]
+    pub scene_luminance: Option<f64>,
+}
+
+impl EvaluationRequest {
+    /// The chart set-up the request asks for, or a 400 naming what is wrong.
+    fn chart_setup(&self) -> Result<ChartSetup, ServiceError> {
+        let chart = ChartSetup {
+            seed: self.seed,
+            noise: self.noise,
+            patch_px: self.patch_px,
+            ..ChartSetup::default()
+        };
+        let light = match (self.exposure_factor, self.scene_luminance) {
+            (Some(_), Some(_)) => {
+                return Err(ServiceError::BadRequest(
+                    "give exposure_factor or scene_luminance, not both".into(),
+                ));
+            }
+            (Some(f), None) => LightLevel::ExposureFactor(f),
+            (None, Some(l)) => LightLevel::SceneLuminance(l),
+            (None, None) => return Ok(chart),
+        };
+        light
+            .apply(&chart)
+            .map_err(|e| ServiceError::BadRequest(e.to_string()))
+    }
 }
 
 fn default_method() -> String {
@@ -130,6 +162,7 @@ pub async fn create(
             req.patch_px
         )));
     }
+    let chart = req.chart_setup()?;
     let is_l3 = match req.method.as_str() {
         "l3" => true,
         "baseline" => false,
@@ -192,12 +225,6 @@ pub async fn create(
             };
             let camera = Camera::new(&design, grid, iset.as_ref())
                 .map_err(|e| ServiceError::Unprocessable(e.to_string()))?;
-            let chart = ChartSetup {
-                seed: r2.seed,
-                noise: r2.noise,
-                patch_px: r2.patch_px,
-                ..ChartSetup::default()
-            };
             let eval_err = |e: crate::eval::EvalError| ServiceError::Unprocessable(e.to_string());
             let mut report = match &table {
                 Some(t) => {
