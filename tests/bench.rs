@@ -25,14 +25,9 @@ fn numbers(v: &serde_json::Value, path: &str, out: &mut Vec<(String, f64)>) {
 
 #[test]
 fn quick_bench_writes_json_markdown_and_plot() {
-    let Some(iset) = l3::spectral::IsetData::for_tests() else {
-        return;
-    };
     let tmp = tempfile::tempdir().unwrap();
     let out_dir = tmp.path().join("bench");
     let out = Command::new(env!("CARGO_BIN_EXE_l3"))
-        .arg("--iset-dir")
-        .arg(iset.root())
         .args(["bench", "--quick", "--out"])
         .arg(&out_dir)
         .output()

@@ -1,5 +1,6 @@
 //! The `l3` binary end to end: simulate → train → render → eval, through
-//! the real executable, in a temporary folder.
+//! the real executable, in a temporary folder (with no ISET data directory
+//! beside it: the built-in spectral data serves).
 
 use std::path::Path;
 use std::process::Command;
@@ -17,25 +18,13 @@ fn l3(args: &[&str], dir: &Path) -> (bool, String, String) {
     )
 }
 
-fn iset_arg() -> Option<String> {
-    l3::spectral::IsetData::for_tests().map(|d| {
-        std::fs::canonicalize(d.root())
-            .unwrap_or_else(|_| d.root().to_path_buf())
-            .display()
-            .to_string()
-    })
-}
-
 #[test]
 fn simulate_train_render_eval() {
-    let Some(iset) = iset_arg() else { return };
     let tmp = tempfile::tempdir().unwrap();
     let d = tmp.path();
     let sim = d.join("sim");
     let (ok, out, err) = l3(
         &[
-            "--iset-dir",
-            &iset,
             "simulate",
             "--scene",
             "macbeth",
@@ -74,8 +63,6 @@ fn simulate_train_render_eval() {
     let sim2 = d.join("sim2");
     let (ok, _, _) = l3(
         &[
-            "--iset-dir",
-            &iset,
             "simulate",
             "--scene",
             "macbeth",
@@ -97,8 +84,6 @@ fn simulate_train_render_eval() {
     let table = d.join("t.safetensors");
     let (ok, out, err) = l3(
         &[
-            "--iset-dir",
-            &iset,
             "train",
             "--kind",
             "si",
@@ -124,8 +109,6 @@ fn simulate_train_render_eval() {
         ("out16.tiff", vec!["--tiff", "srgb16"]),
     ] {
         let mut args = vec![
-            "--iset-dir",
-            &iset,
             "render",
             "--table",
             table.to_str().unwrap(),
@@ -148,8 +131,6 @@ fn simulate_train_render_eval() {
     // a 16-bit PNG input renders the same as the raw
     let (ok, _, err) = l3(
         &[
-            "--iset-dir",
-            &iset,
             "render",
             "--table",
             table.to_str().unwrap(),
@@ -171,8 +152,6 @@ fn simulate_train_render_eval() {
     let report = d.join("report.json");
     let (ok, out, err) = l3(
         &[
-            "--iset-dir",
-            &iset,
             "eval",
             "--table",
             table.to_str().unwrap(),
@@ -186,6 +165,7 @@ fn simulate_train_render_eval() {
     assert!(ok, "eval failed: {out}{err}");
     let r: serde_json::Value = serde_json::from_slice(&std::fs::read(&report).unwrap()).unwrap();
     assert_eq!(r["schema"], "l3.delta_e.v1");
+    assert_eq!(r["chart"], "natural100");
     assert_eq!(r["patches"].as_array().unwrap().len(), 110);
     let mean = r["summary"]["mean"].as_f64().unwrap();
     assert!(

@@ -12,10 +12,8 @@ fn opts() -> SceneOptions {
 
 #[test]
 fn natural100_has_100_distinct_samples_in_category_counts_and_is_deterministic() {
-    let Some(iset) = IsetData::for_tests() else {
-        return;
-    };
-    let samples = natural100_samples(&iset).unwrap();
+    let iset = IsetData::built_in();
+    let samples = natural100_samples(iset).unwrap();
     assert_eq!(samples.len(), 100);
     let names: HashSet<_> = samples.iter().map(|s| s.name.as_str()).collect();
     assert_eq!(names.len(), 100, "samples must be distinct");
@@ -45,8 +43,8 @@ fn natural100_has_100_distinct_samples_in_category_counts_and_is_deterministic()
         .collect();
     assert_eq!(spectra.len(), 100);
 
-    let a = natural100_chart(&iset, &opts(), NATURAL100_PATCH_PX).unwrap();
-    let b = natural100_chart(&iset, &opts(), NATURAL100_PATCH_PX).unwrap();
+    let a = natural100_chart(iset, &opts(), NATURAL100_PATCH_PX).unwrap();
+    let b = natural100_chart(iset, &opts(), NATURAL100_PATCH_PX).unwrap();
     assert_eq!(a.patches.len(), 110);
     assert_eq!((a.rows(), a.cols()), (11 * 24, 10 * 24));
     let greys: Vec<_> = a.patches.iter().filter(|p| p.category == "grey").collect();
@@ -63,7 +61,7 @@ fn natural100_has_100_distinct_samples_in_category_counts_and_is_deterministic()
         assert!((got as f64 - v).abs() < 1e-6);
     }
     // Another seed gives another (still valid) selection.
-    let other = natural100_samples_seeded(&iset, 7).unwrap();
+    let other = natural100_samples_seeded(iset, 7).unwrap();
     let other_names: HashSet<_> = other.iter().map(|s| s.name.as_str()).collect();
     assert_eq!(other_names.len(), 100);
     println!(
@@ -73,8 +71,8 @@ fn natural100_has_100_distinct_samples_in_category_counts_and_is_deterministic()
 }
 
 #[test]
-fn ces_chart_serves_without_iset_data() {
-    let s = natural100_or_ces_chart(None, &opts(), 8).unwrap();
+fn ces_chart_has_the_99_ces_and_the_grey_strip() {
+    let s = ces_chart(&opts(), 8).unwrap();
     assert_eq!(s.name, "ces99");
     assert_eq!(s.patches.len(), 109);
     assert_eq!((s.rows(), s.cols()), (11 * 8, 10 * 8));
@@ -83,10 +81,7 @@ fn ces_chart_serves_without_iset_data() {
 
 #[test]
 fn macbeth_has_24_patches_with_the_grey_series_in_the_bottom_row() {
-    let Some(iset) = IsetData::for_tests() else {
-        return;
-    };
-    let s = macbeth(&iset, &opts(), 10).unwrap();
+    let s = macbeth(IsetData::built_in(), &opts(), 10).unwrap();
     assert_eq!(s.patches.len(), 24);
     assert_eq!((s.rows(), s.cols()), (40, 60));
     let cmfs = Cmfs::cie1931(&s.grid);
@@ -269,14 +264,27 @@ fn bad_parameters_are_errors_not_panics() {
         from_srgb_file(&o, &junk),
         Err(SceneError::Image { .. })
     ));
-    // An ISET folder without the surfaces: clear errors.
+    // An ISET folder overrides the built-in tables file by file: without the
+    // surfaces the built-in ones serve; a broken copy is a clear error.
     std::fs::create_dir(dir.path().join("lights")).unwrap();
-    let empty = IsetData::at(dir.path()).unwrap();
-    let e = macbeth(&empty, &o, 8).unwrap_err().to_string();
-    assert!(e.contains("macbethChart.csv"), "{e}");
-    let e = natural100_chart(&empty, &o, 8).unwrap_err().to_string();
+    let partial = IsetData::at(dir.path()).unwrap();
+    assert_eq!(macbeth(&partial, &o, 8).unwrap().patches.len(), 24);
+    let surfaces = dir.path().join("surfaces/reflectances");
+    std::fs::create_dir_all(&surfaces).unwrap();
+    std::fs::write(
+        surfaces.join("macbethChart.csv"),
+        "wavelength_nm,grey\n400,0.5\n700,0.5\n",
+    )
+    .unwrap();
+    let e = macbeth(&partial, &o, 8).unwrap_err().to_string();
+    assert!(
+        e.contains("macbethChart.csv") && e.contains("expected 24 patches"),
+        "{e}"
+    );
+    std::fs::write(surfaces.join("Food_Vhrel.csv"), "not a table").unwrap();
+    let e = natural100_chart(&partial, &o, 8).unwrap_err().to_string();
     assert!(e.contains("Food_Vhrel.csv"), "{e}");
-    println!("missing-data error: {e}");
+    println!("broken-data error: {e}");
     // Options.
     let wrong_grid = Spectrum::constant(WavelengthGrid::new(400.0, 700.0, 5.0).unwrap(), 1.0);
     assert!(SceneOptions::new(g, wrong_grid, "X").is_err());
@@ -284,7 +292,10 @@ fn bad_parameters_are_errors_not_panics() {
     assert!(uniform(&o.clone().with_fov(0.0), &set[0], 2, 2).is_err());
     assert!(uniform(&o.clone().with_mean_luminance(f64::NAN), &set[0], 2, 2).is_err());
     assert!("image:".parse::<SceneKind>().is_err());
-    assert!(SceneKind::Macbeth.build(None, &o, 1).is_err());
+    assert_eq!(
+        SceneKind::Macbeth.build(None, &o, 1).unwrap().patches.len(),
+        24
+    );
 }
 
 #[test]

@@ -6,7 +6,6 @@ mod service_support;
 use std::path::Path;
 use std::process::Command;
 
-use l3::spectral::IsetData;
 use service_support::*;
 
 fn l3_cli(args: &[&str], dir: &Path) {
@@ -42,19 +41,10 @@ fn decode_png(bytes: &[u8]) -> image::RgbImage {
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn render_of_a_tungsten_frame_equals_l3_render_bit_for_bit() {
-    let Some(iset) = IsetData::for_tests() else {
-        return;
-    };
     let tmp = tempfile::tempdir().unwrap();
     let d = tmp.path();
-    let root = std::fs::canonicalize(iset.root())
-        .unwrap()
-        .display()
-        .to_string();
     l3_cli(
         &[
-            "--iset-dir",
-            &root,
             "simulate",
             "--scene",
             "macbeth",
@@ -68,12 +58,10 @@ async fn render_of_a_tungsten_frame_equals_l3_render_bit_for_bit() {
         d,
     );
     let table_path = d.join("table.safetensors");
-    tiny_table(Some(&iset)).save(&table_path).unwrap();
+    tiny_table().save(&table_path).unwrap();
     for out in ["cli.tiff", "cli.raw", "cli.png", "cli.ppm"] {
         l3_cli(
             &[
-                "--iset-dir",
-                &root,
                 "render",
                 "--table",
                 "table.safetensors",
@@ -94,7 +82,7 @@ async fn render_of_a_tungsten_frame_equals_l3_render_bit_for_bit() {
         meta["height"].as_u64().unwrap(),
     );
     let data = tempfile::tempdir().unwrap();
-    let (server, table_id) = server_with_table(data.path(), Some(&iset), None).await;
+    let (server, table_id) = server_with_table(data.path(), None).await;
     let c = client();
     let raw = std::fs::read(d.join("sim/mosaic.raw")).unwrap();
     let q = format!(
@@ -178,9 +166,8 @@ async fn render_of_a_tungsten_frame_equals_l3_render_bit_for_bit() {
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn every_read_endpoint_tables_illuminants_and_evaluations() {
-    let iset = IsetData::for_tests();
     let data = tempfile::tempdir().unwrap();
-    let (server, table_id) = server_with_table(data.path(), iset.as_ref(), None).await;
+    let (server, table_id) = server_with_table(data.path(), None).await;
     let c = client();
     // health, readiness, openapi
     let v = json(c.get(url(&server, "/healthz")).send().await.unwrap()).await;
@@ -403,10 +390,9 @@ async fn every_read_endpoint_tables_illuminants_and_evaluations() {
     .await;
 
     // evaluations
-    let acq = if iset.is_some() { "Tungsten" } else { "A" };
     let r = c
         .post(url(&server, "/v1/evaluations"))
-        .json(&serde_json::json!({"acquisition_illuminant": acq, "patch_px": 8, "noise": false}))
+        .json(&serde_json::json!({"acquisition_illuminant": "Tungsten", "patch_px": 8, "noise": false}))
         .send()
         .await
         .unwrap();
@@ -524,12 +510,11 @@ async fn every_read_endpoint_tables_illuminants_and_evaluations() {
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn hostile_input_gets_a_clear_4xx() {
-    let iset = IsetData::for_tests();
     let data = tempfile::tempdir().unwrap();
-    let mut cfg = test_config(data.path(), iset.as_ref());
+    let mut cfg = test_config(data.path());
     cfg.server.max_body_bytes = 64 * 1024;
     cfg.server.max_pixels = 100_000;
-    let (server, _) = server_with_table(data.path(), iset.as_ref(), Some(cfg)).await;
+    let (server, _) = server_with_table(data.path(), Some(cfg)).await;
     let c = client();
     let render = |q: &str, ctype: Option<&str>, body: Vec<u8>| {
         let mut r = c.post(url(&server, &format!("/v1/render?{q}"))).body(body);
@@ -939,12 +924,11 @@ async fn hostile_input_gets_a_clear_4xx() {
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn overload_gets_503_with_retry_after_and_mutations_need_the_token() {
-    let iset = IsetData::for_tests();
     let data = tempfile::tempdir().unwrap();
-    let mut cfg = test_config(data.path(), iset.as_ref());
+    let mut cfg = test_config(data.path());
     cfg.server.render_concurrency = 2;
     cfg.server.bearer_token = "s3cret".into();
-    let (server, _) = server_with_table(data.path(), iset.as_ref(), Some(cfg)).await;
+    let (server, _) = server_with_table(data.path(), Some(cfg)).await;
     let c = client();
     // hold both render slots
     let slots = server.state().render_slots.clone();
@@ -1021,11 +1005,8 @@ async fn overload_gets_503_with_retry_after_and_mutations_need_the_token() {
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn readyz_is_503_until_a_table_is_active() {
-    let iset = IsetData::for_tests();
     let data = tempfile::tempdir().unwrap();
-    let server = l3::service::start(test_config(data.path(), iset.as_ref()))
-        .await
-        .unwrap();
+    let server = l3::service::start(test_config(data.path())).await.unwrap();
     let c = client();
     let r = c.get(url(&server, "/readyz")).send().await.unwrap();
     assert!(r.headers().contains_key("retry-after"));
@@ -1049,7 +1030,7 @@ async fn readyz_is_503_until_a_table_is_active() {
     assert!(text.contains("l3_ready 0"));
     server.shutdown().await.unwrap();
     // a restart picks the stored table and the user's illuminants up again
-    let (server, id) = server_with_table(data.path(), iset.as_ref(), None).await;
+    let (server, id) = server_with_table(data.path(), None).await;
     let r = c
         .put(url(&server, "/v1/illuminants/Stage"))
         .json(&serde_json::json!({"cct": 3300}))
@@ -1058,9 +1039,7 @@ async fn readyz_is_503_until_a_table_is_active() {
         .unwrap();
     assert_eq!(r.status(), 201);
     server.shutdown().await.unwrap();
-    let server = l3::service::start(test_config(data.path(), iset.as_ref()))
-        .await
-        .unwrap();
+    let server = l3::service::start(test_config(data.path())).await.unwrap();
     let v = json(c.get(url(&server, "/readyz")).send().await.unwrap()).await;
     assert_eq!(v["table_id"], id.as_str());
     let v = json(
@@ -1077,11 +1056,10 @@ async fn readyz_is_503_until_a_table_is_active() {
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn a_request_over_the_time_limit_gets_504() {
-    let iset = IsetData::for_tests();
     let data = tempfile::tempdir().unwrap();
-    let mut cfg = test_config(data.path(), iset.as_ref());
+    let mut cfg = test_config(data.path());
     cfg.server.request_timeout_s = 0.02;
-    let (server, _) = server_with_table(data.path(), iset.as_ref(), Some(cfg)).await;
+    let (server, _) = server_with_table(data.path(), Some(cfg)).await;
     // a full-size chart evaluation takes far longer than 20 ms
     let r = client()
         .post(url(&server, "/v1/evaluations"))

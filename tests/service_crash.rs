@@ -13,7 +13,6 @@ use std::process::{Child, Command, Stdio};
 use std::sync::{Arc, Mutex};
 use std::time::{Duration, Instant};
 
-use l3::spectral::IsetData;
 use serde_json::{Value, json};
 
 /// A running `l3 serve` child with its captured log lines.
@@ -33,7 +32,8 @@ fn free_port() -> u16 {
 
 impl Service {
     /// Starts `l3 serve` on `data` (auto-training off) and waits until it answers /healthz.
-    async fn start(data: &Path, iset: Option<&IsetData>, pause_ms: u64) -> Service {
+    /// The service gets no ISET data directory: it runs on the built-in spectral data.
+    async fn start(data: &Path, pause_ms: u64) -> Service {
         let port = free_port();
         let mut cmd = Command::new(env!("CARGO_BIN_EXE_l3"));
         cmd.arg("serve")
@@ -44,12 +44,9 @@ impl Service {
             .env("L3_LOG", "info,sqlx=warn")
             .env("NO_COLOR", "1")
             .env("L3_TEST_PAUSE_ACTIVATION_MS", pause_ms.to_string())
+            .env("L3_ISET_DIR", data.join("no-iset"))
             .stdout(Stdio::piped())
             .stderr(Stdio::piped());
-        match iset {
-            Some(i) => cmd.env("L3_ISET_DIR", i.root()),
-            None => cmd.env("L3_ISET_DIR", data.join("no-iset")),
-        };
         let mut child = cmd.spawn().expect("spawn l3 serve");
         let log = Arc::new(Mutex::new(Vec::new()));
         for pipe in [
@@ -219,9 +216,8 @@ async fn check_tables_agree(s: &Service, tables: &Path) -> Vec<String> {
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn kill9_during_a_training_job_then_the_restart_finishes_it() {
-    let iset = IsetData::for_tests();
     let data = tempfile::tempdir().unwrap();
-    let s = Service::start(data.path(), iset.as_ref(), 0).await;
+    let s = Service::start(data.path(), 0).await;
     let (st, job) = s.post("/v1/training-jobs", &job_body(3, 12, true)).await;
     assert_eq!(st, 202, "{job}");
     let id = job["id"].as_str().unwrap().to_string();
@@ -235,7 +231,7 @@ async fn kill9_during_a_training_job_then_the_restart_finishes_it() {
     assert!(running["progress"].as_f64().unwrap() > 0.0);
     s.kill9();
 
-    let s = Service::start(data.path(), iset.as_ref(), 0).await;
+    let s = Service::start(data.path(), 0).await;
     s.wait_log("interrupted training job(s) re-queued", 1, 10)
         .await;
     let (_, list) = s.get("/v1/training-jobs").await;
@@ -257,7 +253,6 @@ async fn kill9_during_a_training_job_then_the_restart_finishes_it() {
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn kill9_while_storing_and_switching_tables_then_a_corrupt_table_file() {
-    let iset = IsetData::for_tests();
     let data = tempfile::tempdir().unwrap();
     let tables = data.path().join("tables");
     const PAUSE_MS: u64 = 4000;
@@ -265,7 +260,7 @@ async fn kill9_while_storing_and_switching_tables_then_a_corrupt_table_file() {
     const BEFORE_SWITCH: &str = "pausing 4000 ms before recording it as active";
 
     // run 1: table A trained and active
-    let s = Service::start(data.path(), iset.as_ref(), 0).await;
+    let s = Service::start(data.path(), 0).await;
     let (_, job) = s.post("/v1/training-jobs", &job_body(1, 4, true)).await;
     let a_job = job["id"].as_str().unwrap().to_string();
     let done = s
@@ -279,7 +274,7 @@ async fn kill9_while_storing_and_switching_tables_then_a_corrupt_table_file() {
     s.kill9();
 
     // run 2: job B (activate) killed after its temporary file is written, before the rename
-    let s = Service::start(data.path(), iset.as_ref(), PAUSE_MS).await;
+    let s = Service::start(data.path(), PAUSE_MS).await;
     assert_eq!(s.ready_table().await.as_deref(), Some(a.as_str()));
     let (_, job) = s.post("/v1/training-jobs", &job_body(2, 4, true)).await;
     let b_job = job["id"].as_str().unwrap().to_string();
@@ -293,7 +288,7 @@ async fn kill9_while_storing_and_switching_tables_then_a_corrupt_table_file() {
 
     // run 3: the temporary file is cleaned at start, A still serves, B runs again and is
     // killed after its file is stored and verified, before the switch to it is recorded
-    let s = Service::start(data.path(), iset.as_ref(), PAUSE_MS).await;
+    let s = Service::start(data.path(), PAUSE_MS).await;
     assert!(
         temp_files(&tables).is_empty(),
         "orphan temporary file remains"
@@ -307,7 +302,7 @@ async fn kill9_while_storing_and_switching_tables_then_a_corrupt_table_file() {
 
     // run 4: A is still the active table (the switch was never recorded); every file agrees
     // with the database; job B is not lost: it runs a third time and activates B
-    let s = Service::start(data.path(), iset.as_ref(), 0).await;
+    let s = Service::start(data.path(), 0).await;
     assert_eq!(s.ready_table().await.as_deref(), Some(a.as_str()));
     let ids = check_tables_agree(&s, &tables).await;
     assert_eq!(ids.len(), 2);
@@ -338,7 +333,7 @@ async fn kill9_while_storing_and_switching_tables_then_a_corrupt_table_file() {
         *x ^= 0xA5;
     }
     std::fs::write(&b_path, &bytes).unwrap();
-    let s = Service::start(data.path(), iset.as_ref(), 0).await;
+    let s = Service::start(data.path(), 0).await;
     assert_eq!(s.ready_table().await.as_deref(), Some(a.as_str()));
     s.wait_log(&format!("the recorded active table {b} is unusable"), 1, 10)
         .await;

@@ -3,7 +3,6 @@
 
 mod service_support;
 
-use l3::spectral::IsetData;
 use service_support::*;
 
 fn gradient_raw(w: usize, h: usize) -> Vec<u8> {
@@ -14,11 +13,8 @@ fn gradient_raw(w: usize, h: usize) -> Vec<u8> {
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn job_runs_with_progress_succeeds_activates_and_renders() {
-    let iset = IsetData::for_tests();
     let data = tempfile::tempdir().unwrap();
-    let server = l3::service::start(test_config(data.path(), iset.as_ref()))
-        .await
-        .unwrap();
+    let server = l3::service::start(test_config(data.path())).await.unwrap();
     let c = client();
     let mut body = tiny_job_json(&["D65", "A"], 5);
     body["scenes"] = 8.into();
@@ -155,11 +151,8 @@ async fn job_runs_with_progress_succeeds_activates_and_renders() {
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn running_and_queued_jobs_are_canceled() {
-    let iset = IsetData::for_tests();
     let data = tempfile::tempdir().unwrap();
-    let server = l3::service::start(test_config(data.path(), iset.as_ref()))
-        .await
-        .unwrap();
+    let server = l3::service::start(test_config(data.path())).await.unwrap();
     let c = client();
     // a long job and one queued behind it
     let mut long = tiny_job_json(&["D65"], 1);
@@ -224,11 +217,8 @@ async fn running_and_queued_jobs_are_canceled() {
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn a_restart_resumes_a_running_and_a_queued_job() {
-    let iset = IsetData::for_tests();
     let data = tempfile::tempdir().unwrap();
-    let server = l3::service::start(test_config(data.path(), iset.as_ref()))
-        .await
-        .unwrap();
+    let server = l3::service::start(test_config(data.path())).await.unwrap();
     let c = client();
     let mut first = tiny_job_json(&["D65"], 11);
     first["scenes"] = 40.into();
@@ -287,9 +277,7 @@ async fn a_restart_resumes_a_running_and_a_queued_job() {
             .unwrap();
         db.close().await;
     }
-    let server = l3::service::start(test_config(data.path(), iset.as_ref()))
-        .await
-        .unwrap();
+    let server = l3::service::start(test_config(data.path())).await.unwrap();
     for id in [&a, &b] {
         let j = wait_job(&server, id, 120.0, |j| {
             !["queued", "running"].contains(&j["status"].as_str().unwrap())
@@ -313,9 +301,8 @@ async fn a_restart_resumes_a_running_and_a_queued_job() {
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn first_start_trains_and_activates_the_default_table() {
-    let iset = IsetData::for_tests();
     let data = tempfile::tempdir().unwrap();
-    let mut cfg = test_config(data.path(), iset.as_ref());
+    let mut cfg = test_config(data.path());
     cfg.training.auto_train_default = true;
     // keep the default table tiny for the test
     for (k, v) in [("scenes", 4), ("scene_size", 48), ("levels", 10)] {
@@ -339,14 +326,9 @@ async fn first_start_trains_and_activates_the_default_table() {
     )
     .await;
     let id = jobs["items"][0]["id"].as_str().unwrap().to_string();
-    let expect: Vec<&str> = if iset.is_some() {
-        vec!["D65", "Tungsten", "Fluorescent"]
-    } else {
-        vec!["D65", "A", "F11"]
-    };
     assert_eq!(
         jobs["items"][0]["request"]["illuminants"],
-        serde_json::json!(expect)
+        serde_json::json!(["D65", "Tungsten", "Fluorescent"])
     );
     let j = wait_job(&server, &id, 120.0, |j| {
         j["status"] == "succeeded" || j["status"] == "failed"

@@ -16,6 +16,8 @@
 // Index loops read best in numeric code (as in the library).
 #![allow(clippy::needless_range_loop)]
 
+mod iset_reference;
+
 use std::sync::atomic::AtomicBool;
 
 use l3::camera::{Camera, NoiseSwitches, SensorDesign, mosaic};
@@ -27,7 +29,7 @@ use l3::l3::{
     TrainControl, TrainingFrame, correction_matrix, default_reflectances, fuse_kernels, learn,
     package, render_reference,
 };
-use l3::spectral::{Extrapolation, IsetData, Spectrum, WavelengthGrid, cie_illuminant};
+use l3::spectral::{Extrapolation, Spectrum, WavelengthGrid, cie_illuminant};
 use l3::training::{TrainingScenes, TrainingSpec, train_table};
 use nalgebra::{DMatrix, DVector};
 
@@ -587,7 +589,7 @@ fn f64_accumulation_is_needed_on_an_ill_conditioned_class() {
     // centred covariance is a small difference of large sums.
     let design = SensorDesign::paper_default();
     let mut frames = Vec::new();
-    for s in 0..3 {
+    for s in 0..6 {
         frames.extend(camera_frames(
             &design,
             s + 1,
@@ -675,7 +677,8 @@ fn f64_accumulation_is_needed_on_an_ill_conditioned_class() {
 
 #[test]
 fn led_illuminants_give_finite_bounded_t() {
-    let Some(iset) = IsetData::for_tests() else {
+    // every ISET LED light: reference data beyond the built-in set
+    let Some(iset) = iset_reference::iset_dir("led_illuminants_give_finite_bounded_t") else {
         return;
     };
     let grid = WavelengthGrid::default();

@@ -460,18 +460,6 @@ impl ChartCase {
     }
 }
 
-/// The ISET measured lights when the data is there, else CIE A and F11.
-fn acquisition_names(wanted: &[String], iset: Option<&IsetData>) -> Vec<String> {
-    wanted
-        .iter()
-        .map(|w| match (w.to_ascii_lowercase().as_str(), iset) {
-            ("tungsten", None) => "A".to_string(),
-            ("fluorescent", None) => "F11".to_string(),
-            _ => w.clone(),
-        })
-        .collect()
-}
-
 /// A simulated natural frame: a dead-leaves scene of the training
 /// reflectances under `illuminant`, through the camera with full noise,
 /// tiled to `width × height`.
@@ -583,7 +571,7 @@ pub fn run_bench(
     let grid = WavelengthGrid::default();
     let camera = Camera::new(design, grid, iset)?;
     let mut registry = IlluminantRegistry::with_defaults(grid, iset)?;
-    let acqs = acquisition_names(&opts.acquisitions, iset);
+    let acqs = &opts.acquisitions;
     progress(&format!("simulating the chart under {}", acqs.join(", ")));
     let cases = acqs
         .iter()
@@ -869,9 +857,5 @@ mod tests {
             ];
             assert_eq!(changes.iter().filter(|&&x| x).count(), 1, "{}", c.name);
         }
-        assert_eq!(
-            acquisition_names(&["Tungsten".into(), "Fluorescent".into()], None),
-            ["A", "F11"]
-        );
     }
 }

@@ -24,7 +24,8 @@ const PARAMETRIC_SUBSAMPLES: usize = 20;
 ///
 /// Parametric curves are band-averaged onto the simulation grid; CSV columns
 /// are resampled area-preserving with zero outside their range. A relative CSV
-/// path is taken from the ISET data directory ([`IsetData`]).
+/// path is a table of the spectral data ([`IsetData::table`]: the ISET data
+/// directory's file, else the built-in copy).
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(try_from = "FilterToml", into = "FilterToml")]
 pub enum FilterSpec {
@@ -225,7 +226,7 @@ impl FilterSpec {
     }
 
     /// The curve on `grid` (band averages), checked to lie in [0, 1].
-    /// `iset` locates relative CSV paths.
+    /// `iset` holds relative CSV paths (`None`: the built-in data).
     pub fn resolve(
         &self,
         grid: &WavelengthGrid,
@@ -250,27 +251,14 @@ impl FilterSpec {
                 column,
                 scale,
             } => {
-                // absolute: that file; relative: the ISET data directory's
-                // copy if it has one, else the built-in copy
+                // absolute: that file; relative: a table of the spectral data
                 let p = Path::new(path);
-                let in_iset = iset.map(|d| d.root().join(p)).filter(|f| f.is_file());
                 let table = if p.is_absolute() {
-                    crate::spectral::load_csv(p)?
-                } else if let Some(full) = in_iset {
-                    crate::spectral::load_csv(&full)?
-                } else if let Some(t) = crate::spectral::bundled_table(path) {
-                    t?
+                    crate::spectral::load_csv(p)
                 } else {
-                    return Err(CameraError::InvalidDesign(format!(
-                        "{what}: csv path '{path}' is neither in the ISET data directory ({}) \
-                         nor built in (built in: {})",
-                        iset.map(|d| d.root().display().to_string())
-                            .unwrap_or_else(|| "not found; set L3_ISET_DIR".into()),
-                        crate::spectral::bundled_paths()
-                            .collect::<Vec<_>>()
-                            .join(", ")
-                    )));
-                };
+                    IsetData::or_built_in(iset).table(path)
+                }
+                .map_err(|e| CameraError::InvalidDesign(format!("{what}: {e}")))?;
                 table
                     .samples(column)?
                     .resample(grid, Extrapolation::Zero)
@@ -461,8 +449,9 @@ impl SensorDesign {
         }
     }
 
-    /// Load and validate a TOML design. With `iset`, CSV curves are also read
-    /// (on the default grid) so a missing file or column fails here.
+    /// Load and validate a TOML design. CSV curves are read too (on the
+    /// default grid, from `iset`; `None`: the built-in data), so a missing
+    /// file or column fails here.
     pub fn load(path: impl AsRef<Path>, iset: Option<&IsetData>) -> Result<Self, CameraError> {
         let p = path.as_ref();
         let text = std::fs::read_to_string(p).map_err(|source| CameraError::Io {
@@ -479,9 +468,7 @@ impl SensorDesign {
             }
             other => other,
         })?;
-        if let Some(d) = iset {
-            design.resolve_curves(&WavelengthGrid::default(), Some(d))?;
-        }
+        design.resolve_curves(&WavelengthGrid::default(), iset)?;
         Ok(design)
     }
 
@@ -740,17 +727,14 @@ mod tests {
     }
 
     #[test]
-    fn ar0132at_config_loads_from_iset_csv() {
-        let Some(iset) = IsetData::for_tests() else {
-            return;
-        };
-        let d = SensorDesign::load(config_path("rgbw-ar0132at.toml"), Some(&iset)).unwrap();
+    fn ar0132at_config_loads_from_its_csv() {
+        let d = SensorDesign::load(config_path("rgbw-ar0132at.toml"), None).unwrap();
         assert_eq!(d.cfa.to_string(), "RG/WB");
         let grid = WavelengthGrid::default();
-        let curves = d.resolve_curves(&grid, Some(&iset)).unwrap();
+        let curves = d.resolve_curves(&grid, None).unwrap();
         // Compare with the CSV, band-averaged by hand at 550 nm (band 15):
         // the mean of the 1-nm piecewise-linear curve over 545–555 nm.
-        let t = iset
+        let t = IsetData::built_in()
             .table("sensor/colorfilters/auto/ar0132atRGBW.csv")
             .unwrap();
         let g = t.samples("gAR0132").unwrap();
@@ -758,10 +742,8 @@ mod tests {
         let gi = d.cfa.channel_index("G").unwrap();
         assert!((curves[gi].values()[15] - manual).abs() < 1e-12);
         assert!(manual > 0.9, "G peaks near 550 nm: {manual}");
-        // Without the ISET directory the built-in copy gives the same curves.
-        let builtin = d.resolve_curves(&grid, None).unwrap();
-        assert_eq!(builtin, curves);
-        // A path that is in neither says where it looked.
+        // A path that is in neither the ISET directory nor the built-in data
+        // says where it looked.
         let mut missing = d.clone();
         if let Some(f) = missing.filters.values_mut().next() {
             *f = FilterSpec::Csv {
@@ -923,14 +905,12 @@ mod tests {
             println!("linear floor under {ill}: RGBW {f4:.3}, RGB {f3:.3} mean ΔE76 (CES)");
             assert!(f4 < 0.8 && f3 < 0.9, "{ill}: {f4} {f3}");
         }
-        if let Some(iset) = IsetData::for_tests() {
-            let ar = SensorDesign::load(config_path("rgbw-ar0132at.toml"), Some(&iset))
-                .unwrap()
-                .resolve_curves(&g, Some(&iset))
-                .unwrap();
-            let fa = linear_floor(&ar, "A");
-            println!("linear floor under A: AR0132AT RGBW {fa:.3}");
-            assert!(fa > linear_floor(&rgbw, "A"));
-        }
+        let ar = SensorDesign::load(config_path("rgbw-ar0132at.toml"), None)
+            .unwrap()
+            .resolve_curves(&g, None)
+            .unwrap();
+        let fa = linear_floor(&ar, "A");
+        println!("linear floor under A: AR0132AT RGBW {fa:.3}");
+        assert!(fa > linear_floor(&rgbw, "A"));
     }
 }

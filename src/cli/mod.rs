@@ -19,7 +19,8 @@ use crate::spectral::IsetData;
 #[derive(Parser, Debug)]
 #[command(name = "l3", version, about)]
 pub struct Cli {
-    /// ISET spectral data folder (default: $L3_ISET_DIR or ../shared/data/iset).
+    /// ISET spectral data folder, over the built-in spectral data (default:
+    /// $L3_ISET_DIR or ../shared/data/iset when there).
     #[arg(long, global = true)]
     pub iset_dir: Option<PathBuf>,
     #[command(subcommand)]
@@ -71,6 +72,8 @@ pub enum CliError {
     },
 }
 
+/// The ISET data directory: `--iset-dir`, else a located one; `None` means
+/// the built-in spectral data.
 pub(crate) fn iset(dir: &Option<PathBuf>) -> Result<Option<IsetData>, CliError> {
     match dir {
         Some(d) => Ok(Some(IsetData::at(d)?)),

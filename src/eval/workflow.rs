@@ -11,7 +11,7 @@ use crate::l3::{
     ColourMatrix, FastRenderer, IlluminantEntry, L3Table, Mosaic, TableKind, fuse_kernels,
     render_baseline,
 };
-use crate::scene::{Scene, SceneOptions, natural100_or_ces_chart};
+use crate::scene::{Scene, SceneOptions, natural100_chart};
 use crate::spectral::{Extrapolation, IlluminantSpec, IsetData, Spectrum, cie_illuminant};
 use crate::training::colour_samples;
 
@@ -103,8 +103,7 @@ impl LightLevel {
     }
 }
 
-/// The evaluation chart under an acquisition illuminant: Natural-100 when the
-/// ISET data is present, else the CES chart.
+/// The evaluation chart under an acquisition illuminant: Natural-100.
 pub fn chart_scene(
     camera: &Camera,
     acquisition: &str,
@@ -115,7 +114,7 @@ pub fn chart_scene(
     let grid = *camera.grid();
     let opts = SceneOptions::from_samples(grid, &named.spd, named.name.clone())?
         .with_mean_luminance(setup.mean_luminance);
-    let scene = natural100_or_ces_chart(iset, &opts, setup.patch_px)?;
+    let scene = natural100_chart(IsetData::or_built_in(iset), &opts, setup.patch_px)?;
     Ok((scene, named.name))
 }
 

@@ -27,7 +27,7 @@ pub const IDENTITY: Mat3 = [[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]];
 
 /// The crate-only reflectance set for T: the Munsell matt set and the 99
 /// CES samples, on `grid` (see `scene::correction_reflectances` for the
-/// default, which prefers natural surfaces when the ISET data is present).
+/// default, which uses natural surfaces).
 pub fn default_reflectances(grid: &WavelengthGrid) -> Vec<Spectrum> {
     munsell_reflectances()
         .into_iter()
@@ -175,7 +175,7 @@ impl IlluminantRegistry {
     }
 
     /// The defaults: D65, D50, A, F2, F11, and ISET's measured Tungsten and
-    /// Fluorescent when the data is present.
+    /// Fluorescent (from `iset`; `None`: the built-in data).
     pub fn with_defaults(grid: WavelengthGrid, iset: Option<&IsetData>) -> Result<Self, L3Error> {
         let refl = crate::scene::correction_reflectances(&grid, iset)
             .map_err(|e| L3Error::InvalidInput(e.to_string()))?
@@ -189,12 +189,9 @@ impl IlluminantRegistry {
             })?;
             r.insert_spd(name, &spd, CorrectionSource::Builtin)?;
         }
-        if let Some(d) = iset {
-            for name in ["Tungsten", "Fluorescent"] {
-                if let Ok(spd) = d.light(name) {
-                    r.insert_spd(name, &spd, CorrectionSource::Iset)?;
-                }
-            }
+        let data = IsetData::or_built_in(iset);
+        for name in ["Tungsten", "Fluorescent"] {
+            r.insert_spd(name, &data.light(name)?, CorrectionSource::Iset)?;
         }
         Ok(r)
     }

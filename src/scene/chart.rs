@@ -12,7 +12,7 @@ pub const GREY_STRIP_STEPS: usize = 10;
 pub const CHART_SURROUND: f64 = 0.2;
 /// Category of the grey-strip and neutral patches.
 pub const GREY_CATEGORY: &str = "grey";
-/// The Macbeth ColorChecker in the ISET data folder.
+/// The Macbeth ColorChecker in the ISET data (built in).
 pub const MACBETH_CSV: &str = "surfaces/reflectances/macbethChart.csv";
 
 /// The grey strip: flat reflectances 0.05, 0.15, …, 0.95 (equal steps of 0.1).
@@ -109,7 +109,7 @@ pub fn macbeth(iset: &IsetData, opts: &SceneOptions, patch_px: usize) -> Result<
     opts.validate()?;
     let table = iset
         .table(MACBETH_CSV)
-        .map_err(|e| SceneError::Invalid(format!("the Macbeth chart needs the ISET data: {e}")))?;
+        .map_err(|e| SceneError::Invalid(format!("the Macbeth chart: {e}")))?;
     if table.names.len() != 24 {
         return Err(SceneError::Invalid(format!(
             "{}: expected 24 patches, found {}",

@@ -9,7 +9,7 @@ use crate::spectral::{Extrapolation, IsetData, Spectrum};
 use super::chart::macbeth;
 use super::dead_leaves::{DeadLeavesParams, dead_leaves};
 use super::image_lift::from_srgb_file;
-use super::natural100::{NATURAL100_PATCH_PX, ces_samples, natural100_or_ces_chart};
+use super::natural100::{NATURAL100_PATCH_PX, ces_samples, natural100_chart};
 use super::simple::{grey_ramp, uniform};
 use super::{Scene, SceneError, SceneOptions};
 
@@ -77,9 +77,9 @@ impl fmt::Display for SceneKind {
 }
 
 impl SceneKind {
-    /// Build the kind with default parameters: Macbeth with 32 px patches
-    /// (needs the ISET data); Natural-100 with 24 px patches (the CES chart
-    /// without ISET data); 256 × 256 dead leaves of the 99 CES reflectances
+    /// Build the kind with default parameters (`iset` `None`: the built-in
+    /// spectral data): Macbeth with 32 px patches; Natural-100 with 24 px
+    /// patches; 256 × 256 dead leaves of the 99 CES reflectances
     /// with `seed`; a 256 × 256 uniform 50 % grey; a 256 × 256 ramp of 16
     /// steps; an sRGB image file.
     pub fn build(
@@ -90,15 +90,10 @@ impl SceneKind {
     ) -> Result<Scene, SceneError> {
         let (rows, cols) = DEFAULT_TEXTURE_SIZE;
         match self {
-            Self::Macbeth => {
-                let d = iset.ok_or_else(|| {
-                    SceneError::Invalid(
-                        "the Macbeth scene needs the ISET data folder (set L3_ISET_DIR)".into(),
-                    )
-                })?;
-                macbeth(d, opts, MACBETH_PATCH_PX)
+            Self::Macbeth => macbeth(IsetData::or_built_in(iset), opts, MACBETH_PATCH_PX),
+            Self::Natural100 => {
+                natural100_chart(IsetData::or_built_in(iset), opts, NATURAL100_PATCH_PX)
             }
-            Self::Natural100 => natural100_or_ces_chart(iset, opts, NATURAL100_PATCH_PX),
             Self::DeadLeaves => {
                 let set: Vec<Spectrum> = ces_samples()
                     .iter()

@@ -23,7 +23,7 @@ pub use kind::{DEFAULT_TEXTURE_SIZE, MACBETH_PATCH_PX, SceneKind, ScenesKind};
 pub use natural100::{
     ChartSample, NATURAL100_CATEGORIES, NATURAL100_COLS, NATURAL100_COMPONENTS,
     NATURAL100_PATCH_PX, NATURAL100_SEED, Natural100Category, ces_chart, ces_samples,
-    natural100_chart, natural100_or_ces_chart, natural100_samples, natural100_samples_seeded,
+    natural100_chart, natural100_samples, natural100_samples_seeded,
 };
 pub use options::{DEFAULT_FOV_DEG, DEFAULT_MEAN_LUMINANCE, MAX_SCENE_VALUES, SceneOptions};
 pub use sets::{correction_reflectances, training_reflectances};

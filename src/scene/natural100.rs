@@ -1,7 +1,7 @@
 //! The Natural-100 chart (DESIGN §7, the paper's §3.3): 100 natural
 //! reflectances picked by clustering principal-component weights per
-//! category, plus a 10-step grey strip; and a CES-based stand-in built from
-//! crate data when the ISET folder is absent.
+//! category, plus a 10-step grey strip; and a chart of the 99 CES from
+//! crate data.
 
 use std::collections::HashSet;
 
@@ -111,9 +111,9 @@ pub fn natural100_samples_seeded(
     for cat in &NATURAL100_CATEGORIES {
         let mut list = Vec::new();
         for f in cat.files {
-            let t = iset.table(f).map_err(|e| {
-                SceneError::Invalid(format!("the Natural-100 chart needs the ISET data: {e}"))
-            })?;
+            let t = iset
+                .table(f)
+                .map_err(|e| SceneError::Invalid(format!("the Natural-100 chart: {e}")))?;
             list.extend(t.all()?);
         }
         if list.len() < cat.count {
@@ -239,20 +239,7 @@ pub fn ces_samples() -> Vec<ChartSample> {
         .collect()
 }
 
-/// The stand-in evaluation chart from crate data: the 99 CES in 10 columns,
-/// then the grey strip.
+/// A chart from crate data: the 99 CES in 10 columns, then the grey strip.
 pub fn ces_chart(opts: &SceneOptions, patch_px: usize) -> Result<Scene, SceneError> {
     chart_of(&ces_samples(), opts, patch_px, "ces99")
-}
-
-/// The Natural-100 chart when the ISET data is at hand, else the CES chart.
-pub fn natural100_or_ces_chart(
-    iset: Option<&IsetData>,
-    opts: &SceneOptions,
-    patch_px: usize,
-) -> Result<Scene, SceneError> {
-    match iset {
-        Some(d) => natural100_chart(d, opts, patch_px),
-        None => ces_chart(opts, patch_px),
-    }
 }

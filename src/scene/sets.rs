@@ -43,44 +43,37 @@ fn crate_sets(grid: &WavelengthGrid, munsell: bool) -> Vec<(String, Spectrum)> {
 }
 
 /// The training reflectances: the Munsell matt set and the 99 CES from the
-/// crate, plus ISET's Vrhel objects, DuPont paints and Munsell samples when
-/// present — never the 100 samples of the Natural-100 evaluation chart.
+/// crate, plus ISET's Vrhel objects, DuPont paints and Munsell samples
+/// (`iset` `None`: the built-in copies) — never the 100 samples of the
+/// Natural-100 evaluation chart.
 pub fn training_reflectances(
     grid: &WavelengthGrid,
     iset: Option<&IsetData>,
 ) -> Result<Vec<(String, Spectrum)>, SceneError> {
     let mut out = crate_sets(grid, true);
-    if let Some(d) = iset {
-        out.extend(vrhel_without_chart(
-            grid,
-            d,
-            &[VRHEL_OBJECTS, VRHEL_DUPONT, VRHEL_MUNSELL],
-        )?);
-    }
+    out.extend(vrhel_without_chart(
+        grid,
+        IsetData::or_built_in(iset),
+        &[VRHEL_OBJECTS, VRHEL_DUPONT, VRHEL_MUNSELL],
+    )?);
     Ok(out)
 }
 
 /// The reflectances the illuminant correction T is fitted on: natural
 /// surfaces — Vrhel's objects and DuPont paints (minus the Natural-100
-/// chart's samples) with the 99 CES — when the ISET data is present, else
-/// the Munsell matt set with the CES. Measured on the Natural-100 chart under
-/// ISET's tungsten, T alone costs 1.30 ΔE2000 with the natural set against
-/// 1.72 with Munsell + CES: the Munsell set over-weights saturated colours
-/// that natural scenes rarely hold.
+/// chart's samples) with the 99 CES (`iset` `None`: the built-in copies).
+/// Measured on the Natural-100 chart under ISET's tungsten, T alone costs
+/// 1.30 ΔE2000 with the natural set against 1.72 with Munsell + CES: the
+/// Munsell set over-weights saturated colours that natural scenes rarely hold.
 pub fn correction_reflectances(
     grid: &WavelengthGrid,
     iset: Option<&IsetData>,
 ) -> Result<Vec<(String, Spectrum)>, SceneError> {
-    match iset {
-        Some(d) => {
-            let mut out = crate_sets(grid, false);
-            out.extend(vrhel_without_chart(
-                grid,
-                d,
-                &[VRHEL_OBJECTS, VRHEL_DUPONT],
-            )?);
-            Ok(out)
-        }
-        None => Ok(crate_sets(grid, true)),
-    }
+    let mut out = crate_sets(grid, false);
+    out.extend(vrhel_without_chart(
+        grid,
+        IsetData::or_built_in(iset),
+        &[VRHEL_OBJECTS, VRHEL_DUPONT],
+    )?);
+    Ok(out)
 }

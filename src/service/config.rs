@@ -51,7 +51,8 @@ fn default_log_format() -> String {
 #[serde(deny_unknown_fields)]
 pub struct DataConfig {
     pub dir: PathBuf,
-    /// ISET data folder; when it does not exist the built-in data is used.
+    /// ISET data folder over the built-in spectral data; when it does not exist the built-in
+    /// data alone is used.
     #[serde(default)]
     pub iset_dir: Option<PathBuf>,
 }

@@ -103,22 +103,15 @@ fn begin_shutdown(state: &AppState) {
 }
 
 /// The default table's training spec: the config's `[training.default_spec]` fields over the
-/// TrainingSpec defaults, with the SI ensemble D65 + Tungsten + Fluorescent (ISET data present)
-/// or D65 + A + F11 when no illuminants are given.
-pub fn default_training_spec(
-    cfg: &ServiceConfig,
-    iset: Option<&IsetData>,
-) -> Result<TrainingSpec, ServiceError> {
+/// TrainingSpec defaults, with the SI ensemble D65 + Tungsten + Fluorescent when no illuminants
+/// are given.
+pub fn default_training_spec(cfg: &ServiceConfig) -> Result<TrainingSpec, ServiceError> {
     let mut t = cfg.training.default_spec.clone();
     if !t.contains_key("illuminants") {
-        let ills: Vec<toml::Value> = if iset.is_some() {
-            ["D65", "Tungsten", "Fluorescent"]
-        } else {
-            ["D65", "A", "F11"]
-        }
-        .iter()
-        .map(|s| toml::Value::String(s.to_string()))
-        .collect();
+        let ills: Vec<toml::Value> = ["D65", "Tungsten", "Fluorescent"]
+            .iter()
+            .map(|s| toml::Value::String(s.to_string()))
+            .collect();
         t.insert("illuminants".into(), toml::Value::Array(ills));
     }
     let spec: TrainingSpec = toml::Value::Table(t)
@@ -129,6 +122,8 @@ pub fn default_training_spec(
     Ok(spec)
 }
 
+/// The ISET data directory over the built-in spectral data: the config's, else a located one;
+/// `None`: the built-in data alone.
 fn locate_iset(cfg: &ServiceConfig) -> Option<IsetData> {
     if let Some(d) = &cfg.data.iset_dir
         && d.is_dir()
@@ -156,13 +151,17 @@ pub async fn start_with(
     let db = connect(&data.join("l3.sqlite")).await?;
     sqlx::migrate!("./migrations").run(&db).await?;
     let iset = locate_iset(&cfg);
-    if iset.is_none() {
-        tracing::warn!("ISET data not found; using the built-in spectral data only");
+    match iset.as_ref().and_then(IsetData::dir) {
+        Some(d) => tracing::info!(
+            "spectral data: the ISET directory {} over the built-in data",
+            d.display()
+        ),
+        None => tracing::info!("spectral data: built in (no ISET data directory)"),
     }
     let grid = WavelengthGrid::default();
     let defaults = IlluminantRegistry::with_defaults(grid, iset.as_ref())
         .map_err(|e| ServiceError::Internal(format!("default illuminants: {e}")))?;
-    let default_spec = default_training_spec(&cfg, iset.as_ref())?;
+    let default_spec = default_training_spec(&cfg)?;
     let state = AppState(Arc::new(Inner {
         render_slots: Arc::new(Semaphore::new(cfg.server.render_concurrency)),
         cpu_gate: Arc::new(Semaphore::new((rayon::current_num_threads() / 2).max(1))),

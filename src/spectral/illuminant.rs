@@ -92,21 +92,15 @@ impl IlluminantSpec {
         }
     }
 
-    /// Load the SPD. ISET lights need the ISET data directory.
+    /// Load the SPD. ISET lights come from `iset` (`None`: the built-in
+    /// data, which holds Tungsten and Fluorescent).
     pub fn resolve(&self, iset: Option<&IsetData>) -> Result<NamedSpd, SpectralError> {
         let name = self.to_string();
         let spd = match self {
             Self::Cie(n) => cie_illuminant(n).ok_or_else(|| {
                 SpectralError::UnknownIlluminant(n.clone(), CIE_ILLUMINANT_NAMES.join(", "))
             })?,
-            Self::Iset(n) => {
-                let d = iset.ok_or_else(|| {
-                    SpectralError::IsetDataMissing(format!(
-                        "illuminant '{n}' is an ISET measured light; point L3_ISET_DIR at ../shared/data/iset"
-                    ))
-                })?;
-                d.light(n)?
-            }
+            Self::Iset(n) => IsetData::or_built_in(iset).light(n)?,
             Self::Cct(k) => {
                 if *k < 4000.0 {
                     planck(*k)?
@@ -216,9 +210,16 @@ mod tests {
                 .resolve(None)
                 .is_ok()
         );
+        // ISET's measured lights are built in; other ISET lights need the directory
+        for name in ["Tungsten", "Fluorescent"] {
+            let l = IlluminantSpec::parse(name).unwrap().resolve(None).unwrap();
+            assert_eq!(l.name, name);
+        }
         assert!(matches!(
-            IlluminantSpec::parse("Tungsten").unwrap().resolve(None),
-            Err(SpectralError::IsetDataMissing(_))
+            IlluminantSpec::parse("iset:LED405nm")
+                .unwrap()
+                .resolve(None),
+            Err(SpectralError::NoSuchTable { .. })
         ));
     }
 }

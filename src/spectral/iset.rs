@@ -1,25 +1,46 @@
 use std::path::{Path, PathBuf};
 
-use super::{Samples, SpectralError, SpectralTable, load_csv};
+use super::{Samples, SpectralError, SpectralTable, bundled_paths, bundled_table, load_csv};
 
-/// The ISETCam spectral data exported as CSV (`../shared/data/iset`): Vrhel
-/// reflectances, Macbeth, measured lights, sensor filters. Read in place, never
-/// copied. The location is `L3_ISET_DIR` if set, else `../shared/data/iset`
-/// relative to the working directory or to the crate.
-#[derive(Clone, Debug)]
+/// Where the tables come from.
+#[derive(Clone, Debug, PartialEq)]
+enum Source {
+    /// An ISET data directory, over the built-in copies.
+    Dir(PathBuf),
+    /// The built-in copies only.
+    BuiltIn,
+}
+
+/// ISETCam's spectral data exported as CSV: Vrhel reflectances, the Macbeth
+/// chart, measured lights, sensor filters. The tables the defaults need are
+/// built into the binary (`config/spectra/`, see [`bundled_table`]). An ISET
+/// data directory (`--iset-dir`, `$L3_ISET_DIR` or `../shared/data/iset`,
+/// read in place) overrides them file by file and adds the rest of the export:
+/// a table is read from the directory when the directory holds it, else from
+/// the built-in copy.
+///
+/// Functions that take an `Option<&IsetData>` read `None` as the built-in
+/// data ([`IsetData::or_built_in`]).
+#[derive(Clone, Debug, PartialEq)]
 pub struct IsetData {
-    root: PathBuf,
+    source: Source,
 }
 
 /// Environment variable naming the ISET data directory.
 pub const ISET_DIR_ENV: &str = "L3_ISET_DIR";
 
+static BUILT_IN: IsetData = IsetData {
+    source: Source::BuiltIn,
+};
+
 impl IsetData {
-    /// Use the directory `root`, which must exist.
+    /// Use the directory `root`, which must exist and hold a `lights/` folder.
     pub fn at(root: impl Into<PathBuf>) -> Result<Self, SpectralError> {
         let root = root.into();
         if root.join("lights").is_dir() {
-            Ok(Self { root })
+            Ok(Self {
+                source: Source::Dir(root),
+            })
         } else {
             Err(SpectralError::IsetDataMissing(format!(
                 "{} has no lights/ folder",
@@ -28,43 +49,60 @@ impl IsetData {
         }
     }
 
-    /// Find the data: `$L3_ISET_DIR`, `./../shared/data/iset`, `./shared/data/iset`,
-    /// or `../shared/data/iset` beside the crate.
+    /// The built-in data alone.
+    pub fn built_in() -> &'static IsetData {
+        &BUILT_IN
+    }
+
+    /// `iset`, or the built-in data for `None`.
+    pub fn or_built_in(iset: Option<&IsetData>) -> &IsetData {
+        iset.unwrap_or(&BUILT_IN)
+    }
+
+    /// Find an ISET data directory: `$L3_ISET_DIR` when set (and valid), else
+    /// `../shared/data/iset` or `shared/data/iset` relative to the working
+    /// directory. `None` when there is none: the built-in data serves.
     pub fn locate() -> Option<Self> {
         if let Ok(dir) = std::env::var(ISET_DIR_ENV) {
             return Self::at(dir).ok();
         }
-        [
-            PathBuf::from("../shared/data/iset"),
-            PathBuf::from("shared/data/iset"),
-            Path::new(env!("CARGO_MANIFEST_DIR")).join("../shared/data/iset"),
-        ]
-        .into_iter()
-        .find_map(|p| Self::at(p).ok())
+        ["../shared/data/iset", "shared/data/iset"]
+            .into_iter()
+            .find_map(|p| Self::at(p).ok())
     }
 
-    /// For tests: the data, or `None` with a printed reason. When `CI` is set
-    /// the data must be there, so a missing directory fails the test.
-    pub fn for_tests() -> Option<Self> {
-        match Self::locate() {
-            Some(d) => Some(d),
-            None if std::env::var_os("CI").is_some() => {
-                panic!("CI is set but ../shared/data/iset was not found (set {ISET_DIR_ENV})")
-            }
-            None => {
-                eprintln!("skipped: ../shared/data/iset not found (set {ISET_DIR_ENV})");
-                None
-            }
+    /// The ISET data directory, or `None` for the built-in data alone.
+    pub fn dir(&self) -> Option<&Path> {
+        match &self.source {
+            Source::Dir(root) => Some(root),
+            Source::BuiltIn => None,
         }
     }
 
-    pub fn root(&self) -> &Path {
-        &self.root
-    }
-
-    /// A CSV table by path relative to the root, e.g. `lights/Tungsten.csv`.
+    /// A CSV table by path relative to the data root, e.g.
+    /// `lights/Tungsten.csv`: the directory's file when it has one, else the
+    /// built-in copy.
     pub fn table(&self, rel: &str) -> Result<SpectralTable, SpectralError> {
-        load_csv(self.root.join(rel))
+        if let Source::Dir(root) = &self.source {
+            let file = root.join(rel);
+            if file.is_file() {
+                return load_csv(file);
+            }
+        }
+        bundled_table(rel).unwrap_or_else(|| {
+            let dir = match &self.source {
+                Source::Dir(root) => format!("in the ISET data directory {}", root.display()),
+                Source::BuiltIn => format!(
+                    "in an ISET data directory (none given or found: --iset-dir, \
+                     {ISET_DIR_ENV}, ../shared/data/iset)"
+                ),
+            };
+            Err(SpectralError::NoSuchTable {
+                path: rel.to_string(),
+                dir,
+                built_in: bundled_paths().collect::<Vec<_>>().join(", "),
+            })
+        })
     }
 
     /// The first spectrum of `lights/<name>.csv` (e.g. `Tungsten`, `Fluorescent`).
@@ -78,20 +116,80 @@ impl IsetData {
         self.table(&format!("lights/{name}.csv"))?.samples_at(0)
     }
 
-    /// Names of the lights in `lights/`.
+    /// Names of the lights: the built-in ones and those in the directory's
+    /// `lights/`, sorted.
     pub fn light_names(&self) -> Vec<String> {
-        let mut v: Vec<String> = std::fs::read_dir(self.root.join("lights"))
-            .map(|rd| {
-                rd.filter_map(|e| e.ok())
-                    .filter_map(|e| {
-                        let p = e.path();
-                        (p.extension()? == "csv")
-                            .then(|| p.file_stem()?.to_str().map(String::from))?
-                    })
-                    .collect()
-            })
-            .unwrap_or_default();
+        let mut v: Vec<String> = bundled_paths()
+            .filter_map(|p| p.strip_prefix("lights/")?.strip_suffix(".csv"))
+            .filter(|n| !n.contains('/'))
+            .map(String::from)
+            .collect();
+        if let Source::Dir(root) = &self.source
+            && let Ok(rd) = std::fs::read_dir(root.join("lights"))
+        {
+            v.extend(rd.filter_map(|e| e.ok()).filter_map(|e| {
+                let p = e.path();
+                (p.extension()? == "csv").then(|| p.file_stem()?.to_str().map(String::from))?
+            }));
+        }
         v.sort();
+        v.dedup();
         v
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn built_in_data_has_the_default_lights() {
+        let d = IsetData::built_in();
+        assert_eq!(d.dir(), None);
+        assert_eq!(d.light_names(), ["Fluorescent", "Tungsten"]);
+        let t = d.light("Tungsten").unwrap();
+        assert!(t.at(600.0, crate::spectral::Extrapolation::Zero) > 0.0);
+        assert_eq!(IsetData::or_built_in(None), d);
+        assert!(d.light("../lights/Tungsten").is_err());
+        let e = d.light("LED405nm").unwrap_err().to_string();
+        assert!(
+            e.contains("lights/LED405nm.csv") && e.contains("--iset-dir"),
+            "{e}"
+        );
+    }
+
+    #[test]
+    fn a_directory_overrides_the_built_in_copies_file_by_file() {
+        let tmp = tempfile::tempdir().unwrap();
+        let lights = tmp.path().join("lights");
+        std::fs::create_dir(&lights).unwrap();
+        std::fs::write(
+            lights.join("Tungsten.csv"),
+            "wavelength_nm,mine\n400,1\n700,2\n",
+        )
+        .unwrap();
+        std::fs::write(
+            lights.join("Lamp.csv"),
+            "wavelength_nm,lamp\n400,1\n700,1\n",
+        )
+        .unwrap();
+        let d = IsetData::at(tmp.path()).unwrap();
+        assert_eq!(d.dir(), Some(tmp.path()));
+        // the directory's copy wins
+        let t = d.table("lights/Tungsten.csv").unwrap();
+        assert_eq!(t.names, ["mine"]);
+        // what the directory lacks comes from the built-in data
+        assert_eq!(
+            d.table("lights/Fluorescent.csv").unwrap().path,
+            "built-in:lights/Fluorescent.csv"
+        );
+        assert_eq!(d.light_names(), ["Fluorescent", "Lamp", "Tungsten"]);
+        let e = d.table("lights/None.csv").unwrap_err().to_string();
+        assert!(
+            e.contains(&tmp.path().display().to_string()) && e.contains("built in"),
+            "{e}"
+        );
+        // a folder without lights/ is not ISET data
+        assert!(IsetData::at(lights.join("nowhere")).is_err());
     }
 }

@@ -55,4 +55,10 @@ pub enum SpectralError {
     InvalidIlluminantSpec(String, String),
     #[error("ISET data directory not found: {0}")]
     IsetDataMissing(String),
+    #[error("spectral table '{path}' is neither {dir} nor built in (built in: {built_in})")]
+    NoSuchTable {
+        path: String,
+        dir: String,
+        built_in: String,
+    },
 }

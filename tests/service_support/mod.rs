@@ -9,7 +9,6 @@ use std::sync::atomic::AtomicBool;
 use l3::camera::SensorDesign;
 use l3::l3::L3Table;
 use l3::service::{Server, ServiceConfig};
-use l3::spectral::IsetData;
 use l3::training::{TrainingSpec, train_table};
 
 /// A small, quick training spec.
@@ -34,19 +33,15 @@ pub fn tiny_job_json(illuminants: &[&str], seed: u64) -> serde_json::Value {
     })
 }
 
-/// A tiny SI table (trained once per test binary).
-pub fn tiny_table(iset: Option<&IsetData>) -> &'static L3Table {
+/// A tiny SI table on D65 and Tungsten (trained once per test binary, on the built-in
+/// spectral data).
+pub fn tiny_table() -> &'static L3Table {
     static T: OnceLock<L3Table> = OnceLock::new();
     T.get_or_init(|| {
-        let ills: &[&str] = if iset.is_some() {
-            &["D65", "Tungsten"]
-        } else {
-            &["D65", "A"]
-        };
         train_table(
             &SensorDesign::paper_default(),
-            &tiny_spec(ills),
-            iset,
+            &tiny_spec(&["D65", "Tungsten"]),
+            None,
             &|_, _| {},
             &AtomicBool::new(false),
         )
@@ -55,24 +50,19 @@ pub fn tiny_table(iset: Option<&IsetData>) -> &'static L3Table {
 }
 
 /// A config for tests: port 0, the given data dir, no auto-training.
-pub fn test_config(data: &Path, iset: Option<&IsetData>) -> ServiceConfig {
+pub fn test_config(data: &Path) -> ServiceConfig {
     let mut c = ServiceConfig::load_with_env(None, &[]).expect("default config");
     c.server.bind = "127.0.0.1:0".parse().unwrap();
     c.data.dir = data.to_path_buf();
-    c.data.iset_dir = iset.map(|d| d.root().to_path_buf());
     c.training.auto_train_default = false;
     c
 }
 
 /// A started server with the tiny table imported and active.
-pub async fn server_with_table(
-    data: &Path,
-    iset: Option<&IsetData>,
-    cfg: Option<ServiceConfig>,
-) -> (Server, String) {
-    let cfg = cfg.unwrap_or_else(|| test_config(data, iset));
+pub async fn server_with_table(data: &Path, cfg: Option<ServiceConfig>) -> (Server, String) {
+    let cfg = cfg.unwrap_or_else(|| test_config(data));
     let server = l3::service::start(cfg).await.expect("start server");
-    let table = tiny_table(iset).clone();
+    let table = tiny_table().clone();
     let id = l3::service::import_table(server.state(), &table, true)
         .await
         .expect("import table");
