@@ -223,6 +223,17 @@ fn simulate_train_render_eval() {
         d,
     );
     assert!(!ok && err.contains("exposure factor 2"), "{err}");
+    let (ok, _, err) = l3(
+        &[
+            "eval",
+            "--table",
+            table.to_str().unwrap(),
+            "--patch-px",
+            "4",
+        ],
+        d,
+    );
+    assert!(!ok && err.contains("patch-px"), "{err}");
 }
 
 #[test]

@@ -44,6 +44,10 @@ pub struct EvalArgs {
     /// falls with the light.
     #[arg(long)]
     pub scene_luminance: Option<f64>,
+    /// Side of each chart patch in pixels (8–64; the interior averaged is
+    /// the patch minus a quarter on each side).
+    #[arg(long, default_value_t = 24, value_parser = clap::value_parser!(u16).range(8..=64))]
+    pub patch_px: u16,
     /// Training scenes per table (with --paper-table).
     #[arg(long, default_value_t = 48)]
     pub scenes: usize,
@@ -69,6 +73,7 @@ fn chart_setup(a: &EvalArgs) -> Result<ChartSetup, CliError> {
     let chart = ChartSetup {
         seed: a.seed,
         noise: !a.no_noise,
+        patch_px: a.patch_px.into(),
         ..ChartSetup::default()
     };
     let light = match (a.exposure, a.scene_luminance) {
