@@ -1,7 +1,8 @@
 //! Render throughput: a 12 MP RGBW frame → XYZ → sRGB 8-bit with the
 //! reference renderer (fused T) and the fast renderer (pooled, new and reused
 //! output buffers; AVX-512 and AVX2 kernels), against a plain copy of the same
-//! frame measured in the same run. Run: `cargo bench --bench render`.
+//! frame measured in the same run. Run: `cargo bench --bench render`
+//! (`L3_BENCH_TABLE=FILE` renders that table instead of training one).
 
 use std::hint::black_box;
 use std::sync::atomic::AtomicBool;
@@ -27,7 +28,12 @@ fn bench(c: &mut Criterion) {
         scenes: 16,
         ..TrainingSpec::default()
     };
-    let table = train_table(&design, &spec, None, &|_, _| {}, &cancel).expect("train");
+    // L3_BENCH_TABLE=path renders a given table instead (to compare tables
+    // on the same renderer, e.g. from two trainers)
+    let table = match std::env::var_os("L3_BENCH_TABLE") {
+        Some(p) => l3::l3::L3Table::load(std::path::Path::new(&p)).expect("load table"),
+        None => train_table(&design, &spec, None, &|_, _| {}, &cancel).expect("train"),
+    };
     let grid = WavelengthGrid::default();
     let camera = Camera::new(&design, grid, None).expect("camera");
     // a 1000×750 dead-leaves frame under A, tiled to 12 MP
