@@ -167,4 +167,13 @@ fn sensor_sweep_runs_every_sensor_in_one_go() {
         .filter(|l| l.starts_with("| rgbw-iset |") || l.starts_with("| bayer-nikon-d5100 |"))
         .count();
     assert_eq!(rows, 8, "{md}");
+    // every row of the summary table has as many cells as its header
+    let table: Vec<&str> = md
+        .lines()
+        .skip_while(|l| !l.starts_with("| sensor |"))
+        .take_while(|l| l.starts_with('|'))
+        .collect();
+    let cells = |l: &str| l.matches('|').count();
+    assert!(table.len() == 10, "{md}");
+    assert!(table.iter().all(|l| cells(l) == cells(table[0])), "{md}");
 }

@@ -131,8 +131,7 @@ pub fn sensor_sweep_markdown(sweep: &SensorSweep) -> String {
          (RGB or all channels, by patch mean at full exposure). ΔE2000 of patch means; per-pixel ΔE at full and \
          {low}× exposure; sRGB 8-bit throughput, all threads.\n\n\
          | sensor | light | L3 configuration | L3 mean | L3 per-pixel | L3 per-pixel {low}× | baseline | baseline mean | baseline per-pixel | baseline per-pixel {low}× | L3/baseline per-pixel {low}× | L3 Mpix/s | baseline Mpix/s |\n\
-         |---|---|---|---:| L3 per-pixel | L3 per-pixel {low}× | baseline | baseline mean | baseline per-pixel | baseline per-pixel {low}× | L3/baseline per-pixel {low}× | L3 Mpix/s | baseline Mpix/s |\n\
-         |---|---|---:|---:|---:|---|---:|---:|---:|---:|---:|---:|\n"
+         |---|---|---|---:|---:|---:|---|---:|---:|---:|---:|---:|---:|\n"
     );
     for r in &sweep.reports {
         for (l3, a) in r
