@@ -119,9 +119,6 @@ fn quick_bench_writes_json_markdown_and_plot() {
 
 #[test]
 fn sensor_sweep_runs_every_sensor_in_one_go() {
-    let Some(iset) = l3::spectral::IsetData::for_tests() else {
-        return;
-    };
     let tmp = tempfile::tempdir().unwrap();
     let out_dir = tmp.path().join("sweep");
     let root = env!("CARGO_MANIFEST_DIR");
@@ -129,8 +126,6 @@ fn sensor_sweep_runs_every_sensor_in_one_go() {
         "{root}/config/sensors/rgbw-iset.toml,{root}/config/sensors/bayer-nikon-d5100.toml"
     );
     let out = Command::new(env!("CARGO_BIN_EXE_l3"))
-        .arg("--iset-dir")
-        .arg(iset.root())
         .args(["bench", "--quick", "--sensor", &sensors, "--out"])
         .arg(&out_dir)
         .output()

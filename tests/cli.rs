@@ -186,8 +186,6 @@ fn simulate_train_render_eval() {
         let path = d.join(name);
         let (ok, out, err) = l3(
             &[
-                "--iset-dir",
-                &iset,
                 "eval",
                 "--table",
                 table.to_str().unwrap(),

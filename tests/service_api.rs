@@ -448,7 +448,7 @@ async fn every_read_endpoint_tables_illuminants_and_evaluations() {
     // light level: a tenth of the exposure is noisier per pixel
     let dim = c
         .post(url(&server, "/v1/evaluations"))
-        .json(&serde_json::json!({"acquisition_illuminant": acq, "patch_px": 8, "exposure_factor": 0.1}))
+        .json(&serde_json::json!({"acquisition_illuminant": "Tungsten", "patch_px": 8, "exposure_factor": 0.1}))
         .send()
         .await
         .unwrap();
