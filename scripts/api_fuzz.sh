@@ -26,8 +26,8 @@ PORT=$(python3 -c 'import socket; s=socket.socket(); s.bind(("127.0.0.1", 0)); p
 URL=http://127.0.0.1:$PORT
 LOG=$DATA/server.log
 export L3_BIND=127.0.0.1:$PORT L3_DATA_DIR=$DATA
-export L3_ISET_DIR=${L3_ISET_DIR:-$ROOT/../shared/data/iset}
-[ -d "$L3_ISET_DIR" ] || L3_ISET_DIR=/work/shared/data/iset
+# the spectral data is built in; ../shared (or $L3_ISET_DIR) overrides it when present
+[ -d "${L3_ISET_DIR:-$ROOT/../shared/data/iset}" ] && export L3_ISET_DIR=${L3_ISET_DIR:-$ROOT/../shared/data/iset}
 # (an evaluation can take long on a loaded 2-core machine while the fuzzer's jobs train)
 export L3_REQUEST_TIMEOUT_S=${L3_REQUEST_TIMEOUT_S:-300}
 "$BIN" serve >"$LOG" 2>&1 &

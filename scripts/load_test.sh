@@ -19,8 +19,8 @@ PORT=$(python3 -c 'import socket; s=socket.socket(); s.bind(("127.0.0.1", 0)); p
 URL=http://127.0.0.1:$PORT
 LOG=$DATA/server.log
 export L3_BIND=127.0.0.1:$PORT L3_DATA_DIR=$DATA
-export L3_ISET_DIR=${L3_ISET_DIR:-$ROOT/../shared/data/iset}
-[ -d "$L3_ISET_DIR" ] || L3_ISET_DIR=/work/shared/data/iset
+# the spectral data is built in; ../shared (or $L3_ISET_DIR) overrides it when present
+[ -d "${L3_ISET_DIR:-$ROOT/../shared/data/iset}" ] && export L3_ISET_DIR=${L3_ISET_DIR:-$ROOT/../shared/data/iset}
 "$BIN" serve >"$LOG" 2>&1 &
 PID=$!
 cleanup() {
