@@ -23,18 +23,26 @@ fn numbers(v: &serde_json::Value, path: &str, out: &mut Vec<(String, f64)>) {
     }
 }
 
+/// `l3 bench --quick ARGS --out OUT`, which must succeed; its stdout.
+fn quick_bench(args: &[&str], out: &std::path::Path) -> String {
+    let run = Command::new(env!("CARGO_BIN_EXE_l3"))
+        .args(["bench", "--quick"])
+        .args(args)
+        .arg("--out")
+        .arg(out)
+        .output()
+        .expect("run l3");
+    let stdout = String::from_utf8_lossy(&run.stdout).into_owned();
+    let stderr = String::from_utf8_lossy(&run.stderr);
+    assert!(run.status.success(), "l3 bench failed: {stdout}{stderr}");
+    stdout
+}
+
 #[test]
 fn quick_bench_writes_json_markdown_and_plot() {
     let tmp = tempfile::tempdir().unwrap();
     let out_dir = tmp.path().join("bench");
-    let out = Command::new(env!("CARGO_BIN_EXE_l3"))
-        .args(["bench", "--quick", "--out"])
-        .arg(&out_dir)
-        .output()
-        .expect("run l3");
-    let stdout = String::from_utf8_lossy(&out.stdout);
-    let stderr = String::from_utf8_lossy(&out.stderr);
-    assert!(out.status.success(), "l3 bench failed: {stdout}{stderr}");
+    let stdout = quick_bench(&[], &out_dir);
 
     let json: serde_json::Value =
         serde_json::from_slice(&std::fs::read(out_dir.join("bench.json")).unwrap()).unwrap();
@@ -125,14 +133,7 @@ fn sensor_sweep_runs_every_sensor_in_one_go() {
     let sensors = format!(
         "{root}/config/sensors/rgbw-iset.toml,{root}/config/sensors/bayer-nikon-d5100.toml"
     );
-    let out = Command::new(env!("CARGO_BIN_EXE_l3"))
-        .args(["bench", "--quick", "--sensor", &sensors, "--out"])
-        .arg(&out_dir)
-        .output()
-        .expect("run l3");
-    let stdout = String::from_utf8_lossy(&out.stdout);
-    let stderr = String::from_utf8_lossy(&out.stderr);
-    assert!(out.status.success(), "l3 bench failed: {stdout}{stderr}");
+    quick_bench(&["--sensor", &sensors], &out_dir);
     let sweep: l3::bench::SensorSweep =
         serde_json::from_slice(&std::fs::read(out_dir.join("sensors.json")).unwrap()).unwrap();
     let names: Vec<&str> = sweep.reports.iter().map(|r| r.sensor.as_str()).collect();
