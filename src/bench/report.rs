@@ -293,9 +293,13 @@ mod tests {
             "{}",
             table[2]
         );
-        // default row: 2.00 / 4.00 under tungsten, 100.0 ms/Mpix, on both fronts
+        // default row: mean 2.00, p90 4.00, per-pixel 3.00 and 6.00 at low light
+        // under tungsten, then fluorescent; 100.0 ms/Mpix, on both fronts
         let d = table[3];
-        assert!(d.contains("| 2.00 | 4.00 | 2.50 | 5.00 |"), "{d}");
+        assert!(
+            d.contains("| 2.00 | 4.00 | 3.00 | 6.00 | 2.50 | 5.00 | 3.75 | 7.50 |"),
+            "{d}"
+        );
         assert!(
             d.contains("| 100.00 |") && d.ends_with("| Tungsten, Fluorescent |"),
             "{d}"
