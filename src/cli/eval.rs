@@ -58,16 +58,6 @@ pub struct EvalArgs {
     pub out: PathBuf,
 }
 
-/// The sensor design stored in a table.
-pub fn table_sensor(table: &L3Table) -> Result<crate::camera::SensorDesign, CliError> {
-    let d: crate::camera::SensorDesign = serde_json::from_value(table.meta.sensor.clone())
-        .map_err(|e| {
-            CliError::Usage(format!("the table's sensor description is unreadable: {e}"))
-        })?;
-    d.validate()?;
-    Ok(d)
-}
-
 /// The chart set-up the arguments describe.
 fn chart_setup(a: &EvalArgs) -> Result<ChartSetup, CliError> {
     let chart = ChartSetup {
@@ -118,7 +108,7 @@ pub fn run(cli: &Cli, a: &EvalArgs) -> Result<(), CliError> {
             let table_camera;
             let camera = if a.sensor.is_empty() {
                 // evaluate on the sensor the table was trained for
-                table_camera = Camera::new(&table_sensor(&table)?, grid, iset.as_ref())?;
+                table_camera = Camera::new(&table.sensor_design()?, grid, iset.as_ref())?;
                 &table_camera
             } else {
                 &camera

@@ -150,6 +150,18 @@ pub struct L3Table {
 }
 
 impl L3Table {
+    /// The sensor design the table was trained for (stored in its metadata),
+    /// checked as a design file is.
+    pub fn sensor_design(&self) -> Result<crate::camera::SensorDesign, L3Error> {
+        let d: crate::camera::SensorDesign = serde_json::from_value(self.meta.sensor.clone())
+            .map_err(|e| {
+                L3Error::Table(format!("the table's sensor description is unreadable: {e}"))
+            })?;
+        d.validate()
+            .map_err(|e| L3Error::Table(format!("the table's sensor: {e}")))?;
+        Ok(d)
+    }
+
     pub fn n_positions(&self) -> usize {
         self.meta.cfa.rows * self.meta.cfa.cols
     }

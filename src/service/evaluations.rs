@@ -15,7 +15,6 @@ use super::ServiceError;
 use super::state::{AppState, new_id, now_ms};
 use crate::camera::{Camera, SensorDesign};
 use crate::eval::{ChartSetup, LightLevel, Method, evaluate_method, fit_baseline_matrix};
-use crate::l3::L3Table;
 use crate::spectral::WavelengthGrid;
 
 /// Charts an evaluation can use.
@@ -94,15 +93,6 @@ fn default_true() -> bool {
 }
 fn default_patch_px() -> usize {
     24
-}
-
-fn table_sensor(table: &L3Table) -> Result<SensorDesign, ServiceError> {
-    let d: SensorDesign = serde_json::from_value(table.meta.sensor.clone()).map_err(|e| {
-        ServiceError::Unprocessable(format!("the table's sensor description is unreadable: {e}"))
-    })?;
-    d.validate()
-        .map_err(|e| ServiceError::Unprocessable(format!("the table's sensor: {e}")))?;
-    Ok(d)
 }
 
 fn evaluation_json(row: &sqlx::sqlite::SqliteRow) -> Result<Value, ServiceError> {
@@ -220,7 +210,10 @@ pub async fn create(
         let run = || -> Result<crate::eval::DeltaEReport, ServiceError> {
             let grid = WavelengthGrid::default();
             let design = match &table {
-                Some(t) => table_sensor(&t.table)?,
+                Some(t) => t
+                    .table
+                    .sensor_design()
+                    .map_err(|e| ServiceError::Unprocessable(e.to_string()))?,
                 None => SensorDesign::paper_default(),
             };
             let camera = Camera::new(&design, grid, iset.as_ref())
