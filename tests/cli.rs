@@ -232,6 +232,52 @@ fn simulate_train_render_eval() {
         d,
     );
     assert!(!ok && err.contains("patch-px"), "{err}");
+
+    // the noise split: the first capture is the plain evaluation's, the
+    // averaged patch means lie below the per-capture mean (noise averages
+    // out), and the noise-free chart is reported too
+    let split_path = d.join("split.json");
+    let (ok, out, err) = l3(
+        &[
+            "eval",
+            "--table",
+            table.to_str().unwrap(),
+            "--captures",
+            "4",
+            "--out",
+            split_path.to_str().unwrap(),
+        ],
+        d,
+    );
+    assert!(ok, "eval --captures failed: {out}{err}");
+    assert!(out.contains("noise split over 4 captures"), "{out}");
+    let v: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(&split_path).unwrap()).unwrap();
+    let split = &v["context"]["noise_split"];
+    let per: Vec<f64> = split["per_capture"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|x| x.as_f64().unwrap())
+        .collect();
+    assert_eq!(per.len(), 4);
+    assert_eq!(split["seeds"], serde_json::json!([7, 8, 9, 10]));
+    assert!((per[0] - mean).abs() < 1e-9, "{} vs {mean}", per[0]);
+    let averaged = split["averaged"]["mean"].as_f64().unwrap();
+    let per_mean = split["per_capture_stats"]["mean"].as_f64().unwrap();
+    assert!(averaged < per_mean, "{averaged} vs {per_mean}");
+    assert!(split["noise_free"]["mean"].as_f64().unwrap() > 0.0);
+    let (ok, _, err) = l3(
+        &[
+            "eval",
+            "--table",
+            table.to_str().unwrap(),
+            "--captures",
+            "1",
+        ],
+        d,
+    );
+    assert!(!ok && err.contains("captures"), "{err}");
 }
 
 #[test]

@@ -6,7 +6,7 @@ use super::{Cli, CliError, iset, load_sensor, write_file};
 use crate::camera::Camera;
 use crate::eval::{
     ChartSetup, LightLevel, Method, PaperOptions, evaluate_method, fit_baseline_matrix,
-    paper_summary, run_paper_table,
+    noise_split, paper_summary, run_paper_table,
 };
 use crate::l3::{IlluminantRegistry, L3Table};
 use crate::spectral::WavelengthGrid;
@@ -45,9 +45,15 @@ pub struct EvalArgs {
     #[arg(long)]
     pub scene_luminance: Option<f64>,
     /// Side of each chart patch in pixels (8–64; the interior averaged is
-    /// the patch minus a quarter on each side).
+    /// the patch minus a fifth, at least 3 pixels, on each side).
     #[arg(long, default_value_t = 24, value_parser = clap::value_parser!(u16).range(8..=64))]
     pub patch_px: u16,
+    /// Also evaluate N noisy captures (seeds --seed, --seed + 1, …) and one
+    /// noise-free capture, and split the patch-mean error: one capture's
+    /// mean and spread, the patch means averaged over the captures (the
+    /// bias) and the noise-free chart. 2–64; not with --paper-table.
+    #[arg(long, value_parser = clap::value_parser!(u16).range(2..=64), conflicts_with = "paper_table")]
+    pub captures: Option<u16>,
     /// Training scenes per table (with --paper-table).
     #[arg(long, default_value_t = 48)]
     pub scenes: usize,
@@ -127,7 +133,17 @@ pub fn run(cli: &Cli, a: &EvalArgs) -> Result<(), CliError> {
                 iset.as_ref(),
                 &chart,
             )?;
-            print_budget(camera, &acq, &corr, iset.as_ref(), &chart, r)?
+            let r = print_budget(camera, &acq, &corr, iset.as_ref(), &chart, r)?;
+            with_noise_split(
+                a,
+                camera,
+                &Method::Table(&table),
+                &acq,
+                &corr,
+                iset.as_ref(),
+                &chart,
+                r,
+            )?
         }
         "baseline" => {
             let m = fit_baseline_matrix(&camera, &["D65".to_string()], iset.as_ref())?;
@@ -140,7 +156,17 @@ pub fn run(cli: &Cli, a: &EvalArgs) -> Result<(), CliError> {
                 iset.as_ref(),
                 &chart,
             )?;
-            print_budget(&camera, &acq, &corr, iset.as_ref(), &chart, r)?
+            let r = print_budget(&camera, &acq, &corr, iset.as_ref(), &chart, r)?;
+            with_noise_split(
+                a,
+                &camera,
+                &Method::Baseline(&m),
+                &acq,
+                &corr,
+                iset.as_ref(),
+                &chart,
+                r,
+            )?
         }
         other => {
             return Err(CliError::Usage(format!(
@@ -245,6 +271,49 @@ fn run_paper_tables(
     Ok(())
 }
 
+/// With `--captures N`, add the noise split of the report's method to its
+/// context and print it.
+#[allow(clippy::too_many_arguments)]
+fn with_noise_split(
+    a: &EvalArgs,
+    camera: &Camera,
+    method: &Method,
+    acq: &str,
+    corr: &crate::l3::IlluminantEntry,
+    iset: Option<&crate::spectral::IsetData>,
+    chart: &ChartSetup,
+    mut report: crate::eval::DeltaEReport,
+) -> Result<crate::eval::DeltaEReport, CliError> {
+    let Some(n) = a.captures else {
+        return Ok(report);
+    };
+    let split = noise_split(
+        camera,
+        method,
+        &report.method,
+        acq,
+        corr,
+        iset,
+        chart,
+        n.into(),
+    )?;
+    println!(
+        "noise split over {n} captures: one capture {:.2} (std {:.2}, {:.2}–{:.2}); patch means averaged over the captures {:.2}; noise-free {:.2}",
+        split.per_capture_stats.mean,
+        split.per_capture_stats.std,
+        split
+            .per_capture
+            .iter()
+            .copied()
+            .fold(f64::INFINITY, f64::min),
+        split.per_capture_stats.max,
+        split.averaged.mean,
+        split.noise_free.mean,
+    );
+    report.context["noise_split"] = serde_json::to_value(&split).unwrap_or_default();
+    Ok(report)
+}
+
 fn print_budget(
     camera: &Camera,
     acq: &str,
@@ -255,13 +324,14 @@ fn print_budget(
 ) -> Result<crate::eval::DeltaEReport, CliError> {
     let budget = crate::eval::error_budget(camera, acq, corr, iset, chart)?;
     println!(
-        "error budget: T alone {:.2} (p90 {:.2}); linear floor {:.2} (p90 {:.2}); linear SI + T {:.2} (p90 {:.2})",
+        "error budget: T alone {:.2} (p90 {:.2}); linear floor {:.2} (p90 {:.2}); linear SI + T {:.2} (p90 {:.2}); linear cross {:.2}",
         budget.t_only.mean,
         budget.t_only.p90,
         budget.linear_floor.mean,
         budget.linear_floor.p90,
         budget.linear_si_then_t.mean,
-        budget.linear_si_then_t.p90
+        budget.linear_si_then_t.p90,
+        budget.linear_cross.as_ref().map_or(f64::NAN, |s| s.mean)
     );
     report.context["error_budget"] = serde_json::to_value(&budget).unwrap_or_default();
     Ok(report)

@@ -23,9 +23,14 @@ pub struct ErrorBudget {
     /// acquisition illuminant (same-illuminant), then T: the noise-free
     /// linear analogue of SI_X + T.
     pub linear_si_then_t: ErrorStats,
+    /// A linear map fitted on the training reflectances from channels under
+    /// the acquisition illuminant to XYZ under D65: the noise-free linear
+    /// analogue of a cross-illuminant table (I_X).
+    #[serde(default)]
+    pub linear_cross: Option<ErrorStats>,
     /// Per patch (chart order, grey strip included): ΔE of T alone, the
-    /// linear floor and linear SI + T.
-    pub per_patch: Vec<[f64; 3]>,
+    /// linear floor, linear SI + T and linear cross.
+    pub per_patch: Vec<Vec<f64>>,
 }
 
 fn per_patch(est: &[Xyz], truth: &[Xyz], white: usize) -> Vec<f64> {
@@ -114,15 +119,25 @@ pub fn error_budget(
     };
     let si_m = fit_colour_matrix(camera, &si_fit, iset)?.then(&correction.t);
     let si: Vec<Xyz> = chans.iter().map(|c| apply(&si_m, c)).collect();
-    let (a, b, c) = (
+    let cross_fit = ColourFit {
+        kind: crate::l3::TableKind::CrossIlluminant,
+        ..si_fit
+    };
+    let cross_m = fit_colour_matrix(camera, &cross_fit, iset)?;
+    let cross: Vec<Xyz> = chans.iter().map(|c| apply(&cross_m, c)).collect();
+    let rows = [
         per_patch(&t_only, &truth, white),
         per_patch(&floor, &truth, white),
         per_patch(&si, &truth, white),
-    );
+        per_patch(&cross, &truth, white),
+    ];
     Ok(ErrorBudget {
-        t_only: de_stats(&a, &include),
-        linear_floor: de_stats(&b, &include),
-        linear_si_then_t: de_stats(&c, &include),
-        per_patch: (0..a.len()).map(|i| [a[i], b[i], c[i]]).collect(),
+        t_only: de_stats(&rows[0], &include),
+        linear_floor: de_stats(&rows[1], &include),
+        linear_si_then_t: de_stats(&rows[2], &include),
+        linear_cross: Some(de_stats(&rows[3], &include)),
+        per_patch: (0..rows[0].len())
+            .map(|i| rows.iter().map(|r| r[i]).collect())
+            .collect(),
     })
 }

@@ -3,12 +3,14 @@
 
 mod budget;
 mod figure;
+mod noise_split;
 mod paper_table;
 mod report;
 mod workflow;
 
 pub use budget::{ErrorBudget, error_budget};
 pub use figure::report_svg;
+pub use noise_split::{MAX_CAPTURES, MIN_CAPTURES, NoiseSplit, averaged_patch_means, noise_split};
 pub use paper_table::{
     BaselineComparison, BaselineFamily, ExposurePoint, PAPER_TABLE1, PaperOptions, PaperRow,
     PaperTable, StorageComparison, paper_summary, run_paper_table,

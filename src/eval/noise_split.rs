@@ -1,0 +1,178 @@
+//! Where a method's patch-mean error comes from once the chart is captured
+//! with noise: the noise a single capture leaves in its patch means, the
+//! bias that remains when many captures are averaged, and the noise-free
+//! capture (optics and demosaicking, no noise).
+//!
+//! A patch mean averages only the patch interior (16 × 16 pixels on the
+//! default 24-pixel chart, 64 samples per RGBW channel), so on a sensor
+//! whose colour map amplifies noise one capture's patch means still carry
+//! visible noise. Averaging the patch means of `n` captures with different
+//! noise seeds divides that residual by √n and leaves the bias: what the
+//! method would give on large patches or a stack of frames.
+
+use serde::{Deserialize, Serialize};
+
+use super::workflow::{ChartSetup, Method, evaluate_method};
+use super::{DeltaEReport, ErrorStats, EvalError, summarize};
+use crate::camera::Camera;
+use crate::colour::{D65_WHITE_XYZ, Xyz, ciede2000, xyz_to_lab};
+use crate::l3::IlluminantEntry;
+use crate::spectral::IsetData;
+
+/// Fewest captures a split is computed from.
+pub const MIN_CAPTURES: usize = 2;
+/// Most captures a split is computed from.
+pub const MAX_CAPTURES: usize = 64;
+
+/// A method's patch-mean ΔE2000 on the chart, split by noise.
+#[derive(Clone, Debug, Serialize, Deserialize)]
+pub struct NoiseSplit {
+    /// The noise seeds of the captures (the set-up's seed, then the next ones).
+    pub seeds: Vec<u64>,
+    /// Mean patch-mean ΔE of each capture (grey strip excluded).
+    pub per_capture: Vec<f64>,
+    /// Statistics of `per_capture`: what one capture gives, and its spread.
+    pub per_capture_stats: ErrorStats,
+    /// ΔE of the patch means averaged over every capture: the bias, with
+    /// the residual noise divided by √n.
+    pub averaged: ErrorStats,
+    /// The same chart captured without noise.
+    pub noise_free: ErrorStats,
+}
+
+/// Evaluate `method` on `captures` noisy captures of the chart (seeds
+/// `setup.seed`, `setup.seed + 1`, …) and once without noise; see
+/// [`NoiseSplit`].
+#[allow(clippy::too_many_arguments)]
+pub fn noise_split(
+    camera: &Camera,
+    method: &Method,
+    method_name: &str,
+    acquisition: &str,
+    correction: &IlluminantEntry,
+    iset: Option<&IsetData>,
+    setup: &ChartSetup,
+    captures: usize,
+) -> Result<NoiseSplit, EvalError> {
+    if !(MIN_CAPTURES..=MAX_CAPTURES).contains(&captures) {
+        return Err(EvalError::Invalid(format!(
+            "{captures} captures: a noise split takes {MIN_CAPTURES} to {MAX_CAPTURES}"
+        )));
+    }
+    let eval = |seed: u64, noise: bool| {
+        let s = ChartSetup {
+            seed,
+            noise,
+            ..setup.clone()
+        };
+        evaluate_method(
+            camera,
+            method,
+            method_name,
+            acquisition,
+            correction,
+            iset,
+            &s,
+        )
+    };
+    let seeds: Vec<u64> = (0..captures as u64)
+        .map(|k| setup.seed.wrapping_add(k))
+        .collect();
+    let reports = seeds
+        .iter()
+        .map(|&s| eval(s, true))
+        .collect::<Result<Vec<_>, _>>()?;
+    let per_capture: Vec<f64> = reports.iter().map(|r| r.summary.mean).collect();
+    Ok(NoiseSplit {
+        per_capture_stats: summarize(&per_capture),
+        averaged: averaged_patch_means(&reports)?,
+        noise_free: eval(setup.seed, false)?.summary,
+        seeds,
+        per_capture,
+    })
+}
+
+/// ΔE2000 statistics (grey strip excluded) of the patch means averaged
+/// over `reports` of the same chart, each normalised by its white patch.
+pub fn averaged_patch_means(reports: &[DeltaEReport]) -> Result<ErrorStats, EvalError> {
+    let first = reports
+        .first()
+        .ok_or_else(|| EvalError::Invalid("no reports to average".into()))?;
+    let n = first.patches.len();
+    if reports.iter().any(|r| r.patches.len() != n) {
+        return Err(EvalError::Invalid(
+            "the reports are of different charts".into(),
+        ));
+    }
+    let mut de = Vec::with_capacity(n);
+    for (i, p) in first.patches.iter().enumerate() {
+        if p.category == "grey" {
+            continue;
+        }
+        let mut sum: Xyz = [0.0; 3];
+        for r in reports {
+            for (s, v) in sum.iter_mut().zip(r.patches[i].est_xyz) {
+                *s += v;
+            }
+        }
+        let mean = sum.map(|v| v / reports.len() as f64);
+        de.push(ciede2000(p.true_lab, xyz_to_lab(mean, D65_WHITE_XYZ)));
+    }
+    if de.iter().any(|d| !d.is_finite()) {
+        return Err(EvalError::Invalid("non-finite averaged ΔE".into()));
+    }
+    Ok(summarize(&de))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::eval::PatchResult;
+
+    fn report(est: [f64; 3]) -> DeltaEReport {
+        let t = [0.3, 0.3, 0.3];
+        let patch = |name: &str, category: &str, e: [f64; 3]| PatchResult {
+            name: name.into(),
+            category: category.into(),
+            true_xyz: t,
+            est_xyz: e,
+            true_lab: xyz_to_lab(t, D65_WHITE_XYZ),
+            est_lab: xyz_to_lab(e, D65_WHITE_XYZ),
+            delta_e: ciede2000(xyz_to_lab(t, D65_WHITE_XYZ), xyz_to_lab(e, D65_WHITE_XYZ)),
+            pixel_delta_e: 0.0,
+        };
+        DeltaEReport {
+            schema: String::new(),
+            chart: "c".into(),
+            acquisition_illuminant: "D65".into(),
+            method: "m".into(),
+            summary: ErrorStats::default(),
+            per_pixel: Default::default(),
+            per_category: Default::default(),
+            white_patch: "w".into(),
+            patches: vec![patch("a", "Food", est), patch("w", "grey", [1.0; 3])],
+            context: serde_json::Value::Null,
+        }
+    }
+
+    #[test]
+    fn averaging_cancels_symmetric_noise_and_keeps_bias() {
+        // two captures whose errors cancel: the average is exact
+        let a =
+            averaged_patch_means(&[report([0.33, 0.3, 0.3]), report([0.27, 0.3, 0.3])]).unwrap();
+        assert!(a.mean < 1e-9, "{}", a.mean);
+        assert_eq!(a.n, 1, "the grey strip is left out");
+        // a common offset (bias) survives averaging
+        let b =
+            averaged_patch_means(&[report([0.33, 0.3, 0.3]), report([0.33, 0.3, 0.3])]).unwrap();
+        assert!(b.mean > 1.0, "{}", b.mean);
+    }
+
+    #[test]
+    fn mismatched_or_empty_reports_are_refused() {
+        assert!(averaged_patch_means(&[]).is_err());
+        let mut r = report([0.3; 3]);
+        r.patches.pop();
+        assert!(averaged_patch_means(&[report([0.3; 3]), r]).is_err());
+    }
+}
