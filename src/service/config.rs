@@ -28,6 +28,9 @@ pub struct ServerConfig {
     pub max_body_bytes: usize,
     pub max_pixels: usize,
     pub render_concurrency: usize,
+    /// Threads of the render pool (0: one per core).
+    #[serde(default)]
+    pub render_threads: usize,
     pub request_timeout_s: f64,
     /// Empty: mutating endpoints need no token.
     #[serde(default)]
@@ -63,6 +66,10 @@ pub struct DataConfig {
 pub struct TrainingConfig {
     pub auto_train_default: bool,
     pub max_concurrent_jobs: usize,
+    /// Threads of the pool training jobs and evaluations run on (0: half
+    /// the cores, at least one).
+    #[serde(default)]
+    pub background_threads: usize,
     /// TrainingSpec fields of the default table (validated when used).
     #[serde(default)]
     pub default_spec: toml::Table,
@@ -135,6 +142,8 @@ impl ServiceConfig {
             "L3_MAX_BODY_BYTES" => self.server.max_body_bytes = num(key, value)?,
             "L3_MAX_PIXELS" => self.server.max_pixels = num(key, value)?,
             "L3_RENDER_CONCURRENCY" => self.server.render_concurrency = num(key, value)?,
+            "L3_RENDER_THREADS" => self.server.render_threads = num(key, value)?,
+            "L3_BACKGROUND_THREADS" => self.training.background_threads = num(key, value)?,
             "L3_REQUEST_TIMEOUT_S" => self.server.request_timeout_s = num(key, value)?,
             "L3_BEARER_TOKEN" => self.server.bearer_token = value.to_string(),
             "L3_LOG_FORMAT" => self.server.log_format = value.to_string(),

@@ -205,8 +205,8 @@ pub async fn create(
     let table_id = table.as_ref().map(|t| t.id.clone());
     let iset = state.iset.clone();
     let r2 = req.clone();
-    let (tx, rx) = tokio::sync::oneshot::channel();
-    rayon::spawn(move || {
+    let pool_state = state.clone();
+    let report = super::cpu::run(&pool_state.pools.background, "the evaluation", move || {
         let run = || -> Result<crate::eval::DeltaEReport, ServiceError> {
             let grid = WavelengthGrid::default();
             let design = match &table {
@@ -260,12 +260,11 @@ pub async fn create(
             }
             Ok(report)
         };
-        let _ = tx.send(run());
+        let report = run();
         drop(slot);
-    });
-    let report = rx
-        .await
-        .map_err(|_| ServiceError::Internal("the evaluation task was lost".into()))??;
+        report
+    })
+    .await??;
     let id = new_id("eval");
     let report_json = serde_json::to_string(&report)
         .map_err(|e| ServiceError::Internal(format!("report: {e}")))?;

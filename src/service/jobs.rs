@@ -429,11 +429,12 @@ async fn run_job(state: &AppState, id: &str, request: &str) {
     let (tx, mut rx) = tokio::sync::oneshot::channel::<Outcome>();
     let st = state.clone();
     let cancel2 = cancel.clone();
-    rayon::spawn(move || {
+    let pool_state = state.clone();
+    let train = move || {
         let progress = move |stage: &str, f: f64| {
             let _ = ptx.send((stage.to_string(), f));
         };
-        let outcome = match train_table(
+        match train_table(
             &req.sensor,
             &req.spec,
             st.iset.as_ref(),
@@ -450,7 +451,15 @@ async fn run_job(state: &AppState, id: &str, request: &str) {
             },
             Err(TrainError::L3(L3Error::Canceled)) => Outcome::Canceled,
             Err(e) => Outcome::Failed(e.to_string()),
-        };
+        }
+    };
+    // a panic fails the job (logged) instead of aborting the process
+    let job = id.to_string();
+    super::cpu::spawn_catching(&pool_state.pools.background, train, move |r| {
+        let outcome = r.unwrap_or_else(|msg| {
+            tracing::error!(job = %job, panic = %msg, "training panicked");
+            Outcome::Failed(format!("training failed unexpectedly: {msg}"))
+        });
         let _ = tx.send(outcome);
     });
     let mut last_write = Instant::now() - Duration::from_secs(1);

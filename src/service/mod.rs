@@ -4,6 +4,7 @@
 
 mod accept;
 mod config;
+mod cpu;
 mod error;
 mod evaluations;
 mod illuminants;
@@ -162,14 +163,19 @@ pub async fn start_with(
     let defaults = IlluminantRegistry::with_defaults(grid, iset.as_ref())
         .map_err(|e| ServiceError::Internal(format!("default illuminants: {e}")))?;
     let default_spec = default_training_spec(&cfg)?;
+    let pools = cpu::CpuPools::new(cfg.server.render_threads, cfg.training.background_threads)?;
     let state = AppState(Arc::new(Inner {
         render_slots: Arc::new(Semaphore::new(cfg.server.render_concurrency)),
-        cpu_gate: Arc::new(Semaphore::new((rayon::current_num_threads() / 2).max(1))),
+        cpu_gate: Arc::new(Semaphore::new(
+            (pools.render.current_num_threads() / 2).max(1),
+        )),
+        pools,
         eval_slots: Arc::new(Semaphore::new(EVALUATION_SLOTS)),
         config: cfg.clone(),
         db,
         iset,
         registry: Mutex::new(defaults.clone()),
+        registry_writes: tokio::sync::Mutex::new(()),
         default_registry: defaults,
         active: ArcSwapOption::empty(),
         kernel_cache: Mutex::new(HashMap::new()),

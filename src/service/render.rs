@@ -442,8 +442,7 @@ pub async fn render(
     let st = state.clone();
     let entry_name = entry.name.clone();
     let table_id = active.id.clone();
-    let (tx, rx) = tokio::sync::oneshot::channel();
-    rayon::spawn(move || {
+    let r = super::cpu::run(&state.pools.render, "the render", move || {
         let run = || -> Result<Rendered, ServiceError> {
             let t0 = Instant::now();
             let black = q.black_level.unwrap_or(0);
@@ -555,11 +554,9 @@ pub async fn render(
         // free the slots before answering, so a client's next request finds them free
         drop(gate);
         drop(permit);
-        let _ = tx.send(result);
-    });
-    let r = rx
-        .await
-        .map_err(|_| ServiceError::Internal("the render task was lost".into()))??;
+        result
+    })
+    .await??;
     state.metrics.rendered((r.in_width * r.in_height) as u64);
     let length = r.bytes.len();
     let mut resp = r.bytes.into_body().into_response();

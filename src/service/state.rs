@@ -52,6 +52,9 @@ pub struct Inner {
     pub default_registry: IlluminantRegistry,
     /// Built-ins plus the user's illuminants from the database.
     pub registry: Mutex<IlluminantRegistry>,
+    /// Held by every change to the registry (PUT, DELETE) from reading it
+    /// to swapping in the result, so that changes apply one after another.
+    pub registry_writes: tokio::sync::Mutex<()>,
     pub active: ArcSwapOption<ActiveTable>,
     /// Fused kernels per (table id, lower-case illuminant name).
     pub kernel_cache: Mutex<KernelCache>,
@@ -59,6 +62,8 @@ pub struct Inner {
     pub render_slots: Arc<Semaphore>,
     /// Execution: renders running on rayon at once (FIFO); the rest of the admitted wait.
     pub cpu_gate: Arc<Semaphore>,
+    /// The render pool and the background (training, evaluation) pool.
+    pub pools: super::cpu::CpuPools,
     /// Admission of evaluations (each simulates and renders a chart); excess gets 503.
     pub eval_slots: Arc<Semaphore>,
     pub metrics: Metrics,
