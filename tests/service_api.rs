@@ -1071,3 +1071,60 @@ async fn a_request_over_the_time_limit_gets_504() {
     assert!(d.contains("0.02 s"), "{d}");
     server.shutdown().await.unwrap();
 }
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn concurrent_illuminant_changes_are_all_kept() {
+    let data = tempfile::tempdir().unwrap();
+    let server = l3::service::start(test_config(data.path())).await.unwrap();
+    let c = client();
+    // 12 PUTs of different lights at once: none may undo another
+    let put = |i: u32| {
+        let (c, u) = (c.clone(), url(&server, &format!("/v1/illuminants/Lamp{i}")));
+        tokio::spawn(async move {
+            c.put(u)
+                .json(&serde_json::json!({"cct": 2500 + 300 * i}))
+                .send()
+                .await
+                .unwrap()
+                .status()
+                .as_u16()
+        })
+    };
+    let del = |i: u32| {
+        let (c, u) = (c.clone(), url(&server, &format!("/v1/illuminants/Lamp{i}")));
+        tokio::spawn(async move { c.delete(u).send().await.unwrap().status().as_u16() })
+    };
+    async fn all(h: Vec<tokio::task::JoinHandle<u16>>) -> Vec<u16> {
+        let mut out = Vec::new();
+        for h in h {
+            out.push(h.await.unwrap());
+        }
+        out
+    }
+    let statuses = all((0..12).map(put).collect()).await;
+    assert!(statuses.iter().all(|s| *s == 201), "{statuses:?}");
+    for i in 0..12 {
+        let v = json(
+            c.get(url(&server, &format!("/v1/illuminants/lamp{i}")))
+                .send()
+                .await
+                .unwrap(),
+        )
+        .await;
+        assert_eq!(v["cct"], f64::from(2500 + 300 * i), "Lamp{i}: {v}");
+    }
+    // DELETEs racing PUTs of other names, started together: the deleted
+    // stay deleted, the created stay
+    let handles_d: Vec<_> = (0..6).map(del).collect();
+    let handles_p: Vec<_> = (12..18).map(put).collect();
+    let (d, p) = (all(handles_d).await, all(handles_p).await);
+    assert!(d.iter().all(|s| *s == 204), "{d:?}");
+    assert!(p.iter().all(|s| *s == 201), "{p:?}");
+    let list = json(c.get(url(&server, "/v1/illuminants")).send().await.unwrap()).await;
+    let text = list.to_string().to_ascii_lowercase();
+    for i in 0..18 {
+        let name = format!("\"lamp{i}\"");
+        assert_eq!(text.contains(&name), i >= 6, "lamp{i} in {text}");
+    }
+    server.shutdown().await.unwrap();
+}

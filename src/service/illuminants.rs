@@ -190,9 +190,19 @@ pub async fn put(
             "illuminant name '{name}' uses a reserved prefix (cct:, xy:, csv:, iset:)"
         )));
     }
-    // validate on a copy before persisting
-    let mut copy = state.registry().clone();
-    let entry = apply(&mut copy, &name, &def)?;
+    // one registry change at a time, from reading the live registry to
+    // swapping in the new one: concurrent PUTs and DELETEs cannot undo each
+    // other
+    let _writing = state.registry_writes.lock().await;
+    // validate on a copy before persisting; fitting T from an SPD is CPU
+    // work, done off the runtime
+    let copy = state.registry().clone();
+    let (name2, def2) = (name.clone(), def.clone());
+    let (copy, entry) = super::cpu::run(&state.pools.background, "the illuminant fit", move || {
+        let mut copy = copy;
+        apply(&mut copy, &name2, &def2).map(|e| (copy, e))
+    })
+    .await??;
     let existed = user_names(&state).await?.contains(&lower);
     let text = serde_json::to_string(&def)
         .map_err(|e| ServiceError::Internal(format!("illuminant definition: {e}")))?;
@@ -226,6 +236,7 @@ pub async fn delete(
             "D65 is the rendering target and cannot be deleted".into(),
         ));
     }
+    let _writing = state.registry_writes.lock().await;
     let stored = sqlx::query("SELECT name FROM illuminants")
         .fetch_all(&state.db)
         .await?
