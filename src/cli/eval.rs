@@ -124,7 +124,8 @@ pub fn run(cli: &Cli, a: &EvalArgs) -> Result<(), CliError> {
                 table.meta.kind,
                 table.meta.train_illuminants.join("+")
             );
-            let r = evaluate_method(
+            evaluate_and_explain(
+                a,
                 camera,
                 &Method::Table(&table),
                 &name,
@@ -132,22 +133,12 @@ pub fn run(cli: &Cli, a: &EvalArgs) -> Result<(), CliError> {
                 &corr,
                 iset.as_ref(),
                 &chart,
-            )?;
-            let r = print_budget(camera, &acq, &corr, iset.as_ref(), &chart, r)?;
-            with_noise_split(
-                a,
-                camera,
-                &Method::Table(&table),
-                &acq,
-                &corr,
-                iset.as_ref(),
-                &chart,
-                r,
             )?
         }
         "baseline" => {
             let m = fit_baseline_matrix(&camera, &["D65".to_string()], iset.as_ref())?;
-            let r = evaluate_method(
+            evaluate_and_explain(
+                a,
                 &camera,
                 &Method::Baseline(&m),
                 "Baseline+T",
@@ -155,17 +146,6 @@ pub fn run(cli: &Cli, a: &EvalArgs) -> Result<(), CliError> {
                 &corr,
                 iset.as_ref(),
                 &chart,
-            )?;
-            let r = print_budget(&camera, &acq, &corr, iset.as_ref(), &chart, r)?;
-            with_noise_split(
-                a,
-                &camera,
-                &Method::Baseline(&m),
-                &acq,
-                &corr,
-                iset.as_ref(),
-                &chart,
-                r,
             )?
         }
         other => {
@@ -271,57 +251,38 @@ fn run_paper_tables(
     Ok(())
 }
 
-/// With `--captures N`, add the noise split of the report's method to its
-/// context and print it.
+/// Evaluate `method` on the chart and explain its error: the sensor's
+/// error budget and, with `--captures N`, the noise split, both printed and
+/// added to the report's context.
 #[allow(clippy::too_many_arguments)]
-fn with_noise_split(
+fn evaluate_and_explain(
     a: &EvalArgs,
     camera: &Camera,
     method: &Method,
+    name: &str,
     acq: &str,
     corr: &crate::l3::IlluminantEntry,
     iset: Option<&crate::spectral::IsetData>,
     chart: &ChartSetup,
-    mut report: crate::eval::DeltaEReport,
 ) -> Result<crate::eval::DeltaEReport, CliError> {
-    let Some(n) = a.captures else {
-        return Ok(report);
-    };
-    let split = noise_split(
-        camera,
-        method,
-        &report.method,
-        acq,
-        corr,
-        iset,
-        chart,
-        n.into(),
-    )?;
-    println!(
-        "noise split over {n} captures: one capture {:.2} (std {:.2}, {:.2}–{:.2}); patch means averaged over the captures {:.2}; noise-free {:.2}",
-        split.per_capture_stats.mean,
-        split.per_capture_stats.std,
-        split
-            .per_capture
-            .iter()
-            .copied()
-            .fold(f64::INFINITY, f64::min),
-        split.per_capture_stats.max,
-        split.averaged.mean,
-        split.noise_free.mean,
-    );
-    report.context["noise_split"] = serde_json::to_value(&split).unwrap_or_default();
-    Ok(report)
-}
-
-fn print_budget(
-    camera: &Camera,
-    acq: &str,
-    corr: &crate::l3::IlluminantEntry,
-    iset: Option<&crate::spectral::IsetData>,
-    chart: &ChartSetup,
-    mut report: crate::eval::DeltaEReport,
-) -> Result<crate::eval::DeltaEReport, CliError> {
+    let mut report = evaluate_method(camera, method, name, acq, corr, iset, chart)?;
+    if let Some(n) = a.captures {
+        let split = noise_split(camera, method, name, acq, corr, iset, chart, n.into())?;
+        println!(
+            "noise split over {n} captures: one capture {:.2} (std {:.2}, {:.2}–{:.2}); patch means averaged over the captures {:.2}; noise-free {:.2}",
+            split.per_capture_stats.mean,
+            split.per_capture_stats.std,
+            split
+                .per_capture
+                .iter()
+                .copied()
+                .fold(f64::INFINITY, f64::min),
+            split.per_capture_stats.max,
+            split.averaged.mean,
+            split.noise_free.mean,
+        );
+        report.context["noise_split"] = serde_json::to_value(&split).unwrap_or_default();
+    }
     let budget = crate::eval::error_budget(camera, acq, corr, iset, chart)?;
     println!(
         "error budget: T alone {:.2} (p90 {:.2}); linear floor {:.2} (p90 {:.2}); linear SI + T {:.2} (p90 {:.2}); linear cross {:.2}",
