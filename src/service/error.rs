@@ -171,6 +171,7 @@ impl From<crate::io::IoError> for ServiceError {
             | PixelLayout { .. }
             | Png(_)
             | Tiff(_)
+            | Dng(_)
             | Pgm(_)
             | NonFinite { .. }
             | Sidecar { .. }
