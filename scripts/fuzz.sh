@@ -18,7 +18,7 @@ root="$(cd "$(dirname "$0")/.." && pwd)"
 cd "$root"
 targets=("$@")
 if [ ${#targets[@]} -eq 0 ]; then
-    targets=(raw_query mosaic_decode table_file training_json illuminant_upload)
+    targets=(raw_query mosaic_decode dng_decode table_file training_json illuminant_upload)
 fi
 san="${FUZZ_SANITIZER:-none}"
 tdir="${FUZZ_TARGET_DIR:-$root/fuzz/target}"

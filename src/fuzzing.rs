@@ -11,7 +11,10 @@ use std::sync::OnceLock;
 use std::sync::atomic::AtomicBool;
 
 use crate::camera::Cfa;
-use crate::io::{DecodedMosaic, Limits, RawMeta, decode_mosaic_with_info, decode_raw_u16_le};
+use crate::io::{
+    DecodedMosaic, DngWriteInfo, Limits, MosaicFormat, RawMeta, decode_dng,
+    decode_mosaic_with_info, decode_raw_u16_le, detect_format, encode_dng,
+};
 use crate::l3::IlluminantEntry;
 use crate::l3::{
     IlluminantRegistry, L3Error, L3Params, L3Table, NoiseModel, PatchGeometry,
@@ -38,9 +41,10 @@ pub fn apply_upload(
 
 /// Names of the fuzz targets, as directories under `tests/fuzz_regressions/`
 /// and binaries under `fuzz/fuzz_targets/`.
-pub const FUZZ_TARGETS: [&str; 5] = [
+pub const FUZZ_TARGETS: [&str; 6] = [
     "raw_query",
     "mosaic_decode",
+    "dng_decode",
     "table_file",
     "training_json",
     "illuminant_upload",
@@ -51,6 +55,7 @@ pub fn run_target(name: &str, data: &[u8]) -> bool {
     match name {
         "raw_query" => fuzz_raw_query(data),
         "mosaic_decode" => fuzz_mosaic_decode(data),
+        "dng_decode" => fuzz_dng_decode(data),
         "table_file" => fuzz_table_file(data),
         "training_json" => fuzz_training_json(data),
         "illuminant_upload" => fuzz_illuminant_upload(data),
@@ -365,6 +370,71 @@ pub fn fuzz_mosaic_decode(data: &[u8]) {
         }
     };
     render_small(&volts, w, h, WhiteLevel::Auto);
+}
+
+/// DNG bytes through the DNG reader: a decoded frame is within the limits, its CFA and
+/// levels make valid sidecar metadata, the format detector calls it a DNG, small frames
+/// render, and writing it back as DNG reads back the same mosaic.
+pub fn fuzz_dng_decode(data: &[u8]) {
+    let d = match decode_dng(data, &FUZZ_LIMITS) {
+        Ok(d) => d,
+        Err(e) => {
+            assert!(!e.to_string().is_empty());
+            return;
+        }
+    };
+    let (w, h) = (d.frame.width, d.frame.height);
+    assert!(
+        FUZZ_LIMITS.check(w, h).is_ok(),
+        "decoded {w}×{h} beyond limits"
+    );
+    assert_eq!(d.frame.data.len(), w * h);
+    assert_eq!(detect_format(data), Some(MosaicFormat::Dng));
+    assert!(
+        d.black_level < d.white_level,
+        "levels {} ≥ {}",
+        d.black_level,
+        d.white_level
+    );
+    if let Err(e) = Cfa::parse(&d.cfa) {
+        panic!("the DNG's CFA {:?} does not parse: {e}", d.cfa);
+    }
+    if let Some(n) = d.info.neutral() {
+        assert_eq!(n.len(), d.info.plane_colors.len());
+        assert!(
+            n.iter().all(|(_, v)| v.is_finite() && *v > 0.0),
+            "neutral {n:?}"
+        );
+    }
+    let meta = d.raw_meta(1.8);
+    if let Err(e) = meta.validate() {
+        panic!("a decoded DNG's sidecar fields are invalid: {e}");
+    }
+    let volts = match d.frame.to_volts(&meta) {
+        Ok(v) => v,
+        Err(e) => panic!("to_volts of a decoded DNG: {e}"),
+    };
+    render_small(&volts, w, h, WhiteLevel::Auto);
+    if w * h <= 16 * RENDER_MAX_PIXELS {
+        let bytes = match encode_dng(&d.frame, &meta, &DngWriteInfo::default()) {
+            Ok(b) => b,
+            Err(e) => panic!("a decoded DNG does not encode: {e}"),
+        };
+        match decode_dng(&bytes, &FUZZ_LIMITS) {
+            Ok(back) => {
+                assert_eq!(
+                    back.frame, d.frame,
+                    "the DNG written back reads differently"
+                );
+                assert_eq!(
+                    (back.black_level, back.white_level),
+                    (d.black_level, d.white_level)
+                );
+                assert_eq!(back.cfa, d.cfa);
+            }
+            Err(e) => panic!("a written DNG does not read back: {e}"),
+        }
+    }
 }
 
 /// The tensors a table file holds, in checksum order.

@@ -9,7 +9,10 @@
 use std::path::{Path, PathBuf};
 
 use l3::fuzzing::{FUZZ_TARGETS, run_target, tiny_table};
-use l3::io::{RawFrame, encode_png_gray16, encode_tiff_gray_f32, encode_tiff_gray16};
+use l3::io::{
+    DngWriteInfo, RawFrame, RawMeta, encode_dng, encode_png_gray16, encode_tiff_gray_f32,
+    encode_tiff_gray16,
+};
 
 fn root() -> PathBuf {
     PathBuf::from(env!("CARGO_MANIFEST_DIR"))
@@ -80,6 +83,17 @@ fn hostile_inputs_are_errors_not_panics() {
         ("mosaic_decode", b"P2\n2 1\n65535\n70000 1\n"),
         ("mosaic_decode", b"II*\0\x08\0\0\0\xff\xff"),
         ("mosaic_decode", b"\x89PNG\r\n\x1a\n\0\0\0\rIHDR"),
+        ("dng_decode", b""),
+        (
+            "dng_decode",
+            b"II*\0\x08\0\0\0\x01\0\x12\xc6\x01\0\x04\0\0\0\x01\x04\0\0",
+        ),
+        ("dng_decode", b"MM\0*\0\0\0\x08\xff\xff"),
+        ("dng_decode", b"II*\0\xff\xff\xff\xff"),
+        (
+            "mosaic_decode",
+            b"II*\0\x08\0\0\0\x01\0\x12\xc6\x01\0\x04\0\0\0\x01\x04\0\0",
+        ),
         ("table_file", b"\xff\xff\xff\xff\xff\xff\xff\x7f{}"),
         ("table_file", b"\x02\0\0\0\0\0\0\0{}"),
         ("training_json", b"{\"levels\": 1e400}"),
@@ -165,6 +179,32 @@ fn write_seed_corpus() {
             .join(" ")
     );
     write(&md, "seed-p2.pgm", p2.as_bytes());
+    // DNGs: the third-party fixtures and one of ours
+    let dd = seeds.join("dng_decode");
+    for e in std::fs::read_dir(root().join("tests/fixtures/dng")).unwrap() {
+        let p = e.unwrap().path();
+        if p.extension().is_some_and(|x| x == "dng") {
+            let name = format!("seed-{}", p.file_name().unwrap().to_string_lossy());
+            write(&dd, &name, &std::fs::read(&p).unwrap());
+        }
+    }
+    let meta = RawMeta::new(w, h, "RG/WB", 64, 1023, 1.8);
+    let dng = encode_dng(
+        &RawFrame::new(w, h, dn.clone()).unwrap(),
+        &meta,
+        &DngWriteInfo {
+            as_shot_neutral: Some(vec![
+                ("R".into(), 0.5),
+                ("G".into(), 1.0),
+                ("W".into(), 1.0),
+                ("B".into(), 0.4),
+            ]),
+            calibration_illuminant: Some(17),
+            ..DngWriteInfo::default()
+        },
+    )
+    .unwrap();
+    write(&dd, "seed-l3.dng", &dng);
     // table file
     write(
         &seeds.join("table_file"),

@@ -161,6 +161,67 @@ async fn render_of_a_tungsten_frame_equals_l3_render_bit_for_bit() {
         .unwrap()
         .into_rgb8();
     assert!(ppm == ours, "PPM pixels differ from the PNG's");
+
+    // the same frame as the DNG l3 simulate wrote beside it
+    let dng = std::fs::read(d.join("sim/mosaic.dng")).unwrap();
+    let post_dng = |q: &str, body: Vec<u8>| {
+        c.post(url(&server, q))
+            .header("content-type", "image/x-adobe-dng")
+            .header("accept", "image/tiff")
+            .body(body)
+            .send()
+    };
+    let r = post_dng("/v1/render?illuminant=Tungsten", dng.clone())
+        .await
+        .unwrap();
+    assert_eq!(r.status(), 200);
+    assert_eq!(r.headers()["x-l3-illuminant"], "Tungsten");
+    assert_eq!(r.headers()["x-l3-illuminant-source"], "query");
+    let tungsten = std::fs::read(d.join("cli.tiff")).unwrap();
+    assert!(
+        r.bytes().await.unwrap()[..] == tungsten[..],
+        "the DNG renders differently from its .raw"
+    );
+    // no illuminant: the colour temperature matching the DNG's AsShotNeutral
+    let r = post_dng("/v1/render", dng.clone()).await.unwrap();
+    assert_eq!(r.status(), 200);
+    assert_eq!(r.headers()["x-l3-illuminant-source"], "metadata");
+    let ill = r.headers()["x-l3-illuminant"].to_str().unwrap().to_owned();
+    let k: f64 = ill.strip_prefix("cct:").unwrap().parse().unwrap();
+    assert!((2800.0..3500.0).contains(&k), "{ill}");
+    let lim = l3::io::Limits::default();
+    let (.., meta_xyz) = l3::io::decode_tiff_f32_rgb(&r.bytes().await.unwrap(), &lim).unwrap();
+    let (.., ref_xyz) = l3::io::decode_tiff_f32_rgb(&tungsten, &lim).unwrap();
+    let y_max = ref_xyz.chunks(3).map(|p| p[1]).fold(0f32, f32::max) as f64;
+    let white = [0.95047 * y_max, y_max, 1.08883 * y_max];
+    let lab = |p: &[f32]| l3::colour::xyz_to_lab([p[0] as f64, p[1] as f64, p[2] as f64], white);
+    let de: f64 = meta_xyz
+        .chunks(3)
+        .zip(ref_xyz.chunks(3))
+        .map(|(a, b)| l3::colour::ciede2000(lab(a), lab(b)))
+        .sum::<f64>()
+        / (w * h) as f64;
+    eprintln!("DNG metadata illuminant {ill}: mean ΔE2000 {de:.3} from the Tungsten render");
+    assert!(de < 1.0, "{ill}: mean ΔE2000 {de}");
+    // the query's levels and the query's illuminant win; a Bayer DNG is refused by name
+    let r = post_dng("/v1/render?illuminant=D65", dng.clone())
+        .await
+        .unwrap();
+    assert_eq!(r.headers()["x-l3-illuminant-source"], "query");
+    let bayer = std::fs::read(
+        Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/fixtures/dng/bayer_12_lj92.dng"),
+    )
+    .unwrap();
+    let detail = problem(
+        post_dng("/v1/render", bayer).await.unwrap(),
+        422,
+        "cfa_mismatch",
+    )
+    .await;
+    assert!(
+        detail.contains("'RG/GB'") && detail.contains("'RG/WB'"),
+        "{detail}"
+    );
     server.shutdown().await.unwrap();
 }
 
@@ -703,7 +764,7 @@ async fn hostile_input_gets_a_clear_4xx() {
             .await
             .unwrap(),
         422,
-        "unprocessable",
+        "cfa_mismatch",
     )
     .await;
     problem(
@@ -1127,4 +1188,44 @@ async fn concurrent_illuminant_changes_are_all_kept() {
         assert_eq!(text.contains(&name), i >= 6, "lamp{i} in {text}");
     }
     server.shutdown().await.unwrap();
+}
+
+/// The illuminant a tungsten frame's AsShotNeutral chooses corrects Natural-100 about as well
+/// as naming Tungsten: the same capture rendered with both corrections.
+#[test]
+fn as_shot_neutral_of_a_tungsten_frame_corrects_natural100_like_tungsten() {
+    use l3::camera::Camera;
+    use l3::eval::{ChartSetup, Method, evaluate_capture, simulate_chart};
+    use l3::l3::IlluminantRegistry;
+    let table = tiny_table();
+    let design = table.sensor_design().unwrap();
+    let camera = Camera::new(&design, table.meta.grid, None).unwrap();
+    let tungsten = l3::spectral::IlluminantSpec::parse("Tungsten")
+        .unwrap()
+        .resolve(None)
+        .unwrap()
+        .spd;
+    // what l3 simulate writes as AsShotNeutral, and what the service makes of it
+    let neutral = camera.white_neutral(&tungsten).unwrap();
+    let m = table.illuminant_from_neutral(&neutral, None).unwrap();
+    let setup = ChartSetup::default();
+    let cap = simulate_chart(&camera, "Tungsten", None, &setup).unwrap();
+    let mut reg = IlluminantRegistry::with_defaults(table.meta.grid, None).unwrap();
+    let mut mean = |spec: &str| {
+        let e = reg.resolve(spec, None).unwrap();
+        evaluate_capture(&camera, &cap, &Method::Table(table), "l3", &e, &setup)
+            .unwrap()
+            .summary
+            .mean
+    };
+    let (named, metadata) = (mean("Tungsten"), mean(&m.spec()));
+    eprintln!(
+        "Natural-100 under Tungsten: mean ΔE2000 {named:.3} corrected as Tungsten, {metadata:.3} as {} (from AsShotNeutral)",
+        m.spec()
+    );
+    assert!(
+        (metadata - named).abs() <= 0.5,
+        "{named} vs {metadata} with {}",
+        m.spec()
+    );
 }

@@ -18,10 +18,12 @@ pub struct RenderArgs {
     #[arg(long)]
     pub table: PathBuf,
     /// Acquisition illuminant: a registry name (D65, D50, A, F2, F11, Tungsten,
-    /// Fluorescent), cct:K, or any illuminant spec.
-    #[arg(long, default_value = "D65")]
-    pub illuminant: String,
-    /// Input mosaic: .raw (+ .json sidecar), 16-bit PNG, TIFF or PGM.
+    /// Fluorescent), cct:K, or any illuminant spec. Default: the sidecar's `illuminant`, else
+    /// a DNG's AsShotNeutral (matched to a colour temperature through the table's sensor),
+    /// else D65.
+    #[arg(long)]
+    pub illuminant: Option<String>,
+    /// Input mosaic: .raw (+ .json sidecar), DNG, 16-bit PNG, TIFF or PGM.
     #[arg(long = "in")]
     pub input: PathBuf,
     /// Output: .png (sRGB 8-bit), .ppm (sRGB 8-bit, uncompressed), .tiff (float XYZ), .raw (f32 XYZ).
@@ -39,12 +41,34 @@ pub struct RenderArgs {
     pub renderer: String,
 }
 
-/// The input mosaic in volts: integer frames are scaled by their sidecar's
-/// black/white levels (default 0/65535) to the table's swing; float frames
-/// are taken as volts.
-pub fn mosaic_volts(path: &Path, swing: f64) -> Result<(Vec<f32>, usize, usize), CliError> {
+/// A mosaic in volts with what its file says about the capture.
+pub struct MosaicInput {
+    pub volts: Vec<f32>,
+    pub width: usize,
+    pub height: usize,
+    /// The CFA a DNG declares (sidecars are not checked).
+    pub dng_cfa: Option<String>,
+    /// The sidecar's `illuminant`.
+    pub illuminant: Option<String>,
+    /// A DNG's AsShotNeutral per channel.
+    pub neutral: Option<Vec<(String, f64)>>,
+}
+
+/// The input mosaic in volts: integer frames are scaled by their sidecar's (or DNG's)
+/// black/white levels (default 0/65535) to the table's swing; float frames are taken as
+/// volts. With what the file says about the capture.
+pub fn load_mosaic(path: &Path, swing: f64) -> Result<MosaicInput, CliError> {
     let loaded = read_mosaic(path, &Limits::default())?;
-    match loaded.mosaic {
+    let neutral = loaded.dng.as_ref().and_then(|d| d.neutral());
+    let dng_cfa = match (&loaded.dng, &loaded.meta) {
+        (Some(_), Some(m)) => Some(m.cfa.clone()),
+        _ => None,
+    };
+    let illuminant = match &loaded.dng {
+        None => loaded.meta.as_ref().and_then(|m| m.illuminant.clone()),
+        Some(_) => None,
+    };
+    let (volts, width, height) = match loaded.mosaic {
         DecodedMosaic::U16(frame) => {
             let meta = match loaded.meta {
                 Some(m) => m,
@@ -52,23 +76,51 @@ pub fn mosaic_volts(path: &Path, swing: f64) -> Result<(Vec<f32>, usize, usize),
             };
             let mut m = meta;
             m.voltage_swing = swing;
-            Ok((frame.to_volts(&m)?, frame.width, frame.height))
+            (frame.to_volts(&m)?, frame.width, frame.height)
         }
         DecodedMosaic::F32 {
             width,
             height,
             data,
-        } => Ok((data, width, height)),
-    }
+        } => (data, width, height),
+    };
+    Ok(MosaicInput {
+        volts,
+        width,
+        height,
+        dng_cfa,
+        illuminant,
+        neutral,
+    })
 }
 
 pub fn run(cli: &Cli, a: &RenderArgs) -> Result<(), CliError> {
     let iset = iset(&cli.iset_dir)?;
     let table = L3Table::load(&a.table)?;
     let white: WhiteLevel = a.white_level.parse()?;
-    let (volts, w, h) = mosaic_volts(&a.input, table.meta.voltage_swing)?;
+    let input = load_mosaic(&a.input, table.meta.voltage_swing)?;
+    let table_cfa = table.meta.cfa.to_string();
+    if let Some(cfa) = &input.dng_cfa
+        && !cfa.eq_ignore_ascii_case(&table_cfa)
+    {
+        return Err(CliError::Usage(format!(
+            "{}: the DNG's CFA '{cfa}' does not match the table's CFA '{table_cfa}'",
+            a.input.display()
+        )));
+    }
+    let (spec, source) = match (&a.illuminant, &input.illuminant, &input.neutral) {
+        (Some(s), _, _) => (s.clone(), "--illuminant"),
+        (None, Some(s), _) => (s.clone(), "the sidecar"),
+        (None, None, Some(n)) => (
+            table.illuminant_from_neutral(n, iset.as_ref())?.spec(),
+            "the DNG's AsShotNeutral",
+        ),
+        (None, None, None) => ("D65".to_string(), "the default"),
+    };
+    let (volts, w, h) = (input.volts, input.width, input.height);
     let mut registry = IlluminantRegistry::with_defaults(table.meta.grid, iset.as_ref())?;
-    let entry = registry.resolve(&a.illuminant, iset.as_ref())?;
+    let entry = registry.resolve(&spec, iset.as_ref())?;
+    let illuminant = format!("{} (from {source})", entry.name);
     let kernels = match table.meta.kind {
         TableKind::SameIlluminant => fuse_kernels(&table, &entry.t),
         TableKind::CrossIlluminant => {
@@ -115,7 +167,7 @@ pub fn run(cli: &Cli, a: &RenderArgs) -> Result<(), CliError> {
             encode_png_rgb8(w, h, &rgb, PngCompression::Default)?
         };
         write_file(&a.out, &bytes)?;
-        report(a, &entry.name, w, h, ms, &stats);
+        report(a, &illuminant, w, h, ms, &stats);
         return Ok(());
     }
     let (xyz, stats) = if fast {
@@ -150,7 +202,7 @@ pub fn run(cli: &Cli, a: &RenderArgs) -> Result<(), CliError> {
         }
     };
     write_file(&a.out, &bytes)?;
-    report(a, &entry.name, w, h, ms, &stats);
+    report(a, &illuminant, w, h, ms, &stats);
     Ok(())
 }
 

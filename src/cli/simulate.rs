@@ -5,8 +5,8 @@ use clap::Args;
 use super::{Cli, CliError, iset, load_sensor};
 use crate::camera::{Camera, Exposure, NoiseSwitches, simulate};
 use crate::io::{
-    PngCompression, RawFrame, RawMeta, write_png_gray16, write_png_rgb8, write_raw,
-    write_tiff_f32_rgb,
+    DngWriteInfo, IoError, PngCompression, RawFrame, RawMeta, exif_light_source, write_dng,
+    write_png_gray16, write_png_rgb8, write_raw, write_tiff_f32_rgb,
 };
 use crate::l3::{WhiteLevel, white_y, xyz_to_srgb8};
 use crate::scene::{SceneKind, SceneOptions};
@@ -98,6 +98,18 @@ pub fn run(cli: &Cli, a: &SimulateArgs) -> Result<(), CliError> {
     })?;
     let raw_paths = write_raw(&a.out.join("mosaic.raw"), &frame, &meta)?;
     write_png_gray16(&a.out.join("mosaic.png"), &frame)?;
+    // the same mosaic as DNG, with the camera's white response under the light as
+    // AsShotNeutral (CFAs of R, G, B and W only)
+    let dng = DngWriteInfo {
+        camera_model: Some(design.name.clone()),
+        as_shot_neutral: Some(camera.white_neutral(&named.spd)?),
+        calibration_illuminant: exif_light_source(&named.name),
+    };
+    let dng_note = match write_dng(&a.out.join("mosaic.dng"), &frame, &meta, &dng) {
+        Ok(()) => "mosaic.dng, ".to_string(),
+        Err(IoError::InvalidMeta(why)) => format!("no mosaic.dng ({why}), "),
+        Err(e) => return Err(e.into()),
+    };
     let xyz = cap.ideal_xyz.as_slice().unwrap_or(&[]);
     write_tiff_f32_rgb(&a.out.join("ideal_xyz.tiff"), w, h, xyz)?;
     let wy = white_y(xyz, w, h, WhiteLevel::Auto);
@@ -119,7 +131,7 @@ pub fn run(cli: &Cli, a: &SimulateArgs) -> Result<(), CliError> {
         secs * 1e3
     );
     println!(
-        "wrote {} (+ .json), mosaic.png, ideal_xyz.tiff, preview.png in {}",
+        "wrote {} (+ .json), {dng_note}mosaic.png, ideal_xyz.tiff, preview.png in {}",
         raw_paths.raw.display(),
         a.out.display()
     );

@@ -45,7 +45,9 @@ pub enum IoError {
         expected: u128,
     },
     /// The bytes are none of the supported formats.
-    #[error("unrecognised image format ({detail}); a PNG, TIFF or PGM (P5/P2) mosaic is expected")]
+    #[error(
+        "unrecognised image format ({detail}); a PNG, TIFF, DNG or PGM (P5/P2) mosaic is expected"
+    )]
     UnknownFormat { detail: String },
     /// A well-formed image whose pixel layout is not a single-channel mosaic (or not what a
     /// reader expects), e.g. "PNG is 8-bit RGB; a 16-bit (or 8-bit) grayscale mosaic is expected".
@@ -61,6 +63,9 @@ pub enum IoError {
     /// A malformed, truncated or unsupported TIFF stream.
     #[error("invalid TIFF: {0}")]
     Tiff(String),
+    /// A malformed, truncated or unsupported DNG (what it holds that is not taken is named).
+    #[error("invalid DNG: {0}")]
+    Dng(String),
     /// A malformed or truncated PGM stream.
     #[error("invalid PGM: {0}")]
     Pgm(String),

@@ -1,4 +1,5 @@
-//! File formats: raw sensor frames with JSON sidecars, PNG, TIFF, PGM (input) and PPM (output).
+//! File formats: raw sensor frames with JSON sidecars, PNG, TIFF, DNG, PGM (input) and PPM
+//! (output).
 //!
 //! Every decoder treats its input as hostile: it checks the declared size against a caller's
 //! [`Limits`] before allocating pixel memory, never panics, and reports what was wrong in an
@@ -6,6 +7,7 @@
 //! rename); the `encode_*` functions return in-memory files for HTTP responses.
 
 mod atomic;
+mod dng;
 mod error;
 mod limits;
 mod mosaic;
@@ -15,11 +17,14 @@ mod ppm;
 mod raw;
 mod tiff_format;
 
+pub use dng::{
+    DngImage, DngInfo, DngWriteInfo, decode_dng, encode_dng, exif_light_source, is_dng, write_dng,
+};
 pub use error::{IoError, IoResult};
 pub use limits::Limits;
 pub use mosaic::{
     DecodedMosaic, LoadedMosaic, MosaicFormat, SourceInfo, decode_mosaic, decode_mosaic_with_info,
-    detect_format, read_mosaic,
+    decode_mosaic_with_meta, detect_format, read_mosaic,
 };
 pub use png_format::{
     PngCompression, decode_png_rgb8, encode_png_gray16, encode_png_rgb8, write_png_gray16,

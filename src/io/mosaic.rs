@@ -1,9 +1,10 @@
-//! Mosaic input in any supported format, detected from the bytes: PNG, TIFF, PGM, and `.raw`
-//! files with a sidecar.
+//! Mosaic input in any supported format, detected from the bytes: PNG, TIFF, DNG, PGM, and
+//! `.raw` files with a sidecar.
 
 use std::path::Path;
 
 use super::atomic::read_capped;
+use super::dng::{DngInfo, decode_dng, is_dng};
 use super::error::{IoError, IoResult};
 use super::limits::Limits;
 use super::pgm::decode_pgm;
@@ -40,6 +41,8 @@ pub enum MosaicFormat {
     Png,
     Tiff,
     Pgm,
+    /// A DNG raw file (a TIFF with a DNGVersion tag) holding a CFA image.
+    Dng,
     /// Headerless little-endian u16 with a JSON sidecar.
     Raw,
 }
@@ -51,14 +54,18 @@ pub struct SourceInfo {
     /// Bits per stored sample: 8 or 16 (integers), 32 (float).
     pub bits_per_sample: u8,
     /// The largest value the container can hold: 255 or 65535 for 8/16-bit PNG and TIFF, the
-    /// maxval of a PGM; `None` for float data and `.raw` (whose sidecar has the white level).
+    /// maxval of a PGM; `None` for float data, `.raw` (whose sidecar has the white level) and
+    /// DNG (whose tags have it).
     pub max_value: Option<u16>,
 }
 
-/// The container format from the leading magic bytes, if it is a supported one.
+/// The container format from the leading magic bytes (and, for TIFF, a DNGVersion tag in the
+/// first IFD), if it is a supported one.
 pub fn detect_format(bytes: &[u8]) -> Option<MosaicFormat> {
     if bytes.starts_with(PNG_MAGIC) {
         Some(MosaicFormat::Png)
+    } else if is_dng(bytes) {
+        Some(MosaicFormat::Dng)
     } else if bytes.starts_with(b"II*\0")
         || bytes.starts_with(b"MM\0*")
         || bytes.starts_with(b"II+\0")
@@ -94,8 +101,10 @@ fn unknown_format(bytes: &[u8]) -> IoError {
 }
 
 /// Decodes a mosaic from PNG (8/16-bit grayscale), TIFF (8/16-bit grayscale or 32-bit float
-/// single channel) or PGM (P5/P2), detected from the magic bytes. Sizes are checked against
-/// `limits` before pixel memory is allocated; float input must be finite.
+/// single channel), DNG (a CFA image, see [`decode_dng`](super::decode_dng)) or PGM (P5/P2),
+/// detected from the magic bytes. Sizes are checked against `limits` before pixel memory is
+/// allocated; float input must be finite. A DNG's levels and CFA come with
+/// [`decode_mosaic_with_meta`].
 pub fn decode_mosaic(bytes: &[u8], limits: &Limits) -> IoResult<DecodedMosaic> {
     decode_mosaic_with_info(bytes, limits).map(|(m, _)| m)
 }
@@ -105,7 +114,28 @@ pub fn decode_mosaic_with_info(
     bytes: &[u8],
     limits: &Limits,
 ) -> IoResult<(DecodedMosaic, SourceInfo)> {
-    match detect_format(bytes) {
+    decode_mosaic_with_meta(bytes, limits).map(|l| (l.mosaic, l.info))
+}
+
+/// [`decode_mosaic`], with what the bytes say about the mosaic: for a DNG, the sidecar fields
+/// (size, CFA, black and white levels, camera model as `sensor`, a voltage swing of 1 V, which
+/// a DNG does not record) and the DNG's own metadata; `None` for the other formats.
+pub fn decode_mosaic_with_meta(bytes: &[u8], limits: &Limits) -> IoResult<LoadedMosaic> {
+    if detect_format(bytes) == Some(MosaicFormat::Dng) {
+        let d = decode_dng(bytes, limits)?;
+        let meta = d.raw_meta(1.0);
+        return Ok(LoadedMosaic {
+            info: SourceInfo {
+                format: MosaicFormat::Dng,
+                bits_per_sample: d.info.bits_per_sample,
+                max_value: None,
+            },
+            mosaic: DecodedMosaic::U16(d.frame),
+            meta: Some(meta),
+            dng: Some(d.info),
+        });
+    }
+    let (mosaic, info) = match detect_format(bytes) {
         Some(MosaicFormat::Png) => {
             let (frame, bits) = decode_png_mosaic(bytes, limits)?;
             let info = SourceInfo {
@@ -162,8 +192,14 @@ pub fn decode_mosaic_with_info(
             };
             Ok((DecodedMosaic::U16(pgm.frame), info))
         }
-        Some(MosaicFormat::Raw) | None => Err(unknown_format(bytes)),
-    }
+        Some(MosaicFormat::Raw) | Some(MosaicFormat::Dng) | None => Err(unknown_format(bytes)),
+    }?;
+    Ok(LoadedMosaic {
+        mosaic,
+        info,
+        meta: None,
+        dng: None,
+    })
 }
 
 /// A mosaic read from a file, with its sidecar metadata when there is one.
@@ -171,14 +207,17 @@ pub fn decode_mosaic_with_info(
 pub struct LoadedMosaic {
     pub mosaic: DecodedMosaic,
     pub info: SourceInfo,
-    /// The JSON sidecar: required for `.raw`; for other formats read when the file with the
-    /// same stem and extension `.json` exists (its size must match the image).
+    /// The JSON sidecar: required for `.raw`; for a DNG, the sidecar fields its tags give
+    /// (see [`decode_mosaic_with_meta`]); for other formats read when the file with the same
+    /// stem and extension `.json` exists (its size must match the image).
     pub meta: Option<RawMeta>,
+    /// A DNG's metadata (AsShotNeutral, calibration illuminants, colour matrices…).
+    pub dng: Option<DngInfo>,
 }
 
 /// Reads a mosaic file: `.raw` (with its required sidecar, see [`read_raw`]) or any format
 /// [`decode_mosaic`] takes (by magic bytes, whatever the extension). The file size is checked
-/// against `limits` before reading.
+/// against `limits` before reading. A DNG carries its own metadata: no sidecar is read for it.
 pub fn read_mosaic(path: &Path, limits: &Limits) -> IoResult<LoadedMosaic> {
     let is_raw = path
         .extension()
@@ -194,10 +233,11 @@ pub fn read_mosaic(path: &Path, limits: &Limits) -> IoResult<LoadedMosaic> {
                 max_value: None,
             },
             meta: Some(meta),
+            dng: None,
         });
     }
     let bytes = read_capped(path, limits.max_file_bytes(4))?;
-    let (mosaic, info) = decode_mosaic_with_info(&bytes, limits).map_err(|e| match e {
+    let loaded = decode_mosaic_with_meta(&bytes, limits).map_err(|e| match e {
         IoError::UnknownFormat { detail } => IoError::UnknownFormat {
             detail: format!(
                 "{}: {detail}; a .raw file needs the .raw extension",
@@ -206,6 +246,10 @@ pub fn read_mosaic(path: &Path, limits: &Limits) -> IoResult<LoadedMosaic> {
         },
         other => other,
     })?;
+    if loaded.dng.is_some() {
+        return Ok(loaded);
+    }
+    let LoadedMosaic { mosaic, info, .. } = loaded;
     let json = path.with_extension("json");
     let meta = if json.is_file() && json != path {
         let meta = read_sidecar(&json)?;
@@ -225,7 +269,12 @@ pub fn read_mosaic(path: &Path, limits: &Limits) -> IoResult<LoadedMosaic> {
     } else {
         None
     };
-    Ok(LoadedMosaic { mosaic, info, meta })
+    Ok(LoadedMosaic {
+        mosaic,
+        info,
+        meta,
+        dng: None,
+    })
 }
 
 #[cfg(test)]

@@ -162,6 +162,23 @@ impl L3Table {
         Ok(d)
     }
 
+    /// The colour temperature whose white response, through the table's sensor, best matches
+    /// a raw file's neutral (e.g. a DNG's AsShotNeutral, per channel name): see
+    /// [`Camera::cct_from_neutral`](crate::camera::Camera::cct_from_neutral). The sensor's
+    /// curves are read through `iset` (the built-in data when `None`).
+    pub fn illuminant_from_neutral(
+        &self,
+        neutral: &[(String, f64)],
+        iset: Option<&crate::spectral::IsetData>,
+    ) -> Result<crate::camera::NeutralMatch, L3Error> {
+        let design = self.sensor_design()?;
+        let camera = crate::camera::Camera::new(&design, self.meta.grid, iset)
+            .map_err(|e| L3Error::Table(format!("the table's sensor: {e}")))?;
+        camera
+            .cct_from_neutral(neutral)
+            .map_err(|e| L3Error::InvalidInput(format!("the frame's neutral: {e}")))
+    }
+
     pub fn n_positions(&self) -> usize {
         self.meta.cfa.rows * self.meta.cfa.cols
     }

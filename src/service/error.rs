@@ -19,9 +19,17 @@ pub enum ServiceError {
     /// An illuminant that is neither registered nor a `cct:K` / `xy:x,y` spec.
     #[error("{0}")]
     UnknownIlluminant(String),
-    /// An input the request's parameters make inconsistent (e.g. a CFA mismatch).
+    /// An input the request's parameters make inconsistent.
     #[error("{0}")]
     Unprocessable(String),
+    /// The input's CFA (from the query or the file) is not the active table's.
+    #[error("{source_desc} CFA '{input}' does not match the active table's CFA '{table}'")]
+    CfaMismatch {
+        /// Where the input's CFA comes from, e.g. "the query's" or "the DNG's".
+        source_desc: &'static str,
+        input: String,
+        table: String,
+    },
     #[error("{0}")]
     NotFound(String),
     #[error("{0}")]
@@ -63,7 +71,7 @@ impl ServiceError {
             BadRequest(_) | InvalidImage(_) | InvalidJson(_) | UnknownIlluminant(_) => {
                 StatusCode::BAD_REQUEST
             }
-            Unprocessable(_) => StatusCode::UNPROCESSABLE_ENTITY,
+            Unprocessable(_) | CfaMismatch { .. } => StatusCode::UNPROCESSABLE_ENTITY,
             NotFound(_) => StatusCode::NOT_FOUND,
             Conflict(_) => StatusCode::CONFLICT,
             PayloadTooLarge(_) => StatusCode::PAYLOAD_TOO_LARGE,
@@ -86,6 +94,7 @@ impl ServiceError {
             InvalidJson(_) => "invalid_json",
             UnknownIlluminant(_) => "unknown_illuminant",
             Unprocessable(_) => "unprocessable",
+            CfaMismatch { .. } => "cfa_mismatch",
             NotFound(_) => "not_found",
             Conflict(_) => "conflict",
             PayloadTooLarge(_) => "payload_too_large",
@@ -171,6 +180,7 @@ impl From<crate::io::IoError> for ServiceError {
             | PixelLayout { .. }
             | Png(_)
             | Tiff(_)
+            | Dng(_)
             | Pgm(_)
             | NonFinite { .. }
             | Sidecar { .. }

@@ -1,6 +1,10 @@
 //! `POST /v1/render`: a raw mosaic in, an sRGB PNG, a TIFF or f32 XYZ out (by `Accept`).
 //! Decoding, rendering and encoding run on rayon; the answer carries timings and class
 //! statistics in headers. The result equals `l3 render` on the same input bit for bit.
+//!
+//! The illuminant comes from the query; without one, from a DNG's AsShotNeutral (matched to
+//! a colour temperature through the table's sensor), else D65. `x-l3-illuminant-source`
+//! says which: `query`, `metadata` or `default`.
 
 use std::sync::{Arc, Mutex};
 use std::time::Instant;
@@ -18,8 +22,8 @@ use tokio::sync::OwnedSemaphorePermit;
 use super::ServiceError;
 use super::state::AppState;
 use crate::io::{
-    DecodedMosaic, Limits, PngCompression, decode_mosaic, decode_raw_u16_le, encode_png_rgb8,
-    encode_ppm_rgb8, encode_tiff_f32_rgb, encode_tiff_rgb16, ppm_header,
+    DecodedMosaic, Limits, PngCompression, decode_mosaic_with_meta, decode_raw_u16_le,
+    encode_png_rgb8, encode_ppm_rgb8, encode_tiff_f32_rgb, encode_tiff_rgb16, ppm_header,
 };
 use crate::l3::{Mosaic, Region, WhiteLevel, xyz_to_srgb8, xyz_to_srgb16};
 
@@ -32,10 +36,10 @@ pub struct RenderQuery {
     pub height: Option<usize>,
     /// CFA of the input, e.g. `RG/WB`; must match the table's when given.
     pub cfa: Option<String>,
-    /// DN levels of integer input (default 0 and 65535).
+    /// DN levels of integer input (default: a DNG's own, else 0 and 65535).
     pub black_level: Option<u16>,
     pub white_level: Option<u16>,
-    /// Acquisition illuminant (default D65).
+    /// Acquisition illuminant (default: from a DNG's AsShotNeutral, else D65).
     pub illuminant: Option<String>,
     /// Output white: `auto` (default) or the Y that maps to white.
     pub white: Option<String>,
@@ -126,9 +130,11 @@ pub fn require_json(headers: &HeaderMap) -> Result<(), ServiceError> {
     }
 }
 
-const IMAGE_TYPES: [&str; 6] = [
+const IMAGE_TYPES: [&str; 8] = [
     "image/png",
     "image/tiff",
+    "image/x-adobe-dng",
+    "image/dng",
     "image/x-portable-graymap",
     "image/x-portable-anymap",
     "image/pgm",
@@ -228,6 +234,8 @@ impl Encoded {
 }
 
 struct Rendered {
+    illuminant: String,
+    illuminant_source: &'static str,
     bytes: Encoded,
     width: usize,
     height: usize,
@@ -361,7 +369,7 @@ pub async fn render(
     let format = negotiate(headers.get(header::ACCEPT).and_then(|v| v.to_str().ok()))?;
     let ctype = content_type(&headers).ok_or_else(|| {
         ServiceError::UnsupportedMediaType(
-            "Content-Type is missing; send application/octet-stream (raw little-endian u16 with width and height) or image/png, image/tiff, image/x-portable-graymap".into(),
+            "Content-Type is missing; send application/octet-stream (raw little-endian u16 with width and height) or image/png, image/tiff, image/x-adobe-dng, image/x-portable-graymap".into(),
         )
     })?;
     let raw = match ctype.as_str() {
@@ -369,7 +377,7 @@ pub async fn render(
         t if IMAGE_TYPES.contains(&t) => false,
         other => {
             return Err(ServiceError::UnsupportedMediaType(format!(
-                "Content-Type '{other}' is not a mosaic; send application/octet-stream (raw little-endian u16) or image/png, image/tiff, image/x-portable-graymap"
+                "Content-Type '{other}' is not a mosaic; send application/octet-stream (raw little-endian u16) or image/png, image/tiff, image/x-adobe-dng, image/x-portable-graymap"
             )));
         }
     };
@@ -410,15 +418,22 @@ pub async fn render(
             "no table is active yet (the default table may still be training; see /readyz)".into(),
         )
     })?;
-    if let Some(cfa) = &q.cfa {
-        let table_cfa = active.table.meta.cfa.to_string();
-        if !cfa.trim().eq_ignore_ascii_case(&table_cfa) {
-            return Err(ServiceError::Unprocessable(format!(
-                "cfa '{cfa}' does not match the active table's CFA '{table_cfa}'"
-            )));
-        }
+    let table_cfa = active.table.meta.cfa.to_string();
+    if let Some(cfa) = &q.cfa
+        && !cfa.trim().eq_ignore_ascii_case(&table_cfa)
+    {
+        return Err(ServiceError::CfaMismatch {
+            source_desc: "the query's",
+            input: cfa.clone(),
+            table: table_cfa,
+        });
     }
-    let entry = state.resolve_illuminant(q.illuminant.as_deref().unwrap_or("D65"))?;
+    // a named illuminant is checked before the body is decoded
+    let query_entry = q
+        .illuminant
+        .as_deref()
+        .map(|s| state.resolve_illuminant(s))
+        .transpose()?;
     let permit = permit
         .0
         .lock()
@@ -440,25 +455,42 @@ pub async fn render(
         ..Limits::default()
     };
     let st = state.clone();
-    let entry_name = entry.name.clone();
     let table_id = active.id.clone();
     let r = super::cpu::run(&state.pools.render, "the render", move || {
         let run = || -> Result<Rendered, ServiceError> {
             let t0 = Instant::now();
-            let black = q.black_level.unwrap_or(0);
-            let white_dn = q.white_level.unwrap_or(65535);
-            if white_dn <= black {
-                return Err(ServiceError::InvalidImage(format!(
+            let mut black = q.black_level.unwrap_or(0);
+            let mut white_dn = q.white_level.unwrap_or(65535);
+            let bad_levels = |black: u16, white_dn: u16| {
+                ServiceError::InvalidImage(format!(
                     "white_level {white_dn} must exceed black_level {black}"
-                )));
+                ))
+            };
+            if white_dn <= black {
+                return Err(bad_levels(black, white_dn));
             }
+            let mut neutral = None;
             // integer input stays u16: the renderer converts it tile by tile
             let (input, w, h) = if raw {
                 let (w, h) = (q.width.unwrap_or(0), q.height.unwrap_or(0));
                 let f = decode_raw_u16_le(&body, w, h, &limits)?;
                 (Input::Dn(f.data), f.width, f.height)
             } else {
-                let m = decode_mosaic(&body, &limits)?;
+                let loaded = decode_mosaic_with_meta(&body, &limits)?;
+                if let (Some(meta), Some(dng)) = (&loaded.meta, &loaded.dng) {
+                    if !meta.cfa.eq_ignore_ascii_case(&table_cfa) {
+                        return Err(ServiceError::CfaMismatch {
+                            source_desc: "the DNG's",
+                            input: meta.cfa.clone(),
+                            table: table_cfa.clone(),
+                        });
+                    }
+                    // the file's levels unless the query gives others
+                    black = q.black_level.unwrap_or(meta.black_level);
+                    white_dn = q.white_level.unwrap_or(meta.white_level);
+                    neutral = dng.neutral();
+                }
+                let m = loaded.mosaic;
                 let (mw, mh) = m.dims();
                 if q.width.is_some_and(|w| w != mw) || q.height.is_some_and(|h| h != mh) {
                     return Err(ServiceError::InvalidImage(format!(
@@ -475,6 +507,24 @@ pub async fn render(
                         data,
                     } => (Input::Volts(data), width, height),
                 }
+            };
+            if white_dn <= black {
+                return Err(bad_levels(black, white_dn));
+            }
+            let (entry, source) = match (query_entry, neutral) {
+                (Some(e), _) => (e, "query"),
+                (None, Some(n)) => {
+                    let m = active
+                        .table
+                        .illuminant_from_neutral(&n, st.iset.as_ref())
+                        .map_err(|e| {
+                            ServiceError::Unprocessable(format!(
+                                "the illuminant cannot be taken from the DNG's AsShotNeutral ({e}); name one with illuminant="
+                            ))
+                        })?;
+                    (st.resolve_illuminant(&m.spec())?, "metadata")
+                }
+                (None, None) => (st.resolve_illuminant("D65")?, "default"),
             };
             let mosaic = match &input {
                 Input::Dn(d) => Mosaic::Dn {
@@ -539,6 +589,8 @@ pub async fn render(
             let t3 = Instant::now();
             let ms = |a: Instant, b: Instant| (b - a).as_secs_f64() * 1e3;
             Ok(Rendered {
+                illuminant: entry.name.clone(),
+                illuminant_source: source,
                 bytes,
                 width: ow,
                 height: oh,
@@ -574,7 +626,8 @@ pub async fn render(
         }
     };
     put("x-l3-table", table_id);
-    put("x-l3-illuminant", entry_name);
+    put("x-l3-illuminant", r.illuminant.clone());
+    put("x-l3-illuminant-source", r.illuminant_source.to_string());
     put("x-l3-width", r.width.to_string());
     put("x-l3-height", r.height.to_string());
     put("x-l3-input-pixels", (r.in_width * r.in_height).to_string());

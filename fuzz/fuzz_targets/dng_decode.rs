@@ -1,0 +1,9 @@
+//! Fuzz target `dng_decode`: the body is `l3::fuzzing::fuzz_dng_decode`, shared with
+//! `tests/fuzz_regressions.rs`.
+#![no_main]
+
+use libfuzzer_sys::fuzz_target;
+
+fuzz_target!(|data: &[u8]| {
+    l3::fuzzing::fuzz_dng_decode(data);
+});
