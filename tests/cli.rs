@@ -41,6 +41,7 @@ fn simulate_train_render_eval() {
     for f in [
         "mosaic.raw",
         "mosaic.json",
+        "mosaic.dng",
         "mosaic.png",
         "ideal_xyz.tiff",
         "preview.png",
@@ -59,6 +60,20 @@ fn simulate_train_render_eval() {
         std::fs::metadata(sim.join("mosaic.raw")).unwrap().len(),
         w * h * 2
     );
+    // the same mosaic as DNG, with the sidecar's levels and the light's neutral
+    let lim = l3::io::Limits::default();
+    let dng = l3::io::read_mosaic(&sim.join("mosaic.dng"), &lim).unwrap();
+    let raw = l3::io::read_mosaic(&sim.join("mosaic.raw"), &lim).unwrap();
+    assert_eq!(dng.mosaic, raw.mosaic);
+    let (dm, rm) = (dng.meta.unwrap(), raw.meta.unwrap());
+    assert_eq!(
+        (dm.cfa, dm.black_level, dm.white_level),
+        (rm.cfa, rm.black_level, rm.white_level)
+    );
+    let info = dng.dng.unwrap();
+    assert_eq!(info.plane_colors, "RGBW");
+    assert_eq!(info.calibration_illuminants, [Some(3), None]);
+    assert!(info.as_shot_neutral.unwrap().iter().any(|&v| v == 1.0));
     // same seed → same bytes
     let sim2 = d.join("sim2");
     let (ok, _, _) = l3(

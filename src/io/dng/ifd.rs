@@ -192,6 +192,21 @@ impl<'a> Tiff<'a> {
         Ok(Ifd { entries, offset })
     }
 
+    /// Whether the IFD at `offset` has an entry for `tag` (no allocation; `false` when the
+    /// IFD does not fit the file).
+    pub fn ifd_has(&self, offset: u32, tag: u16) -> bool {
+        let off = u64::from(offset);
+        let Some(n) = self.u16_at(off) else {
+            return false;
+        };
+        (0..u64::from(n)).any(|i| self.u16_at(off + 2 + 12 * i) == Some(tag))
+    }
+
+    /// The first IFD's offset.
+    pub fn first_ifd_offset(&self) -> u32 {
+        self.first_ifd
+    }
+
     /// The raw value bytes of `tag` in `ifd`, with its type and count (bounds-checked).
     fn value(&self, ifd: &Ifd, tag: u16) -> IoResult<Option<(u16, u32, &'a [u8])>> {
         let Some(e) = ifd.entries.iter().find(|e| e.tag == tag) else {

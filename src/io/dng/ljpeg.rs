@@ -148,10 +148,10 @@ impl<'a> Bits<'a> {
         for l in 1..=16 {
             code = (code << 1) | self.bit()? as i32;
             if code <= h.maxcode[l] {
-                let i = h.valptr[l] + (code - h.mincode[l]) as usize;
-                return h
-                    .values
-                    .get(i)
+                return usize::try_from(code - h.mincode[l])
+                    .ok()
+                    .and_then(|d| h.valptr[l].checked_add(d))
+                    .and_then(|i| h.values.get(i))
                     .copied()
                     .ok_or_else(|| dng_err("lossless JPEG: a Huffman code has no value"));
             }

@@ -247,11 +247,21 @@ pub fn encode_dng(frame: &RawFrame, meta: &RawMeta, info: &DngWriteInfo) -> IoRe
             )
         }
     };
-    let model = info
+    // an ASCII tag: other characters become '?'
+    let model: String = info
         .camera_model
         .clone()
         .or_else(|| meta.sensor.clone())
-        .unwrap_or_else(|| "l3 simulated sensor".to_string());
+        .unwrap_or_else(|| "l3 simulated sensor".to_string())
+        .chars()
+        .map(|c| {
+            if c.is_ascii() && !c.is_ascii_control() {
+                c
+            } else {
+                '?'
+            }
+        })
+        .collect();
 
     let mut out = Cursor::new(Vec::with_capacity(bytes as usize + 4096));
     {

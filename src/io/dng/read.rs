@@ -53,9 +53,7 @@ const PHOTOMETRIC_LINEAR_RAW: u64 = 34892;
 
 /// Whether `bytes` is a TIFF whose first IFD has a DNGVersion tag.
 pub fn is_dng(bytes: &[u8]) -> bool {
-    Tiff::parse(bytes)
-        .and_then(|t| t.first_ifd())
-        .is_ok_and(|ifd| ifd.has(TAG_DNG_VERSION))
+    Tiff::parse(bytes).is_ok_and(|t| t.ifd_has(t.first_ifd_offset(), TAG_DNG_VERSION))
 }
 
 /// The raw image's IFD: IFD0 or one of its SubIFDs (two levels deep) with NewSubFileType 0
@@ -157,6 +155,52 @@ fn layout(t: &Tiff<'_>, ifd: &Ifd, w: usize, h: usize, limits: &Limits) -> IoRes
         offsets,
         counts,
     })
+}
+
+/// Checks, before the image is allocated, that the chunks' data can hold the image: every
+/// chunk lies inside the file, their bytes add up to no more than the file (chunks do not
+/// share data), and lossless JPEG chunks have at least one bit per sample.
+fn check_chunks(
+    t: &Tiff<'_>,
+    lay: &Layout,
+    compression: u64,
+    bits: u32,
+    w: usize,
+    h: usize,
+) -> IoResult<()> {
+    let mut bytes = 0u64;
+    let mut samples = 0u64;
+    for (k, (&off, &count)) in lay.offsets.iter().zip(&lay.counts).enumerate() {
+        let (x0, y0) = ((k % lay.across) * lay.tile_w, (k / lay.across) * lay.tile_h);
+        let vis_w = lay.tile_w.min(w.saturating_sub(x0)) as u64;
+        let vis_h = lay.tile_h.min(h.saturating_sub(y0)) as u64;
+        let len = if compression == 1 {
+            (lay.tile_w as u64 * u64::from(bits)).div_ceil(8) * vis_h
+        } else {
+            count
+        };
+        if t.slice(off, len).is_none() {
+            return Err(dng_err(format!(
+                "chunk {k} needs {len} bytes at offset {off} but the file has {}",
+                t.len()
+            )));
+        }
+        bytes = bytes.saturating_add(len);
+        samples = samples.saturating_add(vis_w * vis_h);
+    }
+    if bytes > t.len() as u64 {
+        return Err(dng_err(format!(
+            "the {} chunks need {bytes} bytes, more than the file's {}",
+            lay.offsets.len(),
+            t.len()
+        )));
+    }
+    if compression != 1 && samples > bytes.saturating_mul(8) {
+        return Err(dng_err(format!(
+            "{samples} samples cannot fit in {bytes} bytes of lossless JPEG data"
+        )));
+    }
+    Ok(())
 }
 
 /// Decodes every chunk into the `w × h` image.
@@ -384,6 +428,7 @@ pub(super) fn decode(bytes: &[u8], limits: &Limits) -> IoResult<DngImage> {
 
     // --- decode
     let lay = layout(&t, &raw, w, h, limits)?;
+    check_chunks(&t, &lay, compression, bits, w, h)?;
     let mut img = crate::buffers::zeroed::<u16>(w * h);
     decode_chunks(&t, &lay, compression, bits, w, h, &mut img)?;
 

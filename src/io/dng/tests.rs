@@ -451,6 +451,40 @@ fn hostile_sizes_fail_before_allocating() {
     let f = strips_dng(false, &img, 4, 4, 16, 4, vec![b.long(273, &[1 << 30])]);
     let e = decode_dng(&f, &lim()).unwrap_err().to_string();
     assert!(e.contains("needs 32 bytes at offset"), "{e}");
+    // a big image with a few bytes of data
+    let f = strips_dng(
+        false,
+        &img,
+        4,
+        4,
+        16,
+        4,
+        vec![
+            b.long(256, &[9000]),
+            b.long(257, &[9000]),
+            b.long(278, &[9000]),
+        ],
+    );
+    let e = decode_dng(&f, &lim()).unwrap_err().to_string();
+    assert!(e.contains("needs 162000000 bytes at offset"), "{e}");
+    // a tall image whose strips all point at the same bytes
+    let wide = ramp(64, 2, 16);
+    let f = strips_dng(
+        false,
+        &wide,
+        64,
+        2,
+        16,
+        2,
+        vec![
+            b.long(257, &[1000]),
+            b.long(278, &[1]),
+            b.long(273, &[8; 1000]),
+            b.long(279, &[128; 1000]),
+        ],
+    );
+    let e = decode_dng(&f, &lim()).unwrap_err().to_string();
+    assert!(e.contains("more than the file"), "{e}");
     // a strip count that does not match the rows
     let f = strips_dng(false, &img, 4, 4, 16, 1, vec![b.long(278, &[2])]);
     let e = decode_dng(&f, &lim()).unwrap_err().to_string();
@@ -478,6 +512,29 @@ fn hostile_sizes_fail_before_allocating() {
     for cut in 0..good.len() - 4 {
         assert!(decode_dng(&good[..cut], &lim()).is_err(), "cut {cut}");
     }
+}
+
+#[test]
+fn lossless_jpeg_from_pidng() {
+    // a third-party LJ92 tile (PiDNG: one component, twice the width, half the height,
+    // predictor 6) and the mosaic it holds
+    let dng = include_bytes!("../../../tests/fixtures/dng/bayer_12_lj92.dng");
+    let raw = include_bytes!("../../../tests/fixtures/dng/bayer_12_lj92.raw");
+    let want: Vec<u16> = raw
+        .chunks_exact(2)
+        .map(|c| u16::from_le_bytes([c[0], c[1]]))
+        .collect();
+    let t = ifd::Tiff::parse(dng).unwrap();
+    let ifd0 = t.first_ifd().unwrap();
+    let off = t.uint(&ifd0, 324).unwrap().unwrap();
+    let len = t.uint(&ifd0, 325).unwrap().unwrap();
+    let j = ljpeg::decode(t.slice(off, len).unwrap(), 1 << 20).unwrap();
+    assert_eq!(
+        (j.width, j.height, j.components, j.precision),
+        (64, 12, 1, 12)
+    );
+    assert_eq!(j.samples, want);
+    assert_eq!(decode_dng(dng, &lim()).unwrap().frame.data, want);
 }
 
 #[test]
@@ -530,6 +587,15 @@ fn written_dng_reads_back() {
         .unwrap_err()
         .to_string();
     assert!(e.contains("'C' has no DNG colour code"), "{e}");
+    // UniqueCameraModel is ASCII
+    let mut named = meta.clone();
+    named.sensor = Some("caméra\0 2".into());
+    let d = decode_dng(
+        &encode_dng(&frame, &named, &DngWriteInfo::default()).unwrap(),
+        &lim(),
+    )
+    .unwrap();
+    assert_eq!(d.info.unique_camera_model.as_deref(), Some("cam?ra? 2"));
     assert_eq!(exif_light_source("d65"), Some(21));
     assert_eq!(exif_light_source("cct:3200"), None);
 }
