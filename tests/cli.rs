@@ -73,7 +73,7 @@ fn simulate_train_render_eval() {
     let info = dng.dng.unwrap();
     assert_eq!(info.plane_colors, "RGBW");
     assert_eq!(info.calibration_illuminants, [Some(3), None]);
-    assert!(info.as_shot_neutral.unwrap().iter().any(|&v| v == 1.0));
+    assert!(info.as_shot_neutral.unwrap().contains(&1.0));
     // same seed → same bytes
     let sim2 = d.join("sim2");
     let (ok, _, _) = l3(
