@@ -254,7 +254,8 @@ impl<'a> Tiff<'a> {
     }
 
     /// Unsigned integer values (BYTE, SHORT, LONG or IFD), at most `max` of them.
-    pub fn uints(&self, ifd: &Ifd, tag: u16, max: usize) -> IoResult<Option<Vec<u64>>> {
+    /// A tag's type and bytes, refused when it holds more than `max` values.
+    fn value_at_most(&self, ifd: &Ifd, tag: u16, max: usize) -> IoResult<Option<(u16, &'a [u8])>> {
         let Some((typ, count, b)) = self.value(ifd, tag)? else {
             return Ok(None);
         };
@@ -264,6 +265,13 @@ impl<'a> Tiff<'a> {
                 tag_name(tag)
             )));
         }
+        Ok(Some((typ, b)))
+    }
+
+    pub fn uints(&self, ifd: &Ifd, tag: u16, max: usize) -> IoResult<Option<Vec<u64>>> {
+        let Some((typ, b)) = self.value_at_most(ifd, tag, max)? else {
+            return Ok(None);
+        };
         let v = match typ {
             1 | 7 => b.iter().map(|&x| u64::from(x)).collect(),
             3 => b
@@ -298,15 +306,9 @@ impl<'a> Tiff<'a> {
     /// Numeric values of any numeric type as f64, at most `max` of them. Rationals with a
     /// zero denominator are an error.
     pub fn reals(&self, ifd: &Ifd, tag: u16, max: usize) -> IoResult<Option<Vec<f64>>> {
-        let Some((typ, count, b)) = self.value(ifd, tag)? else {
+        let Some((typ, b)) = self.value_at_most(ifd, tag, max)? else {
             return Ok(None);
         };
-        if count as usize > max {
-            return Err(dng_err(format!(
-                "{} has {count} values; at most {max} are accepted",
-                tag_name(tag)
-            )));
-        }
         let ratio = |n: f64, d: f64| -> IoResult<f64> {
             if d == 0.0 {
                 Err(dng_err(format!(
