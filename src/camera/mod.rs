@@ -14,6 +14,7 @@
 //! rates in electrons/s, frames in volts.
 
 mod cfa;
+mod colour_matrix;
 mod design;
 mod neutral;
 mod optics;

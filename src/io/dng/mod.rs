@@ -21,7 +21,7 @@ mod read;
 use std::io::Cursor;
 use std::path::Path;
 
-use tiff::encoder::{Rational, TiffEncoder};
+use tiff::encoder::{Rational, SRational, TiffEncoder};
 use tiff::tags::Tag;
 
 use super::atomic::write_bytes_atomic;
@@ -154,6 +154,9 @@ pub struct DngWriteInfo {
     pub as_shot_neutral: Option<Vec<(String, f64)>>,
     /// CalibrationIlluminant1, an EXIF LightSource code (see [`exif_light_source`]).
     pub calibration_illuminant: Option<u16>,
+    /// ColorMatrix1: per channel letter (any order), the row mapping XYZ to that channel's
+    /// response under the scene light; written in CFAPlaneColor order.
+    pub color_matrix: Option<Vec<(String, [f64; 3])>>,
 }
 
 /// The EXIF LightSource code of a standard illuminant name, for CalibrationIlluminant:
@@ -247,6 +250,33 @@ pub fn encode_dng(frame: &RawFrame, meta: &RawMeta, info: &DngWriteInfo) -> IoRe
             )
         }
     };
+    let color_matrix = match &info.color_matrix {
+        None => None,
+        Some(m) => {
+            let mut v = Vec::with_capacity(3 * planes.len());
+            for p in &planes {
+                let row = m
+                    .iter()
+                    .find(|(name, _)| name.len() == 1 && name.starts_with(*p))
+                    .map(|(_, r)| *r)
+                    .ok_or_else(|| {
+                        IoError::InvalidMeta(format!("ColorMatrix1 has no row for {p}"))
+                    })?;
+                for x in row {
+                    if !(x.is_finite() && x.abs() < 1e4) {
+                        return Err(IoError::InvalidMeta(format!(
+                            "ColorMatrix1 row {p} holds {x}; finite values below 1e4 are expected"
+                        )));
+                    }
+                    v.push(SRational {
+                        n: (x * 1e4).round() as i32,
+                        d: 10_000,
+                    });
+                }
+            }
+            Some(v)
+        }
+    };
     // an ASCII tag: other characters become '?'
     let model: String = info
         .camera_model
@@ -303,6 +333,9 @@ pub fn encode_dng(frame: &RawFrame, meta: &RawMeta, info: &DngWriteInfo) -> IoRe
         put(dir.write_tag(t(50717), u32::from(meta.white_level)))?;
         if let Some(n) = &neutral {
             put(dir.write_tag(t(50728), &n[..]))?;
+        }
+        if let Some(m) = &color_matrix {
+            put(dir.write_tag(t(50721), &m[..]))?;
         }
         if let Some(code) = info.calibration_illuminant {
             put(dir.write_tag(t(50778), code))?;

@@ -552,6 +552,12 @@ fn written_dng_reads_back() {
             ("B".into(), 0.24),
         ]),
         calibration_illuminant: exif_light_source("Tungsten"),
+        color_matrix: Some(vec![
+            ("W".into(), [0.5, 0.75, 0.25]),
+            ("R".into(), [1.0, -0.25, 0.0]),
+            ("B".into(), [0.0, 0.125, 0.5]),
+            ("G".into(), [-0.5, 1.0, 0.0625]),
+        ]),
     };
     let bytes = encode_dng(&frame, &meta, &info).unwrap();
     assert!(is_dng(&bytes));
@@ -564,6 +570,13 @@ fn written_dng_reads_back() {
     assert_eq!(d.info.plane_colors, "RGBW");
     assert_eq!(d.info.as_shot_neutral, Some(vec![0.25, 0.5, 0.2, 1.0]));
     assert_eq!(d.info.calibration_illuminants, [Some(3), None]);
+    // ColorMatrix1 in CFAPlaneColor order (R, G, B, W), signed
+    assert_eq!(
+        d.info.color_matrices[0],
+        Some(vec![
+            1.0, -0.25, 0.0, -0.5, 1.0, 0.0625, 0.0, 0.125, 0.5, 0.5, 0.75, 0.25
+        ])
+    );
     assert_eq!(d.info.unique_camera_model.as_deref(), Some("rgbw-paper"));
     assert_eq!(d.info.version, [1, 4, 0, 0]);
     assert_eq!(d.raw_meta(1.8), {
