@@ -203,6 +203,22 @@ async fn render_of_a_tungsten_frame_equals_l3_render_bit_for_bit() {
         / (w * h) as f64;
     eprintln!("DNG metadata illuminant {ill}: mean ΔE2000 {de:.3} from the Tungsten render");
     assert!(de < 1.0, "{ill}: mean ΔE2000 {de}");
+    // no illuminant and no metadata: estimated from the frame's brightest tiles (the chart's
+    // white), as a colour temperature near tungsten's 3187 K
+    let r = c
+        .post(url(&server, q.trim_end_matches("&illuminant=Tungsten")))
+        .header("content-type", "application/octet-stream")
+        .header("accept", "image/tiff")
+        .body(raw.clone())
+        .send()
+        .await
+        .unwrap();
+    assert_eq!(r.status(), 200);
+    assert_eq!(r.headers()["x-l3-illuminant-source"], "estimated");
+    let est = r.headers()["x-l3-illuminant"].to_str().unwrap().to_owned();
+    let k: f64 = est.strip_prefix("cct:").unwrap().parse().unwrap();
+    eprintln!("estimated illuminant {est} for a tungsten (3187 K) Macbeth frame");
+    assert!((2800.0..3600.0).contains(&k), "{est}");
     // the query's levels and the query's illuminant win; a Bayer DNG is refused by name
     let r = post_dng("/v1/render?illuminant=D65", dng.clone())
         .await

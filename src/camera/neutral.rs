@@ -33,9 +33,19 @@ impl Camera {
     /// Noise-free responses of every channel (CFA channel order) to a perfect white diffuser
     /// under `illuminant`, in volts per unit radiance scale and exposure.
     pub fn white_response(&self, illuminant: &Samples) -> Result<Vec<f64>, CameraError> {
-        let spd = illuminant.resample(self.grid(), Extrapolation::Zero);
         let white = Spectrum::constant(*self.grid(), 1.0);
-        Ok(self.reflectance_response(&white, &spd)?.0)
+        self.surface_response(&white, illuminant)
+    }
+
+    /// Noise-free responses of every channel to `surface` (on the camera's grid) under
+    /// `illuminant`.
+    pub fn surface_response(
+        &self,
+        surface: &Spectrum,
+        illuminant: &Samples,
+    ) -> Result<Vec<f64>, CameraError> {
+        let spd = illuminant.resample(self.grid(), Extrapolation::Zero);
+        Ok(self.reflectance_response(surface, &spd)?.0)
     }
 
     /// [`white_response`](Self::white_response) divided by its largest value: what a DNG
@@ -62,6 +72,17 @@ impl Camera {
     /// squares fit of the log channel ratios, scale removed. `neutral` gives a positive value
     /// for every channel of the camera, by name (case-insensitive); other names are ignored.
     pub fn cct_from_neutral(&self, neutral: &[(String, f64)]) -> Result<NeutralMatch, CameraError> {
+        self.cct_from_surface(neutral, &Spectrum::constant(*self.grid(), 1.0))
+    }
+
+    /// As [`cct_from_neutral`](Self::cct_from_neutral), for channel responses to `surface`
+    /// (on the camera's grid) rather than to white: e.g. a scene's mean, matched against the
+    /// mean of natural surfaces.
+    pub fn cct_from_surface(
+        &self,
+        neutral: &[(String, f64)],
+        surface: &Spectrum,
+    ) -> Result<NeutralMatch, CameraError> {
         let names = &self.cfa().channel_names;
         let mut log_n = Vec::with_capacity(names.len());
         for name in names {
@@ -88,7 +109,7 @@ impl Camera {
         }
         let cost = |mired: f64| -> Result<f64, CameraError> {
             let spd = IlluminantSpec::Cct(1e6 / mired).resolve(None)?.spd;
-            let r = self.white_response(&spd)?;
+            let r = self.surface_response(surface, &spd)?;
             let d: Vec<f64> = log_n
                 .iter()
                 .zip(&r)

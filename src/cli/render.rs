@@ -54,6 +54,16 @@ pub struct MosaicInput {
     pub neutral: Option<Vec<(String, f64)>>,
 }
 
+impl MosaicInput {
+    /// What the file says about its light.
+    pub fn frame_metadata(&self) -> crate::l3::FrameMetadata<'_> {
+        crate::l3::FrameMetadata {
+            illuminant: self.illuminant.as_deref(),
+            neutral: self.neutral.as_deref(),
+        }
+    }
+}
+
 /// The input mosaic in volts: integer frames are scaled by their sidecar's (or DNG's)
 /// black/white levels (default 0/65535) to the table's swing; float frames are taken as
 /// volts. With what the file says about the capture.
@@ -108,14 +118,18 @@ pub fn run(cli: &Cli, a: &RenderArgs) -> Result<(), CliError> {
             a.input.display()
         )));
     }
-    let (spec, source) = match (&a.illuminant, &input.illuminant, &input.neutral) {
-        (Some(s), _, _) => (s.clone(), "--illuminant"),
-        (None, Some(s), _) => (s.clone(), "the sidecar"),
-        (None, None, Some(n)) => (
-            table.illuminant_from_neutral(n, iset.as_ref())?.spec(),
-            "the DNG's AsShotNeutral",
-        ),
-        (None, None, None) => ("D65".to_string(), "the default"),
+    let (spec, source) = match &a.illuminant {
+        Some(s) => (s.clone(), "--illuminant"),
+        None => {
+            let (spec, source) = table.frame_illuminant(
+                input.frame_metadata(),
+                &crate::l3::Mosaic::Volts(&input.volts),
+                input.width,
+                input.height,
+                iset.as_ref(),
+            )?;
+            (spec, source.describe())
+        }
     };
     let (volts, w, h) = (input.volts, input.width, input.height);
     let mut registry = IlluminantRegistry::with_defaults(table.meta.grid, iset.as_ref())?;

@@ -7,6 +7,7 @@ mod classify;
 mod colour_map;
 mod correction;
 mod fast;
+mod illuminant_estimate;
 mod normal_eq;
 mod output;
 mod params;
@@ -24,6 +25,10 @@ pub use correction::{
     correction_matrix, default_reflectances,
 };
 pub use fast::{FastOptions, FastRenderer, Frame, Mosaic, Region};
+pub use illuminant_estimate::{
+    BRIGHT_FRACTION, CLIP_FRACTION, FrameMetadata, IlluminantEstimate, IlluminantSource, MIN_TILES,
+    NeutralStatistic, frame_neutral,
+};
 pub use normal_eq::{ChannelSumConstraint, ClassSolution, Gram, RidgeChoice, solve, solve_with};
 pub use output::{
     WHITE_GRID, WhiteLevel, white_from_samples, white_sample_points, white_y, xyz_to_srgb8,

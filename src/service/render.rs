@@ -3,8 +3,10 @@
 //! statistics in headers. The result equals `l3 render` on the same input bit for bit.
 //!
 //! The illuminant comes from the query; without one, from a DNG's AsShotNeutral (matched to
-//! a colour temperature through the table's sensor), else D65. `x-l3-illuminant-source`
-//! says which: `query`, `metadata` or `default`.
+//! a colour temperature through the table's sensor), else estimated from the frame's
+//! brightest unclipped CFA tiles (matched the same way), else (a frame with too little
+//! unclipped signal) D65. `x-l3-illuminant-source` says which: `query`, `metadata`,
+//! `estimated` or `default`.
 
 use std::sync::{Arc, Mutex};
 use std::time::Instant;
@@ -25,7 +27,7 @@ use crate::io::{
     DecodedMosaic, Limits, PngCompression, decode_mosaic_with_meta, decode_raw_u16_le,
     encode_png_rgb8, encode_ppm_rgb8, encode_tiff_f32_rgb, encode_tiff_rgb16, ppm_header,
 };
-use crate::l3::{Mosaic, Region, WhiteLevel, xyz_to_srgb8, xyz_to_srgb16};
+use crate::l3::{FrameMetadata, Mosaic, Region, WhiteLevel, xyz_to_srgb8, xyz_to_srgb16};
 
 /// Query parameters of a render.
 #[derive(Debug, Default, Deserialize)]
@@ -511,21 +513,6 @@ pub async fn render(
             if white_dn <= black {
                 return Err(bad_levels(black, white_dn));
             }
-            let (entry, source) = match (query_entry, neutral) {
-                (Some(e), _) => (e, "query"),
-                (None, Some(n)) => {
-                    let m = active
-                        .table
-                        .illuminant_from_neutral(&n, st.iset.as_ref())
-                        .map_err(|e| {
-                            ServiceError::Unprocessable(format!(
-                                "the illuminant cannot be taken from the DNG's AsShotNeutral ({e}); name one with illuminant="
-                            ))
-                        })?;
-                    (st.resolve_illuminant(&m.spec())?, "metadata")
-                }
-                (None, None) => (st.resolve_illuminant("D65")?, "default"),
-            };
             let mosaic = match &input {
                 Input::Dn(d) => Mosaic::Dn {
                     data: d,
@@ -533,6 +520,24 @@ pub async fn render(
                     white: white_dn,
                 },
                 Input::Volts(v) => Mosaic::Volts(v),
+            };
+            let (entry, source) = match query_entry {
+                Some(e) => (e, "query"),
+                None => {
+                    let metadata = FrameMetadata {
+                        illuminant: None,
+                        neutral: neutral.as_deref(),
+                    };
+                    let (spec, source) = active
+                        .table
+                        .frame_illuminant(metadata, &mosaic, w, h, st.iset.as_ref())
+                        .map_err(|e| {
+                            ServiceError::Unprocessable(format!(
+                                "the illuminant cannot be taken from the DNG's AsShotNeutral ({e}); name one with illuminant="
+                            ))
+                        })?;
+                    (st.resolve_illuminant(&spec)?, source.name())
+                }
             };
             let region = q
                 .region
