@@ -293,6 +293,88 @@ fn simulate_train_render_eval() {
         d,
     );
     assert!(!ok && err.contains("captures"), "{err}");
+
+    // a captured chart frame: the simulated chart written by `l3 simulate` scores as the
+    // chart eval simulates itself (the same seed; u16 quantisation apart), with the light
+    // from --illuminant, the sidecar, the DNG's AsShotNeutral or an estimate from the pixels
+    let chart = d.join("chart");
+    let (ok, out, err) = l3(
+        &[
+            "simulate",
+            "--scene",
+            "natural100",
+            "--illuminant",
+            "Tungsten",
+            "--seed",
+            "7",
+            "--out",
+            chart.to_str().unwrap(),
+        ],
+        d,
+    );
+    assert!(ok, "simulate natural100 failed: {out}{err}");
+    std::fs::create_dir(d.join("bare")).unwrap();
+    std::fs::copy(chart.join("mosaic.png"), d.join("bare/mosaic.png")).unwrap();
+    let frame_eval = |frame: &std::path::Path, extra: &[&str], expect: &str| {
+        let path = d.join("frame.json");
+        let mut args = vec![
+            "eval",
+            "--table",
+            table.to_str().unwrap(),
+            "--frame",
+            frame.to_str().unwrap(),
+            "--out",
+            path.to_str().unwrap(),
+        ];
+        args.extend(extra);
+        let (ok, out, err) = l3(&args, d);
+        assert!(ok, "eval --frame {} failed: {out}{err}", frame.display());
+        assert!(out.contains(expect), "{expect}: {out}");
+        let v: serde_json::Value = serde_json::from_slice(&std::fs::read(&path).unwrap()).unwrap();
+        v["summary"]["mean"].as_f64().unwrap()
+    };
+    let named = frame_eval(
+        &chart.join("mosaic.raw"),
+        &["--illuminant", "Tungsten"],
+        "(from --illuminant)",
+    );
+    assert!((named - mean).abs() < 0.05, "{named} vs {mean}");
+    let sidecar = frame_eval(
+        &chart.join("mosaic.raw"),
+        &[],
+        "Tungsten (from the frame's metadata)",
+    );
+    assert_eq!(sidecar, named);
+    let neutral = frame_eval(&chart.join("mosaic.dng"), &[], "cct:");
+    assert!(
+        (neutral - named).abs() < 0.5,
+        "AsShotNeutral {neutral} vs {named}"
+    );
+    let estimated = frame_eval(
+        &d.join("bare/mosaic.png"),
+        &[],
+        "(from an estimate from the frame)",
+    );
+    assert!(
+        (estimated - named).abs() < 1.0,
+        "estimated {estimated} vs {named}"
+    );
+    let (ok, _, err) = l3(
+        &[
+            "eval",
+            "--table",
+            table.to_str().unwrap(),
+            "--frame",
+            chart.join("mosaic.raw").to_str().unwrap(),
+            "--patch-px",
+            "30",
+        ],
+        d,
+    );
+    assert!(
+        !ok && err.contains("Natural-100 chart with 30 px patches"),
+        "{err}"
+    );
 }
 
 #[test]

@@ -22,9 +22,17 @@ pub struct EvalArgs {
     /// `l3` (the table) or `baseline` (bilinear + colour matrix fitted under D65).
     #[arg(long, default_value = "l3")]
     pub method: String,
-    /// Acquisition illuminant(s); comma-separated with --paper-table.
-    #[arg(long, default_value = "Tungsten", value_delimiter = ',')]
+    /// Acquisition illuminant(s); comma-separated with --paper-table. Default:
+    /// Tungsten (Tungsten and Fluorescent with --paper-table; with --frame, the
+    /// frame's metadata or an estimate from its pixels).
+    #[arg(long, value_delimiter = ',')]
     pub illuminant: Vec<String>,
+    /// Evaluate a captured frame of the Natural-100 chart instead of simulating
+    /// one: `l3 simulate --scene natural100`'s mosaic.raw (with its sidecar),
+    /// mosaic.dng, or any mosaic file `l3 render` reads, at the chart's size
+    /// for --patch-px. Needs --table.
+    #[arg(long, conflicts_with_all = ["paper_table", "captures", "estimate_illuminant"])]
+    pub frame: Option<PathBuf>,
     /// Sensor design TOML (default: the paper's RGBW sensor). With
     /// --paper-table, repeat it (or give a comma-separated list) to run the
     /// table on several sensors in one go.
@@ -54,6 +62,13 @@ pub struct EvalArgs {
     /// bias) and the noise-free chart. 2–64; not with --paper-table.
     #[arg(long, value_parser = clap::value_parser!(u16).range(2..=64), conflicts_with = "paper_table")]
     pub captures: Option<u16>,
+    /// Study the light taken from a frame with `--table` (an SI table): under A,
+    /// Tungsten, D50, D65, F2, F11 and 2700–10000 K, the colour temperature from
+    /// metadata (the camera's white, as a DNG's AsShotNeutral) and estimated from
+    /// the chart's and a dead-leaves texture's pixels, with the chart's ΔE2000
+    /// for each.
+    #[arg(long, conflicts_with_all = ["paper_table", "captures"])]
+    pub estimate_illuminant: bool,
     /// Training scenes per table (with --paper-table).
     #[arg(long, default_value_t = 48)]
     pub scenes: usize,
@@ -89,10 +104,17 @@ pub fn run(cli: &Cli, a: &EvalArgs) -> Result<(), CliError> {
     if a.paper_table {
         return run_paper_tables(a, iset.as_ref(), chart);
     }
+    if a.estimate_illuminant {
+        return run_estimation_study(a, iset.as_ref(), &chart);
+    }
     if a.sensor.len() > 1 {
         return Err(CliError::Usage(
             "several --sensor files are for --paper-table; evaluate one sensor at a time".into(),
         ));
+    }
+    if let Some(frame) = &a.frame {
+        let report = evaluate_frame(a, frame, iset.as_ref(), &chart)?;
+        return print_and_write(a, &report);
     }
     let design = load_sensor(&a.sensor.first().cloned(), iset.as_ref())?;
     let acq = a
@@ -154,6 +176,77 @@ pub fn run(cli: &Cli, a: &EvalArgs) -> Result<(), CliError> {
             )));
         }
     };
+    print_and_write(a, &report)
+}
+
+/// `--frame`: a captured chart frame rendered with `--table` under the light named by
+/// `--illuminant`, else the frame's metadata, else an estimate from its pixels.
+fn evaluate_frame(
+    a: &EvalArgs,
+    frame: &std::path::Path,
+    iset: Option<&crate::spectral::IsetData>,
+    chart: &ChartSetup,
+) -> Result<crate::eval::DeltaEReport, CliError> {
+    let path = a
+        .table
+        .as_ref()
+        .ok_or_else(|| CliError::Usage("--frame needs --table".into()))?;
+    let table = L3Table::load(path)?;
+    let input = super::render::load_mosaic(frame, table.meta.voltage_swing)?;
+    let table_cfa = table.meta.cfa.to_string();
+    if let Some(cfa) = &input.dng_cfa
+        && !cfa.eq_ignore_ascii_case(&table_cfa)
+    {
+        return Err(CliError::Usage(format!(
+            "{}: the DNG's CFA '{cfa}' does not match the table's CFA '{table_cfa}'",
+            frame.display()
+        )));
+    }
+    let (spec, source) = match a.illuminant.first() {
+        Some(s) => (s.clone(), "--illuminant"),
+        None => {
+            let (spec, source) = table.frame_illuminant(
+                input.frame_metadata(),
+                &crate::l3::Mosaic::Volts(&input.volts),
+                input.width,
+                input.height,
+                iset,
+            )?;
+            (spec, source.describe())
+        }
+    };
+    let grid = table.meta.grid;
+    let design = match a.sensor.first() {
+        Some(p) => load_sensor(&Some(p.clone()), iset)?,
+        None => table.sensor_design()?,
+    };
+    let camera = Camera::new(&design, grid, iset)?;
+    let mut registry = IlluminantRegistry::with_defaults(grid, iset)?;
+    let corr = registry.resolve(&spec, iset)?;
+    println!("illuminant {} (from {source})", corr.name);
+    let cap = crate::eval::frame_chart_capture(
+        &camera,
+        input.volts,
+        input.width,
+        input.height,
+        &corr.name,
+        iset,
+        chart,
+    )?;
+    let name = format!(
+        "L3 {} ({})",
+        table.meta.kind,
+        table.meta.train_illuminants.join("+")
+    );
+    let mut report =
+        crate::eval::evaluate_capture(&camera, &cap, &Method::Table(&table), &name, &corr, chart)?;
+    report.context["frame"] = serde_json::json!(frame.display().to_string());
+    report.context["illuminant_source"] = serde_json::json!(source);
+    Ok(report)
+}
+
+/// Print a report's summary line and write its JSON and SVG figure.
+fn print_and_write(a: &EvalArgs, report: &crate::eval::DeltaEReport) -> Result<(), CliError> {
     let s = &report.summary;
     println!(
         "{} on {} under {}: mean ΔE2000 {:.2} (std {:.2}), median {:.2}, p90 {:.2}, max {:.2}; per-pixel mean {:.2}",
@@ -172,14 +265,41 @@ pub fn run(cli: &Cli, a: &EvalArgs) -> Result<(), CliError> {
     } else {
         a.out.join("report.json")
     };
-    let json = serde_json::to_vec_pretty(&report).map_err(|e| CliError::Usage(e.to_string()))?;
+    let json = serde_json::to_vec_pretty(report).map_err(|e| CliError::Usage(e.to_string()))?;
     write_file(&out, &json)?;
     println!("wrote {}", out.display());
     let svg = out.with_extension("svg");
     if svg != out {
-        write_file(&svg, crate::eval::report_svg(&report)?.as_bytes())?;
+        write_file(&svg, crate::eval::report_svg(report)?.as_bytes())?;
         println!("wrote {}", svg.display());
     }
+    Ok(())
+}
+
+/// `--estimate-illuminant`: the study, printed as markdown and written as JSON.
+fn run_estimation_study(
+    a: &EvalArgs,
+    iset: Option<&crate::spectral::IsetData>,
+    chart: &ChartSetup,
+) -> Result<(), CliError> {
+    let path = a.table.as_ref().ok_or_else(|| {
+        CliError::Usage("--estimate-illuminant needs --table (a same-illuminant table)".into())
+    })?;
+    let table = L3Table::load(path)?;
+    let lights: Vec<String> = crate::eval::STUDY_LIGHTS
+        .iter()
+        .map(|s| s.to_string())
+        .collect();
+    let rows = crate::eval::illuminant_estimation_study(&table, &lights, iset, chart)?;
+    println!("{}", crate::eval::estimation_markdown(&rows));
+    let out = if a.out.extension().is_some() {
+        a.out.clone()
+    } else {
+        a.out.join("illuminant_estimation.json")
+    };
+    let json = serde_json::to_vec_pretty(&rows).map_err(|e| CliError::Usage(e.to_string()))?;
+    write_file(&out, &json)?;
+    println!("wrote {}", out.display());
     Ok(())
 }
 
@@ -196,7 +316,7 @@ fn run_paper_tables(
         a.sensor.iter().cloned().map(Some).collect()
     };
     let opts = PaperOptions {
-        acquisitions: if a.illuminant == ["Tungsten"] {
+        acquisitions: if a.illuminant.is_empty() {
             vec!["Tungsten".into(), "Fluorescent".into()]
         } else {
             a.illuminant.clone()

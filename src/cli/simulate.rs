@@ -9,7 +9,7 @@ use crate::io::{
     write_png_gray16, write_png_rgb8, write_raw, write_tiff_f32_rgb,
 };
 use crate::l3::{WhiteLevel, white_y, xyz_to_srgb8};
-use crate::scene::{SceneKind, SceneOptions};
+use crate::scene::{SceneKind, SceneOptions, training_reflectances};
 use crate::spectral::{IlluminantSpec, WavelengthGrid};
 
 #[derive(Args, Debug)]
@@ -104,6 +104,23 @@ pub fn run(cli: &Cli, a: &SimulateArgs) -> Result<(), CliError> {
         camera_model: Some(design.name.clone()),
         as_shot_neutral: Some(camera.white_neutral(&named.spd)?),
         calibration_illuminant: exif_light_source(&named.name),
+        color_matrix: Some(
+            camera
+                .cfa()
+                .channel_names
+                .iter()
+                .cloned()
+                .zip(
+                    camera.xyz_to_camera_matrix(
+                        &named.spd,
+                        &training_reflectances(&grid, iset.as_ref())?
+                            .into_iter()
+                            .map(|(_, s)| s)
+                            .collect::<Vec<_>>(),
+                    )?,
+                )
+                .collect(),
+        ),
     };
     let dng_note = match write_dng(&a.out.join("mosaic.dng"), &frame, &meta, &dng) {
         Ok(()) => "mosaic.dng, ".to_string(),

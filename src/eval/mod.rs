@@ -3,6 +3,7 @@
 
 mod budget;
 mod figure;
+mod illuminant_estimation;
 mod noise_split;
 mod paper_table;
 mod report;
@@ -10,6 +11,9 @@ mod workflow;
 
 pub use budget::{ErrorBudget, error_budget};
 pub use figure::report_svg;
+pub use illuminant_estimation::{
+    EstimateResult, EstimationRow, STUDY_LIGHTS, estimation_markdown, illuminant_estimation_study,
+};
 pub use noise_split::{MAX_CAPTURES, MIN_CAPTURES, NoiseSplit, averaged_patch_means, noise_split};
 pub use paper_table::{
     BaselineComparison, BaselineFamily, ExposurePoint, PAPER_TABLE1, PaperOptions, PaperRow,
@@ -22,7 +26,7 @@ pub use report::{
 pub use workflow::{
     ChannelSet, ChartCapture, ChartSetup, ColourFit, LightLevel, Method, REFERENCE_LUMINANCE,
     chart_scene, evaluate_capture, evaluate_method, fit_baseline_matrix, fit_colour_matrix,
-    linear_table, matching_linear_map, render_method, simulate_chart,
+    frame_chart_capture, linear_table, matching_linear_map, render_method, simulate_chart,
 };
 
 /// Errors of the evaluation layer.

@@ -188,13 +188,7 @@ pub fn simulate_chart(
     )
     .map_err(invalid)?;
     let (height, width) = cap.volts.dim();
-    let d65 = cie_illuminant("D65")
-        .ok_or_else(|| EvalError::Invalid("D65 missing".into()))?
-        .resample(camera.grid(), Extrapolation::Zero);
-    let optical = camera.optical_image(&scene).map_err(invalid)?;
-    let ideal_img = camera.xyz_rates(&optical, &d65).map_err(invalid)?;
-    let ideal_d65 =
-        super::report::patch_means(&scene.patches, ideal_img.as_slice().unwrap_or(&[]), width);
+    let ideal_d65 = ideal_d65_patch_means(camera, &scene)?;
     Ok(ChartCapture {
         scene,
         acquisition: acq_name,
@@ -202,6 +196,58 @@ pub fn simulate_chart(
         width,
         height,
         exposure_s: cap.exposure_s,
+        ideal_d65,
+    })
+}
+
+/// Per patch of `scene`: the noise-free XYZ of its optical image relit by D65, averaged over
+/// the patch interior.
+fn ideal_d65_patch_means(
+    camera: &Camera,
+    scene: &Scene,
+) -> Result<Vec<crate::colour::Xyz>, EvalError> {
+    let invalid = |e: crate::camera::CameraError| EvalError::Invalid(e.to_string());
+    let d65 = cie_illuminant("D65")
+        .ok_or_else(|| EvalError::Invalid("D65 missing".into()))?
+        .resample(camera.grid(), Extrapolation::Zero);
+    let optical = camera.optical_image(scene).map_err(invalid)?;
+    let ideal_img = camera.xyz_rates(&optical, &d65).map_err(invalid)?;
+    Ok(super::report::patch_means(
+        &scene.patches,
+        ideal_img.as_slice().unwrap_or(&[]),
+        scene.cols(),
+    ))
+}
+
+/// A captured frame of the evaluation chart (e.g. `l3 simulate --scene natural100`'s mosaic,
+/// read from its `.raw` or DNG) in volts, with the truth of the chart `setup` lays out. The
+/// frame must have the chart's size. `acquisition` only labels the report.
+pub fn frame_chart_capture(
+    camera: &Camera,
+    volts: Vec<f32>,
+    width: usize,
+    height: usize,
+    acquisition: &str,
+    iset: Option<&IsetData>,
+    setup: &ChartSetup,
+) -> Result<ChartCapture, EvalError> {
+    let (scene, _) = chart_scene(camera, "D65", iset, setup)?;
+    if (scene.cols(), scene.rows()) != (width, height) || volts.len() != width * height {
+        return Err(EvalError::Invalid(format!(
+            "the frame is {width}×{height} but the Natural-100 chart with {} px patches is {}×{} (simulate it with `l3 simulate --scene natural100`)",
+            setup.patch_px,
+            scene.cols(),
+            scene.rows()
+        )));
+    }
+    let ideal_d65 = ideal_d65_patch_means(camera, &scene)?;
+    Ok(ChartCapture {
+        scene,
+        acquisition: acquisition.to_string(),
+        volts,
+        width,
+        height,
+        exposure_s: f64::NAN,
         ideal_d65,
     })
 }
