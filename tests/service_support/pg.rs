@@ -204,20 +204,22 @@ pub fn test_database_url(data: &Path) -> Option<String> {
         // hand the server to a watchdog that outlives this process
         let dir = server.dir.path().to_path_buf();
         let stop = format!(
-            "while kill -0 {pid} 2>/dev/null; do sleep 1; done; {runas} '{pg_ctl}' -D '{data}' -m immediate -w stop >/dev/null 2>&1; rm -rf '{dir}'",
+            "(while kill -0 {pid} 2>/dev/null; do sleep 1; done; {runas} '{pg_ctl}' -D '{data}' -m immediate -w stop; rm -rf '{dir}') >/dev/null 2>&1 &",
             pid = std::process::id(),
             runas = if server.as_postgres { "runuser -u postgres --" } else { "" },
             pg_ctl = bin.join("pg_ctl").display(),
             data = server.data_dir().display(),
             dir = dir.display(),
         );
-        Command::new("sh")
+        // the shell starts the watchdog in the background and returns
+        let started = Command::new("sh")
             .args(["-c", &stop])
             .stdin(Stdio::null())
             .stdout(Stdio::null())
             .stderr(Stdio::null())
-            .spawn()
-            .expect("spawn the PostgreSQL watchdog");
+            .status()
+            .expect("start the PostgreSQL watchdog");
+        assert!(started.success(), "the PostgreSQL watchdog did not start");
         // the watchdog owns the server and its directory now
         std::mem::forget(server);
         (port, bin)
