@@ -3,7 +3,8 @@
 //! exactly once on either replica; kill -9 of the replica running a job and the other takes
 //! it over after the lease; an activation through one replica is used by a render on the
 //! other within a second; an illuminant PUT on one resolves on the other; 20 jobs submitted to
-//! both at once each run exactly once; the default table is trained once per cluster.
+//! both at once each run exactly once; the default table is trained once per cluster, and a
+//! replica caches table bytes from the database (a damaged cache file is fetched again).
 
 mod service_support;
 
@@ -490,4 +491,24 @@ async fn the_default_table_is_trained_once_per_cluster() {
     assert_eq!(c.ready_table().await.as_deref(), Some(t.as_str()));
     let (_, v) = c.get("/v1/training-jobs").await;
     assert_eq!(v["items"].as_array().unwrap().len(), 1, "{v}");
+    // C read the table's bytes from the database and cached them under its id, checked
+    let (_, meta) = c.get(&format!("/v1/tables/{t}")).await;
+    let cached = std::fs::read(data.path().join(format!("c/tables/{t}.safetensors"))).unwrap();
+    assert_eq!(
+        l3::service::sha256_hex(&cached),
+        meta["sha256"].as_str().unwrap()
+    );
+    // a damaged cache file is fetched again, not reported corrupt
+    std::fs::write(
+        data.path().join(format!("c/tables/{t}.safetensors")),
+        b"damaged",
+    )
+    .unwrap();
+    let r = reqwest::get(c.url(&format!("/v1/tables/{t}/download")))
+        .await
+        .unwrap();
+    assert_eq!(r.status(), 200);
+    assert_eq!(r.bytes().await.unwrap().as_ref(), cached.as_slice());
+    let (_, meta) = c.get(&format!("/v1/tables/{t}")).await;
+    assert_eq!(meta["status"], "ok", "{meta}");
 }
