@@ -10,7 +10,7 @@ use std::time::{Duration, Instant};
 
 use super::ServiceError;
 use super::state::{AppState, new_id, now_ms, sha256_hex};
-use super::store::{JobEnd, JobRow, JobStatus, NewJob};
+use super::store::{JOB_KIND_TRAIN, JobEnd, JobRow, JobStatus, NewJob};
 use super::tables::{activate_table, insert_table, write_table_file_with_pause};
 use crate::camera::SensorDesign;
 use crate::l3::L3Error;
@@ -363,7 +363,12 @@ pub async fn worker(state: AppState) {
         }
         let claimed = state
             .store
-            .claim_job(&state.replica_id, now_ms(), lease_until(&state))
+            .claim_job(
+                JOB_KIND_TRAIN,
+                &state.replica_id,
+                now_ms(),
+                lease_until(&state),
+            )
             .await;
         match claimed {
             Ok(Some(job)) => run_job(&state, &job.id, &job.request_json).await,

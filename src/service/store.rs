@@ -71,11 +71,6 @@ impl JobStatus {
             JobStatus::Canceled => "canceled",
         }
     }
-
-    /// Queued or running.
-    pub fn is_pending(self) -> bool {
-        matches!(self, JobStatus::Queued | JobStatus::Running)
-    }
 }
 
 impl std::fmt::Display for JobStatus {
@@ -101,7 +96,8 @@ impl TryFrom<String> for JobStatus {
     }
 }
 
-/// The kind of a job row; only training today (a later "shard" kind is claimed the same way).
+/// The kind of a job row; only training today. Workers claim the kinds they run, so a later
+/// kind (e.g. training shards) is queued and claimed the same way.
 pub const JOB_KIND_TRAIN: &str = "train";
 
 /// A `training_jobs` row.
@@ -393,10 +389,12 @@ impl Store {
         Ok(n == 1)
     }
 
-    /// Claims the oldest queued job for `owner` under a lease until `lease_until`: `SELECT …
-    /// FOR UPDATE SKIP LOCKED` on PostgreSQL, one atomic UPDATE on SQLite (a single writer).
+    /// Claims the oldest queued job of `kind` for `owner` under a lease until `lease_until`:
+    /// `SELECT … FOR UPDATE SKIP LOCKED` on PostgreSQL, one atomic UPDATE on SQLite (a single
+    /// writer).
     pub async fn claim_job(
         &self,
+        kind: &str,
         owner: &str,
         now: i64,
         lease_until: i64,
@@ -407,7 +405,7 @@ impl Store {
                     "UPDATE training_jobs SET status = $1, stage = 'starting', progress = 0,
                      attempts = attempts + 1, started_at = $2, lease_owner = $3,
                      lease_expires_at = $4, heartbeat_at = $2
-                     WHERE id = (SELECT id FROM training_jobs WHERE status = $5
+                     WHERE id = (SELECT id FROM training_jobs WHERE status = $5 AND kind = $6
                                  ORDER BY created_at, id LIMIT 1 FOR UPDATE SKIP LOCKED)
                      RETURNING *",
                 )
@@ -416,6 +414,7 @@ impl Store {
                 .bind(owner)
                 .bind(lease_until)
                 .bind(JobStatus::Queued.as_str())
+                .bind(kind)
                 .fetch_optional(p)
                 .await?
             }
@@ -424,7 +423,8 @@ impl Store {
                     "UPDATE training_jobs SET status = $1, stage = 'starting', progress = 0,
                      attempts = attempts + 1, started_at = $2, lease_owner = $3,
                      lease_expires_at = $4, heartbeat_at = $2
-                     WHERE status = $5 AND id = (SELECT id FROM training_jobs WHERE status = $5
+                     WHERE status = $5 AND id = (SELECT id FROM training_jobs
+                                                 WHERE status = $5 AND kind = $6
                                                  ORDER BY created_at, id LIMIT 1)
                      RETURNING *",
                 )
@@ -433,6 +433,7 @@ impl Store {
                 .bind(owner)
                 .bind(lease_until)
                 .bind(JobStatus::Queued.as_str())
+                .bind(kind)
                 .fetch_optional(p)
                 .await?
             }
@@ -822,7 +823,6 @@ mod tests {
             assert_eq!(s.as_str().parse::<JobStatus>(), Ok(s));
         }
         assert!("done".parse::<JobStatus>().is_err());
-        assert!(JobStatus::Queued.is_pending() && !JobStatus::Failed.is_pending());
         for c in [Change::ActiveTable, Change::Illuminants, Change::Jobs] {
             assert_eq!(Change::parse(c.as_str()), Some(c));
         }
@@ -842,12 +842,21 @@ mod tests {
         };
         assert!(s.insert_job(&job("a", Some("k"))).await.unwrap());
         assert!(!s.insert_job(&job("b", Some("k"))).await.unwrap());
-        let c = s.claim_job("r1", 10, 20).await.unwrap().unwrap();
+        let c = s
+            .claim_job(JOB_KIND_TRAIN, "r1", 10, 20)
+            .await
+            .unwrap()
+            .unwrap();
         assert_eq!(
             (c.id.as_str(), c.status, c.attempts),
             ("a", JobStatus::Running, 1)
         );
-        assert!(s.claim_job("r2", 10, 20).await.unwrap().is_none());
+        assert!(
+            s.claim_job(JOB_KIND_TRAIN, "r2", 10, 20)
+                .await
+                .unwrap()
+                .is_none()
+        );
         assert_eq!(s.heartbeat("a", "r2", 11, 30, None).await.unwrap(), None);
         assert_eq!(
             s.heartbeat("a", "r1", 11, 30, None).await.unwrap(),
@@ -872,7 +881,11 @@ mod tests {
             Some("a".into())
         );
         assert_eq!(s.queue_once(&job("d", Some("k"))).await.unwrap(), None);
-        let c = s.claim_job("r2", 40, 50).await.unwrap().unwrap();
+        let c = s
+            .claim_job(JOB_KIND_TRAIN, "r2", 40, 50)
+            .await
+            .unwrap()
+            .unwrap();
         assert_eq!((c.attempts, c.cancel_requested), (2, 0));
         assert_eq!(s.requeue_expired(51).await.unwrap(), 1);
         assert_eq!(s.job("a").await.unwrap().unwrap().status, JobStatus::Queued);
