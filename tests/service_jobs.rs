@@ -255,27 +255,26 @@ async fn a_restart_resumes_a_running_and_a_queued_job() {
     server.shutdown().await.unwrap();
     // simulate a crash in the middle of job a: the database says it is still running
     {
-        let db = sqlx::SqlitePool::connect(&format!(
-            "sqlite://{}",
-            data.path().join("l3.sqlite").display()
-        ))
-        .await
-        .unwrap();
-        let st: String = sqlx::query_scalar("SELECT status FROM training_jobs WHERE id = $1")
-            .bind(&a)
-            .fetch_one(&db)
+        let cfg = test_config(data.path());
+        let store = l3::service::Store::connect(&cfg.data.database_url, data.path())
             .await
             .unwrap();
+        let job = store.job(&a).await.unwrap().unwrap();
         assert_eq!(
-            st, "queued",
+            job.status,
+            l3::service::JobStatus::Queued,
             "a graceful shutdown re-queues the running job"
         );
-        sqlx::query("UPDATE training_jobs SET status = 'running' WHERE id = $1")
-            .bind(&a)
-            .execute(&db)
-            .await
-            .unwrap();
-        db.close().await;
+        const CRASHED: &str = "UPDATE training_jobs SET status = 'running' WHERE id = $1";
+        match &store {
+            l3::service::Store::Sqlite(p) => {
+                sqlx::query(CRASHED).bind(&a).execute(p).await.unwrap();
+            }
+            l3::service::Store::Postgres(p) => {
+                sqlx::query(CRASHED).bind(&a).execute(p).await.unwrap();
+            }
+        }
+        store.close().await;
     }
     let server = l3::service::start(test_config(data.path())).await.unwrap();
     for id in [&a, &b] {

@@ -58,6 +58,10 @@ pub struct DataConfig {
     /// data alone is used.
     #[serde(default)]
     pub iset_dir: Option<PathBuf>,
+    /// The database: empty for the embedded SQLite file `l3.sqlite` in `dir`, else
+    /// `sqlite://…` or `postgres://…` (a PostgreSQL database replicas share).
+    #[serde(default)]
+    pub database_url: String,
 }
 
 /// `[training]`: the job runner and the default table.
@@ -70,9 +74,17 @@ pub struct TrainingConfig {
     /// the cores, at least one).
     #[serde(default)]
     pub background_threads: usize,
+    /// Seconds a replica holds a claimed job without a heartbeat; a job whose replica died
+    /// goes back to the queue after this.
+    #[serde(default = "default_lease_s")]
+    pub job_lease_s: f64,
     /// TrainingSpec fields of the default table (validated when used).
     #[serde(default)]
     pub default_spec: toml::Table,
+}
+
+fn default_lease_s() -> f64 {
+    30.0
 }
 
 fn merge(base: &mut toml::Table, over: toml::Table) {
@@ -138,6 +150,8 @@ impl ServiceConfig {
                 })?
             }
             "L3_DATA_DIR" => self.data.dir = PathBuf::from(value),
+            "L3_DATABASE_URL" => self.data.database_url = value.to_string(),
+            "L3_JOB_LEASE_S" => self.training.job_lease_s = num(key, value)?,
             "L3_ISET_DIR" => self.data.iset_dir = Some(PathBuf::from(value)),
             "L3_MAX_BODY_BYTES" => self.server.max_body_bytes = num(key, value)?,
             "L3_MAX_PIXELS" => self.server.max_pixels = num(key, value)?,
@@ -190,6 +204,10 @@ impl ServiceConfig {
         }
         if !["text", "json"].contains(&s.log_format.as_str()) {
             return Err(bad(format!("log_format {:?}: text or json", s.log_format)));
+        }
+        let lease = self.training.job_lease_s;
+        if !(lease.is_finite() && (0.5..=3600.0).contains(&lease)) {
+            return Err(bad(format!("job_lease_s {lease} (0.5 to 3600 seconds)")));
         }
         if self.training.max_concurrent_jobs == 0 {
             return Err(bad("max_concurrent_jobs must be at least 1".into()));

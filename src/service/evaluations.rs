@@ -9,10 +9,10 @@ use axum::http::{HeaderMap, HeaderValue, StatusCode, header};
 use axum::response::{IntoResponse, Response};
 use serde::Deserialize;
 use serde_json::{Value, json};
-use sqlx::Row;
 
 use super::ServiceError;
 use super::state::{AppState, new_id, now_ms};
+use super::store::EvaluationRow;
 use crate::camera::{Camera, SensorDesign};
 use crate::eval::{ChartSetup, LightLevel, Method, evaluate_method, fit_baseline_matrix};
 use crate::spectral::WavelengthGrid;
@@ -95,33 +95,29 @@ fn default_patch_px() -> usize {
     24
 }
 
-fn evaluation_json(row: &sqlx::sqlite::SqliteRow) -> Result<Value, ServiceError> {
-    let id: String = row.try_get("id")?;
-    let report: Value = serde_json::from_str(&row.try_get::<String, _>("report_json")?)
+fn evaluation_json(row: &EvaluationRow) -> Result<Value, ServiceError> {
+    let id = &row.id;
+    let report: Value = serde_json::from_str(&row.report_json)
         .map_err(|e| ServiceError::Internal(format!("stored report {id}: {e}")))?;
-    let request: Value =
-        serde_json::from_str(&row.try_get::<String, _>("request_json")?).unwrap_or(Value::Null);
+    let request: Value = serde_json::from_str(&row.request_json).unwrap_or(Value::Null);
     Ok(json!({
         "id": id,
-        "table_id": row.try_get::<Option<String>, _>("table_id")?,
-        "method": row.try_get::<String, _>("method")?,
-        "chart": row.try_get::<String, _>("chart")?,
-        "acquisition_illuminant": row.try_get::<String, _>("acquisition_illuminant")?,
-        "mean_delta_e": row.try_get::<f64, _>("mean_delta_e")?,
-        "created_at_ms": row.try_get::<i64, _>("created_at")?,
+        "table_id": row.table_id,
+        "method": row.method,
+        "chart": row.chart,
+        "acquisition_illuminant": row.acquisition_illuminant,
+        "mean_delta_e": row.mean_delta_e,
+        "created_at_ms": row.created_at,
         "request": request,
         "report": report,
         "links": { "self": format!("/v1/evaluations/{id}") },
     }))
 }
 
-async fn evaluation_row(
-    state: &AppState,
-    id: &str,
-) -> Result<sqlx::sqlite::SqliteRow, ServiceError> {
-    sqlx::query("SELECT * FROM evaluations WHERE id = $1")
-        .bind(id)
-        .fetch_optional(&state.db)
+async fn evaluation_row(state: &AppState, id: &str) -> Result<EvaluationRow, ServiceError> {
+    state
+        .store
+        .evaluation(id)
         .await?
         .ok_or_else(|| ServiceError::NotFound(format!("no evaluation with id '{id}'")))
 }
@@ -269,22 +265,18 @@ pub async fn create(
     let report_json = serde_json::to_string(&report)
         .map_err(|e| ServiceError::Internal(format!("report: {e}")))?;
     let request_json = String::from_utf8_lossy(&body).to_string();
-    sqlx::query(
-        "INSERT INTO evaluations (id, table_id, method, chart, acquisition_illuminant, mean_delta_e, request_json, report_json, created_at)
-         VALUES ($1, $2, $3, $4, $5, $6, $7, $8, $9)",
-    )
-    .bind(&id)
-    .bind(&table_id)
-    .bind(&req.method)
-    .bind(&req.chart)
-    .bind(&req.acquisition_illuminant)
-    .bind(report.summary.mean)
-    .bind(request_json)
-    .bind(report_json)
-    .bind(now_ms())
-    .execute(&state.db)
-    .await?;
-    let row = evaluation_row(&state, &id).await?;
+    let row = EvaluationRow {
+        id: id.clone(),
+        table_id: table_id.clone(),
+        method: req.method.clone(),
+        chart: req.chart.clone(),
+        acquisition_illuminant: req.acquisition_illuminant.clone(),
+        mean_delta_e: report.summary.mean,
+        request_json,
+        report_json,
+        created_at: now_ms(),
+    };
+    state.store.insert_evaluation(&row).await?;
     let mut resp = (StatusCode::CREATED, Json(evaluation_json(&row)?)).into_response();
     if let Ok(v) = HeaderValue::from_str(&format!("/v1/evaluations/{id}")) {
         resp.headers_mut().insert(header::LOCATION, v);
@@ -294,9 +286,7 @@ pub async fn create(
 
 /// `GET /v1/evaluations`
 pub async fn list(State(state): State<AppState>) -> Result<Json<Value>, ServiceError> {
-    let rows = sqlx::query("SELECT * FROM evaluations ORDER BY created_at DESC, id LIMIT 1000")
-        .fetch_all(&state.db)
-        .await?;
+    let rows = state.store.evaluations().await?;
     let items = rows
         .iter()
         .map(|r| {
@@ -357,9 +347,8 @@ pub async fn get(
     let mut resp = match format {
         EvaluationFormat::Json => Json(evaluation_json(&row)?).into_response(),
         EvaluationFormat::Svg => {
-            let report: crate::eval::DeltaEReport =
-                serde_json::from_str(&row.try_get::<String, _>("report_json")?)
-                    .map_err(|e| ServiceError::Internal(format!("stored report {id}: {e}")))?;
+            let report: crate::eval::DeltaEReport = serde_json::from_str(&row.report_json)
+                .map_err(|e| ServiceError::Internal(format!("stored report {id}: {e}")))?;
             let svg = crate::eval::report_svg(&report)
                 .map_err(|e| ServiceError::Internal(format!("figure of evaluation {id}: {e}")))?;
             svg.into_response()

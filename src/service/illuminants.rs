@@ -1,4 +1,5 @@
-//! Illuminants: the registry of corrections T (built-ins plus the user's, persisted).
+//! Illuminants: the registry of corrections T (built-ins plus the user's, persisted). A change
+//! made through another replica is picked up by [`follow_stored`].
 
 use axum::Json;
 use axum::body::Bytes;
@@ -8,10 +9,10 @@ use axum::http::{HeaderMap, StatusCode};
 use axum::response::{IntoResponse, Response};
 use serde::{Deserialize, Serialize};
 use serde_json::{Value, json};
-use sqlx::Row;
 
 use super::ServiceError;
 use super::state::{AppState, Inner, now_ms};
+use super::store::IlluminantRow;
 use crate::l3::{CorrectionSource, IlluminantEntry, IlluminantRegistry, Mat3};
 use crate::spectral::Samples;
 
@@ -87,30 +88,87 @@ pub fn apply(
 pub async fn user_definitions(
     state: &Inner,
 ) -> Result<Vec<(String, IlluminantDefinition)>, ServiceError> {
-    let rows =
-        sqlx::query("SELECT name, definition_json FROM illuminants ORDER BY created_at, name")
-            .fetch_all(&state.db)
-            .await?;
-    let mut out = Vec::new();
-    for r in rows {
-        let name: String = r.try_get("name")?;
-        match serde_json::from_str(&r.try_get::<String, _>("definition_json")?) {
-            Ok(d) => out.push((name, d)),
-            Err(e) => tracing::warn!("stored illuminant {name} is unreadable: {e}"),
-        }
-    }
-    Ok(out)
+    Ok(definitions(&state.store.illuminants().await?))
 }
 
-/// Rebuilds the registry: built-ins, then the user's definitions.
-pub async fn rebuild_registry(state: &Inner) -> Result<IlluminantRegistry, ServiceError> {
-    let mut reg = state.default_registry.clone();
-    for (name, def) in user_definitions(state).await? {
-        if let Err(e) = apply(&mut reg, &name, &def) {
-            tracing::warn!("stored illuminant {name} skipped: {e}");
+fn definitions(rows: &[IlluminantRow]) -> Vec<(String, IlluminantDefinition)> {
+    let mut out = Vec::new();
+    for r in rows {
+        match serde_json::from_str(&r.definition_json) {
+            Ok(d) => out.push((r.name.clone(), d)),
+            Err(e) => tracing::warn!("stored illuminant {} is unreadable: {e}", r.name),
         }
     }
-    Ok(reg)
+    out
+}
+
+/// The registry from the stored rows: built-ins, then the user's definitions. Fitting T from
+/// an SPD is CPU work: it runs on the background pool.
+async fn build_registry(
+    state: &Inner,
+    rows: &[IlluminantRow],
+) -> Result<IlluminantRegistry, ServiceError> {
+    let mut reg = state.default_registry.clone();
+    let defs = definitions(rows);
+    super::cpu::run(
+        &state.pools.background,
+        "the illuminant registry",
+        move || {
+            for (name, def) in defs {
+                if let Err(e) = apply(&mut reg, &name, &def) {
+                    tracing::warn!("stored illuminant {name} skipped: {e}");
+                }
+            }
+            reg
+        },
+    )
+    .await
+}
+
+/// Rebuilds the registry from the database and installs it (the caller holds
+/// `registry_writes`).
+async fn reload(state: &Inner, rows: Vec<IlluminantRow>) -> Result<(), ServiceError> {
+    let reg = build_registry(state, &rows).await?;
+    *state.registry() = reg;
+    let old = std::mem::replace(
+        &mut *state
+            .illuminant_rows
+            .lock()
+            .unwrap_or_else(|p| p.into_inner()),
+        rows.clone(),
+    );
+    // kernels fused with an illuminant that changed or went are stale
+    for r in old.iter().filter(|o| !rows.contains(o)) {
+        state.forget_illuminant(&r.name);
+    }
+    Ok(())
+}
+
+/// Loads the registry from the database (at start).
+pub async fn load_registry(state: &Inner) -> Result<(), ServiceError> {
+    let _writing = state.registry_writes.lock().await;
+    let rows = state.store.illuminants().await?;
+    reload(state, rows).await
+}
+
+/// Follows illuminant changes made through other replicas: rebuilds the registry when the
+/// stored definitions differ from those it was built from.
+pub async fn follow_stored(state: &Inner) -> Result<(), ServiceError> {
+    let rows = state.store.illuminants().await?;
+    if *state
+        .illuminant_rows
+        .lock()
+        .unwrap_or_else(|p| p.into_inner())
+        == rows
+    {
+        return Ok(());
+    }
+    let _writing = state.registry_writes.lock().await;
+    // re-read under the lock: a change made here meanwhile is already installed
+    let rows = state.store.illuminants().await?;
+    reload(state, rows).await?;
+    tracing::info!("illuminant registry reloaded (changed through another replica)");
+    Ok(())
 }
 
 fn entry_json(e: &IlluminantEntry, user: bool) -> Value {
@@ -206,17 +264,16 @@ pub async fn put(
     let existed = user_names(&state).await?.contains(&lower);
     let text = serde_json::to_string(&def)
         .map_err(|e| ServiceError::Internal(format!("illuminant definition: {e}")))?;
-    sqlx::query(
-        "INSERT INTO illuminants (name, definition_json, created_at) VALUES ($1, $2, $3)
-         ON CONFLICT (name) DO UPDATE SET definition_json = excluded.definition_json",
-    )
-    .bind(&entry.name)
-    .bind(text)
-    .bind(now_ms())
-    .execute(&state.db)
-    .await?;
+    state
+        .store
+        .upsert_illuminant(&entry.name, &text, now_ms())
+        .await?;
     *state.registry() = copy;
     state.forget_illuminant(&entry.name);
+    *state
+        .illuminant_rows
+        .lock()
+        .unwrap_or_else(|p| p.into_inner()) = state.store.illuminants().await?;
     let status = if existed {
         StatusCode::OK
     } else {
@@ -237,11 +294,12 @@ pub async fn delete(
         ));
     }
     let _writing = state.registry_writes.lock().await;
-    let stored = sqlx::query("SELECT name FROM illuminants")
-        .fetch_all(&state.db)
+    let stored = state
+        .store
+        .illuminants()
         .await?
         .into_iter()
-        .filter_map(|r| r.try_get::<String, _>("name").ok())
+        .map(|r| r.name)
         .find(|n| n.eq_ignore_ascii_case(&name));
     let Some(stored) = stored else {
         return Err(if state.registry().get(&name).is_some() {
@@ -252,12 +310,9 @@ pub async fn delete(
             ServiceError::NotFound(format!("no illuminant named '{name}'"))
         });
     };
-    sqlx::query("DELETE FROM illuminants WHERE name = $1")
-        .bind(&stored)
-        .execute(&state.db)
-        .await?;
-    let reg = rebuild_registry(&state).await?;
-    *state.registry() = reg;
+    state.store.delete_illuminant(&stored).await?;
+    let rows = state.store.illuminants().await?;
+    reload(&state, rows).await?;
     state.forget_illuminant(&stored);
     Ok(StatusCode::NO_CONTENT)
 }

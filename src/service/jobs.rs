@@ -1,11 +1,20 @@
 //! Training jobs: submission (idempotent), listing, cancel, and the runner that trains on
-//! rayon, persists the table and optionally activates it. Jobs found `running` at start
-//! (a crash or a restart) go back to `queued` and run again.
+//! rayon, persists the table and optionally activates it. A replica claims a queued job under
+//! a lease it renews with a heartbeat; the heartbeat also carries the progress and brings
+//! back a cancel requested through any replica. A job whose replica died (its lease expired)
+//! goes back to the queue, as do the jobs a restarted replica had left running.
 
 use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::{Duration, Instant};
 
+use super::ServiceError;
+use super::state::{AppState, new_id, now_ms, sha256_hex};
+use super::store::{JOB_KIND_TRAIN, JobEnd, JobRow, JobStatus, NewJob};
+use super::tables::{activate_table, insert_table, write_table_file_with_pause};
+use crate::camera::SensorDesign;
+use crate::l3::L3Error;
+use crate::training::{TrainError, TrainingSpec, train_table};
 use axum::Json;
 use axum::body::Bytes;
 use axum::extract::rejection::BytesRejection;
@@ -14,17 +23,13 @@ use axum::http::{HeaderMap, HeaderValue, StatusCode, header};
 use axum::response::{IntoResponse, Response};
 use serde::Deserialize;
 use serde_json::{Value, json};
-use sqlx::Row;
 
-use super::ServiceError;
-use super::state::{AppState, new_id, now_ms, sha256_hex};
-use super::tables::{activate_table, insert_table, write_table_file_with_pause};
-use crate::camera::SensorDesign;
-use crate::l3::L3Error;
-use crate::training::{TrainError, TrainingSpec, train_table};
+/// How often a running job's replica renews its lease, records progress and looks for a
+/// cancel request (at most; shorter leases beat faster).
+const HEARTBEAT: Duration = Duration::from_millis(250);
 
-/// Every job state, in lifecycle order.
-pub const JOB_STATES: [&str; 5] = ["queued", "running", "succeeded", "failed", "canceled"];
+/// The idempotency key of the default table's training job: one per cluster.
+pub const DEFAULT_TABLE_JOB_KEY: &str = "l3:default-table";
 
 /// A parsed job request: the training spec plus the sensor and whether to activate.
 #[derive(Debug, Clone)]
@@ -101,66 +106,94 @@ pub(super) fn integral_floats_to_ints(v: &mut Value) {
     }
 }
 
-/// Inserts a queued job; returns its id.
+/// A new job's row for `request_json`.
+fn new_job<'a>(
+    id: &'a str,
+    text: &'a str,
+    sha: &'a str,
+    activate: bool,
+    idempotency_key: Option<&'a str>,
+) -> NewJob<'a> {
+    NewJob {
+        id,
+        request_json: text,
+        idempotency_key,
+        request_sha256: sha,
+        activate,
+        created_at: now_ms(),
+    }
+}
+
+fn wake_workers(state: &AppState) {
+    state.job_notify.notify_waiters();
+    state.job_notify.notify_one();
+}
+
+/// Inserts a queued job; returns its id, or `None` when `idempotency_key` is already taken.
 pub async fn enqueue(
     state: &AppState,
     request_json: &Value,
     activate: bool,
     idempotency_key: Option<&str>,
-) -> Result<String, ServiceError> {
+) -> Result<Option<String>, ServiceError> {
     let id = new_id("job");
     let text = request_json.to_string();
-    sqlx::query(
-        "INSERT INTO training_jobs (id, status, request_json, idempotency_key, request_sha256, activate, progress, stage, created_at)
-         VALUES ($1, 'queued', $2, $3, $4, $5, 0, 'queued', $6)",
-    )
-    .bind(&id)
-    .bind(&text)
-    .bind(idempotency_key)
-    .bind(sha256_hex(text.as_bytes()))
-    .bind(i64::from(activate))
-    .bind(now_ms())
-    .execute(&state.db)
-    .await?;
-    state.job_notify.notify_waiters();
-    state.job_notify.notify_one();
+    let sha = sha256_hex(text.as_bytes());
+    let job = new_job(&id, &text, &sha, activate, idempotency_key);
+    if !state.store.insert_job(&job).await? {
+        return Ok(None);
+    }
+    wake_workers(state);
     tracing::info!(job = id, "training job queued");
-    Ok(id)
+    Ok(Some(id))
 }
 
-fn job_json(row: &sqlx::sqlite::SqliteRow) -> Result<Value, ServiceError> {
-    let id: String = row.try_get("id")?;
-    let created: i64 = row.try_get("created_at")?;
-    let started: Option<i64> = row.try_get("started_at")?;
-    let finished: Option<i64> = row.try_get("finished_at")?;
-    let request: Value =
-        serde_json::from_str(&row.try_get::<String, _>("request_json")?).unwrap_or(Value::Null);
+/// Queues the default table's job once per database (replicas starting together queue one),
+/// again only when its earlier run failed or was canceled; returns its id when queued.
+pub async fn enqueue_default(
+    state: &AppState,
+    request_json: &Value,
+) -> Result<Option<String>, ServiceError> {
+    let id = new_id("job");
+    let text = request_json.to_string();
+    let sha = sha256_hex(text.as_bytes());
+    let job = new_job(&id, &text, &sha, true, Some(DEFAULT_TABLE_JOB_KEY));
+    let queued = state.store.queue_once(&job).await?;
+    if queued.is_some() {
+        wake_workers(state);
+    }
+    Ok(queued)
+}
+
+fn job_json(row: &JobRow) -> Value {
+    let id = &row.id;
+    let request: Value = serde_json::from_str(&row.request_json).unwrap_or(Value::Null);
     let now = now_ms();
-    let queued_ms = started.unwrap_or(finished.unwrap_or(now)) - created;
-    let running_ms = started.map(|s| finished.unwrap_or(now) - s);
-    Ok(json!({
+    let queued_ms = row.started_at.unwrap_or(row.finished_at.unwrap_or(now)) - row.created_at;
+    let running_ms = row.started_at.map(|s| row.finished_at.unwrap_or(now) - s);
+    json!({
         "id": id,
-        "status": row.try_get::<String, _>("status")?,
-        "progress": row.try_get::<f64, _>("progress")?,
-        "stage": row.try_get::<Option<String>, _>("stage")?,
-        "error": row.try_get::<Option<String>, _>("error")?,
-        "table_id": row.try_get::<Option<String>, _>("table_id")?,
-        "activate": row.try_get::<i64, _>("activate")? != 0,
-        "attempts": row.try_get::<i64, _>("attempts")?,
-        "idempotency_key": row.try_get::<Option<String>, _>("idempotency_key")?,
+        "status": row.status.as_str(),
+        "progress": row.progress,
+        "stage": row.stage,
+        "error": row.error,
+        "table_id": row.table_id,
+        "activate": row.activate != 0,
+        "attempts": row.attempts,
+        "idempotency_key": row.idempotency_key,
         "request": request,
-        "created_at_ms": created,
-        "started_at_ms": started,
-        "finished_at_ms": finished,
+        "created_at_ms": row.created_at,
+        "started_at_ms": row.started_at,
+        "finished_at_ms": row.finished_at,
         "timings": { "queued_ms": queued_ms.max(0), "running_ms": running_ms.map(|v| v.max(0)) },
         "links": { "self": format!("/v1/training-jobs/{id}"), "cancel": format!("/v1/training-jobs/{id}/cancel") },
-    }))
+    })
 }
 
-async fn job_row(state: &AppState, id: &str) -> Result<sqlx::sqlite::SqliteRow, ServiceError> {
-    sqlx::query("SELECT * FROM training_jobs WHERE id = $1")
-        .bind(id)
-        .fetch_optional(&state.db)
+async fn job_row(state: &AppState, id: &str) -> Result<JobRow, ServiceError> {
+    state
+        .store
+        .job(id)
         .await?
         .ok_or_else(|| ServiceError::NotFound(format!("no training job with id '{id}'")))
 }
@@ -197,24 +230,23 @@ pub async fn submit(
             Some(k.to_string())
         }
     };
-    if let Some(k) = &key
-        && let Some(row) = sqlx::query("SELECT * FROM training_jobs WHERE idempotency_key = $1")
-            .bind(k)
-            .fetch_optional(&state.db)
-            .await?
-    {
-        let same: String = row.try_get("request_sha256")?;
-        if same != sha256_hex(value.to_string().as_bytes()) {
-            return Err(ServiceError::Conflict(format!(
-                "Idempotency-Key '{k}' was already used with a different request body"
-            )));
-        }
-        let id: String = row.try_get("id")?;
-        return Ok(created(&id, job_json(&row)?, StatusCode::OK));
+    // insert, or find the job the key already names (two replicas may race on one key)
+    if let Some(id) = enqueue(&state, &value, req.activate, key.as_deref()).await? {
+        let row = job_row(&state, &id).await?;
+        return Ok(created(&id, job_json(&row), StatusCode::ACCEPTED));
     }
-    let id = enqueue(&state, &value, req.activate, key.as_deref()).await?;
-    let row = job_row(&state, &id).await?;
-    Ok(created(&id, job_json(&row)?, StatusCode::ACCEPTED))
+    let k = key.unwrap_or_default();
+    let row = state.store.job_by_key(&k).await?.ok_or_else(|| {
+        ServiceError::Internal(format!(
+            "Idempotency-Key '{k}': no job, yet the key is taken"
+        ))
+    })?;
+    if row.request_sha256 != sha256_hex(value.to_string().as_bytes()) {
+        return Err(ServiceError::Conflict(format!(
+            "Idempotency-Key '{k}' was already used with a different request body"
+        )));
+    }
+    Ok(created(&row.id, job_json(&row), StatusCode::OK))
 }
 
 /// Query of `GET /v1/training-jobs`.
@@ -237,30 +269,18 @@ pub async fn list(
             "limit {limit}: 1 to 1000"
         )));
     }
-    let rows = match &q.status {
-        Some(s) => {
-            if !JOB_STATES.contains(&s.as_str()) {
-                return Err(ServiceError::BadRequest(format!(
-                    "status '{s}': one of {}",
-                    JOB_STATES.join(", ")
-                )));
-            }
-            sqlx::query(
-                "SELECT * FROM training_jobs WHERE status = $1 ORDER BY created_at DESC, id LIMIT $2",
-            )
-            .bind(s)
-            .bind(limit)
-            .fetch_all(&state.db)
-            .await?
-        }
-        None => {
-            sqlx::query("SELECT * FROM training_jobs ORDER BY created_at DESC, id LIMIT $1")
-                .bind(limit)
-                .fetch_all(&state.db)
-                .await?
-        }
-    };
-    let items = rows.iter().map(job_json).collect::<Result<Vec<_>, _>>()?;
+    let status = q
+        .status
+        .as_deref()
+        .map(|s| {
+            s.parse::<JobStatus>().map_err(|_| {
+                let all: Vec<&str> = JobStatus::ALL.iter().map(|j| j.as_str()).collect();
+                ServiceError::BadRequest(format!("status '{s}': one of {}", all.join(", ")))
+            })
+        })
+        .transpose()?;
+    let rows = state.store.list_jobs(status, limit).await?;
+    let items: Vec<Value> = rows.iter().map(job_json).collect();
     Ok(Json(json!({ "items": items })))
 }
 
@@ -269,29 +289,27 @@ pub async fn get(
     State(state): State<AppState>,
     UrlPath(id): UrlPath<String>,
 ) -> Result<Json<Value>, ServiceError> {
-    Ok(Json(job_json(&job_row(&state, &id).await?)?))
+    Ok(Json(job_json(&job_row(&state, &id).await?)))
 }
 
 /// `POST /v1/training-jobs/{id}/cancel`: a queued job is canceled at once; a running one is
-/// signalled and the answer waits (up to 2 s) until it has stopped.
+/// signalled (through its row, whichever replica runs it) and the answer waits (up to 2 s)
+/// until it has stopped.
 pub async fn cancel(
     State(state): State<AppState>,
     UrlPath(id): UrlPath<String>,
 ) -> Result<Json<Value>, ServiceError> {
-    let row = job_row(&state, &id).await?;
-    let status: String = row.try_get("status")?;
-    match status.as_str() {
-        "queued" => {
-            sqlx::query(
-                "UPDATE training_jobs SET status = 'canceled', stage = 'canceled', finished_at = $1
-                 WHERE id = $2 AND status = 'queued'",
-            )
-            .bind(now_ms())
-            .bind(&id)
-            .execute(&state.db)
-            .await?;
+    let mut status = job_row(&state, &id).await?.status;
+    if status == JobStatus::Queued {
+        if state.store.cancel_queued(&id, now_ms()).await? {
+            return Ok(Json(job_json(&job_row(&state, &id).await?)));
         }
-        "running" => {
+        // claimed meanwhile
+        status = job_row(&state, &id).await?.status;
+    }
+    match status {
+        JobStatus::Running => {
+            state.store.request_cancel(&id).await?;
             let flag = state
                 .running_jobs
                 .lock()
@@ -303,8 +321,7 @@ pub async fn cancel(
             }
             let deadline = Instant::now() + Duration::from_secs(2);
             while Instant::now() < deadline {
-                let s: String = job_row(&state, &id).await?.try_get("status")?;
-                if s != "running" {
+                if job_row(&state, &id).await?.status != JobStatus::Running {
                     break;
                 }
                 tokio::time::sleep(Duration::from_millis(25)).await;
@@ -316,28 +333,45 @@ pub async fn cancel(
             )));
         }
     }
-    Ok(Json(job_json(&job_row(&state, &id).await?)?))
+    Ok(Json(job_json(&job_row(&state, &id).await?)))
 }
 
-/// Puts jobs left `running` by a crash or restart back in the queue.
+/// Puts the jobs this replica left `running` (a crash or restart) back in the queue.
 pub async fn requeue_interrupted(state: &AppState) -> Result<u64, ServiceError> {
-    let r = sqlx::query(
-        "UPDATE training_jobs SET status = 'queued', stage = 'requeued after restart', progress = 0
-         WHERE status = 'running'",
-    )
-    .execute(&state.db)
-    .await?;
-    Ok(r.rows_affected())
+    state.store.requeue_owned(&state.replica_id).await
 }
 
-/// One job worker: claims the oldest queued job, runs it, repeats until shutdown.
+fn lease(state: &AppState) -> Duration {
+    Duration::from_secs_f64(state.config.training.job_lease_s)
+}
+
+fn lease_until(state: &AppState) -> i64 {
+    now_ms() + lease(state).as_millis() as i64
+}
+
+/// One job worker: returns the jobs of dead replicas to the queue, claims the oldest queued
+/// job, runs it, repeats until shutdown.
 pub async fn worker(state: AppState) {
     loop {
         if state.shutting_down.load(Ordering::SeqCst) {
             return;
         }
-        match claim_next(&state).await {
-            Ok(Some((id, request))) => run_job(&state, &id, &request).await,
+        match state.store.requeue_expired(now_ms()).await {
+            Ok(0) => {}
+            Ok(n) => tracing::warn!("{n} training job(s) whose replica stopped beating re-queued"),
+            Err(e) => tracing::error!("job queue: {e}"),
+        }
+        let claimed = state
+            .store
+            .claim_job(
+                JOB_KIND_TRAIN,
+                &state.replica_id,
+                now_ms(),
+                lease_until(&state),
+            )
+            .await;
+        match claimed {
+            Ok(Some(job)) => run_job(&state, &job.id, &job.request_json).await,
             Ok(None) => {
                 tokio::select! {
                     _ = state.job_notify.notified() => {}
@@ -353,53 +387,25 @@ pub async fn worker(state: AppState) {
     }
 }
 
-async fn claim_next(state: &AppState) -> Result<Option<(String, String)>, ServiceError> {
-    loop {
-        let Some(row) = sqlx::query(
-            "SELECT id, request_json FROM training_jobs WHERE status = 'queued'
-             ORDER BY created_at, id LIMIT 1",
-        )
-        .fetch_optional(&state.db)
-        .await?
-        else {
-            return Ok(None);
-        };
-        let id: String = row.try_get("id")?;
-        let claimed = sqlx::query(
-            "UPDATE training_jobs SET status = 'running', stage = 'starting', progress = 0,
-             attempts = attempts + 1, started_at = $1 WHERE id = $2 AND status = 'queued'",
-        )
-        .bind(now_ms())
-        .bind(&id)
-        .execute(&state.db)
-        .await?
-        .rows_affected();
-        if claimed == 1 {
-            return Ok(Some((id, row.try_get("request_json")?)));
-        }
-    }
-}
-
 async fn finish(
     state: &AppState,
     id: &str,
-    status: &str,
+    status: JobStatus,
     error: Option<&str>,
     table_id: Option<&str>,
 ) -> Result<(), ServiceError> {
-    let progress = if status == "succeeded" { 1.0 } else { -1.0 };
-    sqlx::query(
-        "UPDATE training_jobs SET status = $1, stage = $1, error = $2, table_id = $3,
-         progress = CASE WHEN $4 >= 0 THEN $4 ELSE progress END, finished_at = $5 WHERE id = $6",
-    )
-    .bind(status)
-    .bind(error)
-    .bind(table_id)
-    .bind(progress)
-    .bind(now_ms())
-    .bind(id)
-    .execute(&state.db)
-    .await?;
+    let end = JobEnd {
+        status,
+        error,
+        table_id,
+        finished_at: now_ms(),
+    };
+    if !state.store.finish_job(id, &state.replica_id, &end).await? {
+        tracing::warn!(
+            job = id,
+            "the job's lease was lost before it ended {status}; its outcome is not recorded here"
+        );
+    }
     Ok(())
 }
 
@@ -414,7 +420,7 @@ async fn run_job(state: &AppState, id: &str, request: &str) {
     let req = match parsed {
         Ok((r, _)) => r,
         Err(e) => {
-            let _ = finish(state, id, "failed", Some(&e.to_string()), None).await;
+            let _ = finish(state, id, JobStatus::Failed, Some(&e.to_string()), None).await;
             return;
         }
     };
@@ -462,9 +468,11 @@ async fn run_job(state: &AppState, id: &str, request: &str) {
         });
         let _ = tx.send(outcome);
     });
-    let mut last_write = Instant::now() - Duration::from_secs(1);
+    let beat = HEARTBEAT.min(lease(state) / 3);
+    let mut last_beat = Instant::now();
     let mut last_stage = String::new();
     let mut pending: Option<(String, f64)> = None;
+    let mut lease_lost = false;
     let outcome = loop {
         tokio::select! {
             r = &mut rx => break r,
@@ -479,23 +487,46 @@ async fn run_job(state: &AppState, id: &str, request: &str) {
         if state.shutting_down.load(Ordering::SeqCst) {
             cancel.store(true, Ordering::SeqCst);
         }
-        if let Some((stage, f)) = &pending
-            && (last_write.elapsed() >= Duration::from_millis(200) || *stage != last_stage)
-        {
-            let _ = sqlx::query(
-                "UPDATE training_jobs SET stage = $1, progress = $2 WHERE id = $3 AND status = 'running'",
+        let new_stage = pending.as_ref().is_some_and(|(s, _)| *s != last_stage);
+        if lease_lost || !(new_stage || last_beat.elapsed() >= beat) {
+            continue;
+        }
+        // the heartbeat: renew the lease, record progress, look for a cancel request
+        let progress = pending
+            .as_ref()
+            .map(|(s, f)| (s.as_str(), f.clamp(0.0, 1.0)));
+        match state
+            .store
+            .heartbeat(
+                id,
+                &state.replica_id,
+                now_ms(),
+                lease_until(state),
+                progress,
             )
-            .bind(stage)
-            .bind(f.clamp(0.0, 1.0))
-            .bind(id)
-            .execute(&state.db)
-            .await;
-            if *stage != last_stage {
-                tracing::info!(job = id, stage = %stage, progress = format!("{:.0} %", f * 100.0), "training");
+            .await
+        {
+            Ok(Some(cancel_requested)) => {
+                if cancel_requested {
+                    cancel.store(true, Ordering::SeqCst);
+                }
             }
-            last_stage = stage.clone();
-            last_write = Instant::now();
-            pending = None;
+            Ok(None) => {
+                tracing::warn!(
+                    job = id,
+                    "the job's lease was lost (it expired or the job was re-queued); stopping it here"
+                );
+                lease_lost = true;
+                cancel.store(true, Ordering::SeqCst);
+            }
+            Err(e) => tracing::error!(job = id, "heartbeat: {e}"),
+        }
+        last_beat = Instant::now();
+        if let Some((stage, f)) = pending.take()
+            && stage != last_stage
+        {
+            tracing::info!(job = id, stage = %stage, progress = format!("{:.0} %", f * 100.0), "training");
+            last_stage = stage;
         }
     };
     state
@@ -504,11 +535,12 @@ async fn run_job(state: &AppState, id: &str, request: &str) {
         .unwrap_or_else(|p| p.into_inner())
         .remove(id);
     let result = match outcome {
+        _ if lease_lost => Ok(()),
         Err(_) => {
             finish(
                 state,
                 id,
-                "failed",
+                JobStatus::Failed,
                 Some("the training task was lost"),
                 None,
             )
@@ -516,22 +548,18 @@ async fn run_job(state: &AppState, id: &str, request: &str) {
         }
         Ok(Outcome::Canceled) if state.shutting_down.load(Ordering::SeqCst) => {
             tracing::info!(job = id, "training job interrupted by shutdown; re-queued");
-            sqlx::query(
-                "UPDATE training_jobs SET status = 'queued', stage = 'interrupted by shutdown', progress = 0 WHERE id = $1",
-            )
-            .bind(id)
-            .execute(&state.db)
-            .await
-            .map(|_| ())
-            .map_err(ServiceError::from)
+            state
+                .store
+                .requeue_job(id, &state.replica_id, "interrupted by shutdown")
+                .await
         }
         Ok(Outcome::Canceled) => {
             tracing::info!(job = id, "training job canceled");
-            finish(state, id, "canceled", None, None).await
+            finish(state, id, JobStatus::Canceled, None, None).await
         }
         Ok(Outcome::Failed(msg)) => {
             tracing::warn!(job = id, "training job failed: {msg}");
-            finish(state, id, "failed", Some(&msg), None).await
+            finish(state, id, JobStatus::Failed, Some(&msg), None).await
         }
         Ok(Outcome::Done(table, stored)) => {
             let r = async {
@@ -539,13 +567,13 @@ async fn run_job(state: &AppState, id: &str, request: &str) {
                 if req_activate(state, id).await? {
                     activate_table(state, &stored.id).await?;
                 }
-                finish(state, id, "succeeded", None, Some(&stored.id)).await
+                finish(state, id, JobStatus::Succeeded, None, Some(&stored.id)).await
             }
             .await;
             tracing::info!(job = id, table = stored.id, "training job succeeded");
             match r {
                 Ok(()) => Ok(()),
-                Err(e) => finish(state, id, "failed", Some(&e.to_string()), None).await,
+                Err(e) => finish(state, id, JobStatus::Failed, Some(&e.to_string()), None).await,
             }
         }
     };
@@ -555,17 +583,12 @@ async fn run_job(state: &AppState, id: &str, request: &str) {
 }
 
 async fn req_activate(state: &AppState, id: &str) -> Result<bool, ServiceError> {
-    Ok(job_row(state, id).await?.try_get::<i64, _>("activate")? != 0)
+    Ok(job_row(state, id).await?.activate != 0)
 }
 
 /// Job counts by state (for /metrics).
 pub async fn counts(state: &AppState) -> Result<Vec<(String, i64)>, ServiceError> {
-    let rows = sqlx::query("SELECT status, COUNT(*) AS n FROM training_jobs GROUP BY status")
-        .fetch_all(&state.db)
-        .await?;
-    rows.iter()
-        .map(|r| Ok((r.try_get("status")?, r.try_get("n")?)))
-        .collect()
+    state.store.job_counts().await
 }
 
 #[cfg(test)]

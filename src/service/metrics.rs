@@ -112,7 +112,8 @@ impl Metrics {
             out,
             "# HELP l3_training_jobs Training jobs by state.\n# TYPE l3_training_jobs gauge"
         );
-        for state in super::jobs::JOB_STATES {
+        for state in super::store::JobStatus::ALL {
+            let state = state.as_str();
             let n = jobs.iter().find(|(s, _)| s == state).map_or(0, |(_, n)| *n);
             let _ = writeln!(out, "l3_training_jobs{{state=\"{state}\"}} {n}");
         }

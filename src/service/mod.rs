@@ -13,26 +13,26 @@ mod metrics;
 mod render;
 mod routes;
 mod state;
+mod store;
+mod sync;
 mod tables;
 
 use std::collections::HashMap;
 use std::net::SocketAddr;
-use std::path::Path;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::{Arc, Mutex};
-use std::time::Duration;
 
 use arc_swap::ArcSwapOption;
-use sqlx::sqlite::{SqliteConnectOptions, SqliteJournalMode, SqlitePoolOptions};
 use tokio::sync::{Notify, Semaphore};
 
 pub use config::{DEFAULT_CONFIG_TOML, DataConfig, ServerConfig, ServiceConfig, TrainingConfig};
 pub use error::ServiceError;
 pub use illuminants::{IlluminantDefinition, SpdSamples, apply as apply_illuminant};
-pub use jobs::{JOB_STATES, JobRequest, parse_job_request};
+pub use jobs::{JobRequest, parse_job_request};
 pub use render::{OutputFormat, RenderQuery, negotiate};
 pub use routes::{OPENAPI_YAML, ROUTES};
 pub use state::{ActiveTable, AppState, Inner, sha256_hex};
+pub use store::{JobStatus, Store};
 pub use tables::{StoredTable, write_table_file};
 
 use crate::l3::IlluminantRegistry;
@@ -138,7 +138,8 @@ fn locate_iset(cfg: &ServiceConfig) -> Option<IsetData> {
 }
 
 /// Starts the service: data dir, database and migrations, illuminants, the active table (or
-/// the default table's training job), job workers, and the HTTP listener. `signal` ends the
+/// the default table's training job, once per database), job workers, the follower of changes
+/// made through other replicas, and the HTTP listener. `signal` ends the
 /// server gracefully when it completes (in addition to [`Server::shutdown`]).
 pub async fn start_with(
     cfg: ServiceConfig,
@@ -149,8 +150,13 @@ pub async fn start_with(
     std::fs::create_dir_all(&tables_dir).map_err(|e| {
         ServiceError::Config(format!("cannot create {}: {e}", tables_dir.display()))
     })?;
-    let db = connect(&data.join("l3.sqlite")).await?;
-    sqlx::migrate!("./migrations").run(&db).await?;
+    let store = Store::connect(&cfg.data.database_url, &data).await?;
+    let replica_id = state::replica_id(&data);
+    tracing::info!(
+        backend = store.backend(),
+        replica = replica_id,
+        "database ready"
+    );
     let iset = locate_iset(&cfg);
     match iset.as_ref().and_then(IsetData::dir) {
         Some(d) => tracing::info!(
@@ -172,7 +178,9 @@ pub async fn start_with(
         pools,
         eval_slots: Arc::new(Semaphore::new(EVALUATION_SLOTS)),
         config: cfg.clone(),
-        db,
+        store,
+        replica_id,
+        illuminant_rows: Mutex::new(Vec::new()),
         iset,
         registry: Mutex::new(defaults.clone()),
         registry_writes: tokio::sync::Mutex::new(()),
@@ -186,8 +194,7 @@ pub async fn start_with(
         shutting_down: AtomicBool::new(false),
         shutdown_notify: Notify::new(),
     }));
-    let reg = illuminants::rebuild_registry(&state).await?;
-    *state.registry() = reg;
+    illuminants::load_registry(&state).await?;
     let requeued = jobs::requeue_interrupted(&state).await?;
     if requeued > 0 {
         tracing::info!("{requeued} interrupted training job(s) re-queued");
@@ -202,14 +209,7 @@ pub async fn start_with(
     // then the newest stored), skipping files found corrupt or missing
     let recorded = tables::recorded_active(&state).await?;
     let mut candidates: Vec<String> = recorded.iter().cloned().collect();
-    candidates.extend(
-        sqlx::query_scalar::<_, String>(
-            "SELECT id FROM l3_tables WHERE status = 'ok'
-             ORDER BY (last_activated_at IS NULL), last_activated_at DESC, created_at DESC, id",
-        )
-        .fetch_all(&state.db)
-        .await?,
-    );
+    candidates.extend(state.store.usable_tables_by_recency().await?);
     for id in candidates {
         if unusable.iter().any(|(b, _)| *b == id) {
             continue;
@@ -233,26 +233,25 @@ pub async fn start_with(
         }
     }
     if state.active.load().is_none() && cfg.training.auto_train_default {
-        let pending: i64 = sqlx::query_scalar(
-            "SELECT COUNT(*) FROM training_jobs WHERE status IN ('queued', 'running') AND activate = 1",
-        )
-        .fetch_one(&state.db)
-        .await?;
-        if pending == 0 {
+        let pending = state.store.pending_activating_job().await?;
+        if pending.is_none() {
             let mut v = serde_json::to_value(&default_spec)
                 .map_err(|e| ServiceError::Internal(format!("default spec: {e}")))?;
             v["activate"] = serde_json::Value::Bool(true);
-            let id = jobs::enqueue(&state, &v, true, None).await?;
-            tracing::info!(
-                job = id,
-                "no table yet: training the default table ({}); /readyz is 503 until it is active",
-                default_spec.illuminants.join("+")
-            );
+            // once per database: replicas starting together queue one job
+            if let Some(id) = jobs::enqueue_default(&state, &v).await? {
+                tracing::info!(
+                    job = id,
+                    "no table yet: training the default table ({}); /readyz is 503 until it is active",
+                    default_spec.illuminants.join("+")
+                );
+            }
         }
     }
-    let workers = (0..cfg.training.max_concurrent_jobs)
+    let mut workers: Vec<_> = (0..cfg.training.max_concurrent_jobs)
         .map(|_| tokio::spawn(jobs::worker(state.clone())))
         .collect();
+    workers.push(tokio::spawn(sync::follower(state.clone())));
     let listener = tokio::net::TcpListener::bind(cfg.server.bind)
         .await
         .map_err(|e| ServiceError::Config(format!("cannot listen on {}: {e}", cfg.server.bind)))?;
@@ -287,18 +286,6 @@ pub async fn start_with(
 /// [`start_with`] without an external signal.
 pub async fn start(cfg: ServiceConfig) -> Result<Server, ServiceError> {
     start_with(cfg, std::future::pending()).await
-}
-
-async fn connect(path: &Path) -> Result<sqlx::SqlitePool, ServiceError> {
-    let opts = SqliteConnectOptions::new()
-        .filename(path)
-        .create_if_missing(true)
-        .journal_mode(SqliteJournalMode::Wal)
-        .busy_timeout(Duration::from_secs(10));
-    Ok(SqlitePoolOptions::new()
-        .max_connections(8)
-        .connect_with(opts)
-        .await?)
 }
 
 /// Stores a table in the service (file written atomically, checksum recorded) and optionally

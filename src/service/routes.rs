@@ -86,12 +86,7 @@ async fn readyz(State(state): State<AppState>) -> Result<Response, ServiceError>
     match state.active.load_full() {
         Some(a) => Ok(axum::Json(json!({ "status": "ready", "table_id": a.id })).into_response()),
         None => {
-            let job = sqlx::query_scalar::<_, String>(
-                "SELECT id FROM training_jobs WHERE status IN ('queued', 'running') AND activate = 1
-                 ORDER BY created_at LIMIT 1",
-            )
-            .fetch_optional(&state.db)
-            .await?;
+            let job = state.store.pending_activating_job().await?;
             Err(ServiceError::NotReady(match job {
                 Some(j) => format!("no table is active yet; training job {j} will provide one"),
                 None => {

@@ -9,12 +9,12 @@ use std::time::{SystemTime, UNIX_EPOCH};
 
 use arc_swap::ArcSwapOption;
 use sha2::{Digest, Sha256};
-use sqlx::sqlite::SqlitePool;
 use tokio::sync::{Notify, Semaphore};
 
 use super::ServiceError;
 use super::config::ServiceConfig;
 use super::metrics::Metrics;
+use super::store::{IlluminantRow, Store};
 use crate::l3::{
     FastRenderer, IlluminantEntry, IlluminantRegistry, L3Table, TableKind, fuse_kernels,
 };
@@ -46,7 +46,13 @@ impl std::ops::Deref for AppState {
 /// The shared state behind [`AppState`].
 pub struct Inner {
     pub config: ServiceConfig,
-    pub db: SqlitePool,
+    pub store: Store,
+    /// This replica's name in job leases: stable across restarts of the same data directory
+    /// on the same host, so a restart re-queues what its previous run left running.
+    pub replica_id: String,
+    /// The user illuminants the registry was last built from (to notice changes other
+    /// replicas made).
+    pub illuminant_rows: Mutex<Vec<IlluminantRow>>,
     pub iset: Option<IsetData>,
     /// The built-in illuminants (D65, D50, A, F2, F11 and the ISET lights).
     pub default_registry: IlluminantRegistry,
@@ -183,6 +189,22 @@ impl Inner {
             .unwrap_or_else(|p| p.into_inner())
             .retain(|(_, ill), _| *ill != n);
     }
+}
+
+/// A replica id from the host name and the data directory.
+pub fn replica_id(data_dir: &std::path::Path) -> String {
+    let host = std::fs::read_to_string("/proc/sys/kernel/hostname")
+        .or_else(|_| std::fs::read_to_string("/etc/hostname"))
+        .map(|h| h.trim().to_string())
+        .unwrap_or_default();
+    let dir = std::fs::canonicalize(data_dir).unwrap_or_else(|_| data_dir.to_path_buf());
+    let h = Sha256::digest(format!("{host}\0{}", dir.display()).as_bytes());
+    let host: String = host
+        .chars()
+        .filter(|c| c.is_ascii_alphanumeric() || *c == '-')
+        .take(32)
+        .collect();
+    format!("{host}-{}", hex::encode(&h[..6]))
 }
 
 /// Milliseconds since the Unix epoch.

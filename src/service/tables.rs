@@ -1,5 +1,7 @@
 //! Tables: stored as `tables/<id>.safetensors` (written atomically, SHA-256 recorded), listed,
-//! described, downloaded and activated (an atomic swap of the table renders use).
+//! described, downloaded and activated (an atomic swap of the table renders use). Where the
+//! database keeps the table bytes (PostgreSQL, shared by replicas), the files are a local
+//! cache by id and SHA-256: a file missing or damaged is fetched again from the database.
 
 use std::io::Write;
 use std::path::{Path, PathBuf};
@@ -11,10 +13,10 @@ use axum::extract::{Path as UrlPath, State};
 use axum::http::{HeaderValue, header};
 use axum::response::{IntoResponse, Response};
 use serde_json::{Value, json};
-use sqlx::Row;
 
 use super::ServiceError;
 use super::state::{ActiveTable, AppState, Inner, now_ms, sha256_hex};
+use super::store::{NewTable, TableRow};
 use crate::l3::L3Table;
 
 /// A table file written to disk.
@@ -102,7 +104,8 @@ pub fn remove_orphan_temp_files(dir: &Path) -> usize {
     n
 }
 
-/// Records a stored table in the database (idempotent: the id is the content hash).
+/// Records a stored table in the database (idempotent: the id is the content hash), with its
+/// bytes where the database keeps them.
 pub async fn insert_table(
     state: &Inner,
     stored: &StoredTable,
@@ -111,33 +114,43 @@ pub async fn insert_table(
 ) -> Result<(), ServiceError> {
     let meta = serde_json::to_string(&table.meta)
         .map_err(|e| ServiceError::Internal(format!("table metadata: {e}")))?;
-    sqlx::query(
-        "INSERT INTO l3_tables (id, path, sha256, size_bytes, kind, meta_json, job_id, created_at)
-         VALUES ($1, $2, $3, $4, $5, $6, $7, $8) ON CONFLICT (id) DO NOTHING",
-    )
-    .bind(&stored.id)
-    .bind(
-        stored
-            .path
-            .file_name()
-            .and_then(|n| n.to_str())
-            .unwrap_or_default(),
-    )
-    .bind(&stored.sha256)
-    .bind(stored.size_bytes as i64)
-    .bind(table.meta.kind.to_string())
-    .bind(meta)
-    .bind(job_id)
-    .bind(now_ms())
-    .execute(&state.db)
-    .await?;
-    Ok(())
+    let content = if state.store.keeps_table_bytes() {
+        let (path, sha) = (stored.path.clone(), stored.sha256.clone());
+        let read = tokio::task::spawn_blocking(move || read_checked(&path, &sha))
+            .await
+            .map_err(|e| ServiceError::Internal(format!("table reader: {e}")))?;
+        Some(
+            read.map_err(|e| ServiceError::Internal(e.message().to_string()))?
+                .0,
+        )
+    } else {
+        None
+    };
+    let file = stored
+        .path
+        .file_name()
+        .and_then(|n| n.to_str())
+        .unwrap_or_default();
+    state
+        .store
+        .insert_table(&NewTable {
+            id: &stored.id,
+            path: file,
+            sha256: &stored.sha256,
+            size_bytes: stored.size_bytes as i64,
+            kind: &table.meta.kind.to_string(),
+            meta_json: &meta,
+            job_id,
+            created_at: now_ms(),
+            content: content.as_deref(),
+        })
+        .await
 }
 
-async fn table_row(state: &Inner, id: &str) -> Result<sqlx::sqlite::SqliteRow, ServiceError> {
-    sqlx::query("SELECT * FROM l3_tables WHERE id = $1")
-        .bind(id)
-        .fetch_optional(&state.db)
+async fn table_row(state: &Inner, id: &str) -> Result<TableRow, ServiceError> {
+    state
+        .store
+        .table(id)
         .await?
         .ok_or_else(|| ServiceError::NotFound(format!("no table with id '{id}'")))
 }
@@ -179,17 +192,69 @@ fn read_checked(path: &Path, sha256: &str) -> Result<(Vec<u8>, L3Table), TableFi
             TableFileError::Io(m)
         }
     })?;
-    let actual = sha256_hex(&bytes);
+    let table = check_bytes(&bytes, sha256, &format!("table file {}", path.display()))?;
+    Ok((bytes, table))
+}
+
+/// Checks table bytes against their recorded checksum and parses them. Blocking.
+fn check_bytes(bytes: &[u8], sha256: &str, what: &str) -> Result<L3Table, TableFileError> {
+    let actual = sha256_hex(bytes);
     if actual != sha256 {
         return Err(TableFileError::Corrupt(format!(
-            "table file {} is corrupt: its SHA-256 is {actual}, {sha256} was recorded when it was stored",
-            path.display()
+            "{what} is corrupt: its SHA-256 is {actual}, {sha256} was recorded when it was stored"
         )));
     }
-    let table = L3Table::from_bytes(&bytes, &path.display().to_string()).map_err(|e| {
-        TableFileError::Corrupt(format!("table file {} does not parse: {e}", path.display()))
-    })?;
-    Ok((bytes, table))
+    L3Table::from_bytes(bytes, what)
+        .map_err(|e| TableFileError::Corrupt(format!("{what} does not parse: {e}")))
+}
+
+/// Writes bytes fetched from the database to the local cache file (atomically). Blocking.
+fn write_cache(dir: &Path, file: &str, bytes: &[u8]) -> std::io::Result<()> {
+    let tmp = dir.join(format!(".{file}.{}{TMP_SUFFIX}", std::process::id()));
+    {
+        let mut f = std::fs::File::create(&tmp)?;
+        f.write_all(bytes)?;
+        f.sync_all()?;
+    }
+    std::fs::rename(&tmp, dir.join(file))
+}
+
+/// A table's bytes, checked: the local file, else (where the database keeps the bytes) the
+/// database's copy, which then replaces the local file.
+async fn fetch_checked(
+    state: &Inner,
+    row: &TableRow,
+) -> Result<(Vec<u8>, L3Table), TableFileError> {
+    let path = state.tables_dir.join(&row.path);
+    let sha = row.sha256.clone();
+    let local = tokio::task::spawn_blocking(move || read_checked(&path, &sha))
+        .await
+        .map_err(|e| TableFileError::Io(format!("table loader: {e}")))?;
+    let err = match local {
+        Ok(v) => return Ok(v),
+        Err(e) if !state.store.keeps_table_bytes() => return Err(e),
+        Err(e) => e,
+    };
+    let bytes = match state.store.table_content(&row.id).await {
+        Ok(Some(b)) => b,
+        Ok(None) => return Err(err),
+        Err(e) => return Err(TableFileError::Io(format!("table {}: {e}", row.id))),
+    };
+    let (dir, file, sha) = (
+        state.tables_dir.clone(),
+        row.path.clone(),
+        row.sha256.clone(),
+    );
+    let what = format!("table {} in the database", row.id);
+    tokio::task::spawn_blocking(move || {
+        let table = check_bytes(&bytes, &sha, &what)?;
+        if let Err(e) = write_cache(&dir, &file, &bytes) {
+            tracing::warn!("cannot cache {file} in {}: {e}", dir.display());
+        }
+        Ok((bytes, table))
+    })
+    .await
+    .map_err(|e| TableFileError::Io(format!("table loader: {e}")))?
 }
 
 /// Records a table's file health (`ok`, `corrupt` or `missing`) when it changed.
@@ -199,16 +264,7 @@ async fn set_status(
     status: &str,
     detail: Option<&str>,
 ) -> Result<(), ServiceError> {
-    sqlx::query(
-        "UPDATE l3_tables SET status = $1, status_detail = $2
-         WHERE id = $3 AND (status <> $1 OR status_detail IS NOT $2)",
-    )
-    .bind(status)
-    .bind(detail)
-    .bind(id)
-    .execute(&state.db)
-    .await?;
-    Ok(())
+    state.store.set_table_status(id, status, detail).await
 }
 
 /// Loads table `id` with its checksum verified. A corrupt or missing file is recorded in the
@@ -219,17 +275,10 @@ pub(super) async fn load_verified(
     id: &str,
 ) -> Result<(Vec<u8>, L3Table, String, String), ServiceError> {
     let row = table_row(state, id).await?;
-    let file: String = row.try_get("path")?;
-    let sha: String = row.try_get("sha256")?;
-    let path = state.tables_dir.join(&file);
-    let sha2 = sha.clone();
-    let loaded = tokio::task::spawn_blocking(move || read_checked(&path, &sha2))
-        .await
-        .map_err(|e| ServiceError::Internal(format!("table loader: {e}")))?;
-    match loaded {
+    match fetch_checked(state, &row).await {
         Ok((bytes, table)) => {
             set_status(state, id, "ok", None).await?;
-            Ok((bytes, table, sha, file))
+            Ok((bytes, table, row.sha256, row.path))
         }
         Err(e) => {
             if let Some(st) = e.status() {
@@ -249,18 +298,11 @@ pub(super) async fn load_verified(
 /// Checks every stored table file against its checksum (at start) and records each one's
 /// status; returns the ids found unusable, with the reason. Blocking reads run off the runtime.
 pub async fn verify_all(state: &Inner) -> Result<Vec<(String, String)>, ServiceError> {
-    let rows = sqlx::query("SELECT id, path, sha256 FROM l3_tables ORDER BY created_at, id")
-        .fetch_all(&state.db)
-        .await?;
+    let rows = state.store.tables_oldest_first().await?;
     let mut bad = Vec::new();
     for r in rows {
-        let id: String = r.try_get("id")?;
-        let path = state.tables_dir.join(r.try_get::<String, _>("path")?);
-        let sha: String = r.try_get("sha256")?;
-        let checked = tokio::task::spawn_blocking(move || read_checked(&path, &sha).map(|_| ()))
-            .await
-            .map_err(|e| ServiceError::Internal(format!("table check: {e}")))?;
-        match checked {
+        let id = r.id.clone();
+        match fetch_checked(state, &r).await.map(|_| ()) {
             Ok(()) => set_status(state, &id, "ok", None).await?,
             Err(e) => {
                 if let Some(st) = e.status() {
@@ -280,15 +322,41 @@ pub async fn verify_all(state: &Inner) -> Result<Vec<(String, String)>, ServiceE
     Ok(bad)
 }
 
-/// Loads table `id` (checksum verified) and makes it the one renders use; records the choice
-/// (and the activation time, so a start can fall back to the last good table).
-pub async fn activate_table(state: &AppState, id: &str) -> Result<(), ServiceError> {
+/// Loads table `id` (checksum verified) for activation.
+async fn load_for_activation(state: &Inner, id: &str) -> Result<ActiveTable, ServiceError> {
     let (_, table, sha, _) = load_verified(state, id).await?;
     if table.meta.grid != *state.default_registry.grid() {
         return Err(ServiceError::Unprocessable(format!(
             "table '{id}' uses a wavelength grid other than the service's"
         )));
     }
+    Ok(ActiveTable {
+        id: id.to_string(),
+        sha256: sha,
+        table,
+    })
+}
+
+/// Follows the activation recorded in the database (made through another replica): loads the
+/// recorded table when it is not the one renders use. Renders in flight keep theirs.
+pub async fn follow_recorded_active(state: &Inner) -> Result<(), ServiceError> {
+    let Some(id) = state.store.recorded_active().await? else {
+        return Ok(());
+    };
+    if state.active.load().as_ref().is_some_and(|a| a.id == id) {
+        return Ok(());
+    }
+    let loaded = load_for_activation(state, &id).await?;
+    state.active.store(Some(Arc::new(loaded)));
+    tracing::info!(table = id, "table activated (through another replica)");
+    Ok(())
+}
+
+/// Loads table `id` (checksum verified) and makes it the one renders use; records the choice
+/// (and the activation time, so a start can fall back to the last good table) and announces
+/// it to the other replicas.
+pub async fn activate_table(state: &AppState, id: &str) -> Result<(), ServiceError> {
+    let loaded = load_for_activation(state, id).await?;
     let pause = state.config.server.test_pause_activation_ms;
     if pause > 0 && state.active.load().is_some() {
         tracing::warn!(
@@ -297,60 +365,33 @@ pub async fn activate_table(state: &AppState, id: &str) -> Result<(), ServiceErr
         );
         tokio::time::sleep(std::time::Duration::from_millis(pause)).await;
     }
-    let mut tx = state.db.begin().await?;
-    sqlx::query(
-        "INSERT INTO settings (key, value) VALUES ('active_table', $1)
-         ON CONFLICT (key) DO UPDATE SET value = excluded.value",
-    )
-    .bind(id)
-    .execute(&mut *tx)
-    .await?;
-    sqlx::query("UPDATE l3_tables SET last_activated_at = $1 WHERE id = $2")
-        .bind(now_ms())
-        .bind(id)
-        .execute(&mut *tx)
-        .await?;
-    tx.commit().await?;
-    state.active.store(Some(Arc::new(ActiveTable {
-        id: id.to_string(),
-        sha256: sha,
-        table,
-    })));
+    state.store.record_activation(id, now_ms()).await?;
+    state.active.store(Some(Arc::new(loaded)));
     tracing::info!(table = id, "table activated");
     Ok(())
 }
 
 /// The id recorded as active, if any.
 pub async fn recorded_active(state: &Inner) -> Result<Option<String>, ServiceError> {
-    Ok(
-        sqlx::query("SELECT value FROM settings WHERE key = 'active_table'")
-            .fetch_optional(&state.db)
-            .await?
-            .map(|r| r.try_get::<String, _>("value"))
-            .transpose()?,
-    )
+    state.store.recorded_active().await
 }
 
-fn row_json(
-    state: &Inner,
-    row: &sqlx::sqlite::SqliteRow,
-    full: bool,
-) -> Result<Value, ServiceError> {
-    let id: String = row.try_get("id")?;
-    let meta: Value = serde_json::from_str(&row.try_get::<String, _>("meta_json")?)
+fn row_json(state: &Inner, row: &TableRow, full: bool) -> Result<Value, ServiceError> {
+    let id = &row.id;
+    let meta: Value = serde_json::from_str(&row.meta_json)
         .map_err(|e| ServiceError::Internal(format!("stored metadata of {id}: {e}")))?;
-    let active = state.active.load().as_ref().is_some_and(|a| a.id == id);
+    let active = state.active.load().as_ref().is_some_and(|a| a.id == *id);
     let mut v = json!({
         "id": id,
-        "kind": row.try_get::<String, _>("kind")?,
-        "sha256": row.try_get::<String, _>("sha256")?,
-        "size_bytes": row.try_get::<i64, _>("size_bytes")?,
-        "job_id": row.try_get::<Option<String>, _>("job_id")?,
-        "created_at_ms": row.try_get::<i64, _>("created_at")?,
+        "kind": row.kind,
+        "sha256": row.sha256,
+        "size_bytes": row.size_bytes,
+        "job_id": row.job_id,
+        "created_at_ms": row.created_at,
         "active": active,
-        "status": row.try_get::<String, _>("status")?,
-        "status_detail": row.try_get::<Option<String>, _>("status_detail")?,
-        "last_activated_at_ms": row.try_get::<Option<i64>, _>("last_activated_at")?,
+        "status": row.status,
+        "status_detail": row.status_detail,
+        "last_activated_at_ms": row.last_activated_at,
         "train_illuminants": meta["train_illuminants"].clone(),
         "sensor_name": meta["sensor_name"].clone(),
         "training_seconds": meta["training_seconds"].clone(),
@@ -369,9 +410,7 @@ fn row_json(
 
 /// `GET /v1/tables`
 pub async fn list(State(state): State<AppState>) -> Result<Json<Value>, ServiceError> {
-    let rows = sqlx::query("SELECT * FROM l3_tables ORDER BY created_at DESC, id")
-        .fetch_all(&state.db)
-        .await?;
+    let rows = state.store.tables_newest_first().await?;
     let items = rows
         .iter()
         .map(|r| row_json(&state, r, false))

@@ -55,6 +55,9 @@ pub fn test_config(data: &Path) -> ServiceConfig {
     c.server.bind = "127.0.0.1:0".parse().unwrap();
     c.data.dir = data.to_path_buf();
     c.training.auto_train_default = false;
+    if let Some(db) = pg::test_database_url(data) {
+        c.data.database_url = db;
+    }
     c
 }
 
@@ -123,3 +126,4 @@ pub async fn wait_job(
         tokio::time::sleep(std::time::Duration::from_millis(20)).await;
     }
 }
+pub mod pg;
