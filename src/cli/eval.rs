@@ -193,28 +193,8 @@ fn evaluate_frame(
         .ok_or_else(|| CliError::Usage("--frame needs --table".into()))?;
     let table = L3Table::load(path)?;
     let input = super::render::load_mosaic(frame, table.meta.voltage_swing)?;
-    let table_cfa = table.meta.cfa.to_string();
-    if let Some(cfa) = &input.dng_cfa
-        && !cfa.eq_ignore_ascii_case(&table_cfa)
-    {
-        return Err(CliError::Usage(format!(
-            "{}: the DNG's CFA '{cfa}' does not match the table's CFA '{table_cfa}'",
-            frame.display()
-        )));
-    }
-    let (spec, source) = match a.illuminant.first() {
-        Some(s) => (s.clone(), "--illuminant"),
-        None => {
-            let (spec, source) = table.frame_illuminant(
-                input.frame_metadata(),
-                &crate::l3::Mosaic::Volts(&input.volts),
-                input.width,
-                input.height,
-                iset,
-            )?;
-            (spec, source.describe())
-        }
-    };
+    input.check_dng_cfa(&table, frame)?;
+    let (spec, source) = input.light(&table, a.illuminant.first().map(String::as_str), iset)?;
     let grid = table.meta.grid;
     let design = match a.sensor.first() {
         Some(p) => load_sensor(&Some(p.clone()), iset)?,

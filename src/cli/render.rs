@@ -55,12 +55,42 @@ pub struct MosaicInput {
 }
 
 impl MosaicInput {
-    /// What the file says about its light.
-    pub fn frame_metadata(&self) -> crate::l3::FrameMetadata<'_> {
-        crate::l3::FrameMetadata {
+    /// A DNG whose CFA is not `table`'s is refused, naming both.
+    pub fn check_dng_cfa(&self, table: &L3Table, path: &std::path::Path) -> Result<(), CliError> {
+        let table_cfa = table.meta.cfa.to_string();
+        match &self.dng_cfa {
+            Some(cfa) if !cfa.eq_ignore_ascii_case(&table_cfa) => Err(CliError::Usage(format!(
+                "{}: the DNG's CFA '{cfa}' does not match the table's CFA '{table_cfa}'",
+                path.display()
+            ))),
+            _ => Ok(()),
+        }
+    }
+
+    /// The light to render this frame under, and where it came from: `named` (the
+    /// `--illuminant` flag), else the file's metadata, else an estimate from the pixels
+    /// ([`L3Table::frame_illuminant`]).
+    pub fn light(
+        &self,
+        table: &L3Table,
+        named: Option<&str>,
+        iset: Option<&crate::spectral::IsetData>,
+    ) -> Result<(String, &'static str), CliError> {
+        if let Some(s) = named {
+            return Ok((s.to_string(), "--illuminant"));
+        }
+        let metadata = crate::l3::FrameMetadata {
             illuminant: self.illuminant.as_deref(),
             neutral: self.neutral.as_deref(),
-        }
+        };
+        let (spec, source) = table.frame_illuminant(
+            metadata,
+            &crate::l3::Mosaic::Volts(&self.volts),
+            self.width,
+            self.height,
+            iset,
+        )?;
+        Ok((spec, source.describe()))
     }
 }
 
@@ -109,28 +139,8 @@ pub fn run(cli: &Cli, a: &RenderArgs) -> Result<(), CliError> {
     let table = L3Table::load(&a.table)?;
     let white: WhiteLevel = a.white_level.parse()?;
     let input = load_mosaic(&a.input, table.meta.voltage_swing)?;
-    let table_cfa = table.meta.cfa.to_string();
-    if let Some(cfa) = &input.dng_cfa
-        && !cfa.eq_ignore_ascii_case(&table_cfa)
-    {
-        return Err(CliError::Usage(format!(
-            "{}: the DNG's CFA '{cfa}' does not match the table's CFA '{table_cfa}'",
-            a.input.display()
-        )));
-    }
-    let (spec, source) = match &a.illuminant {
-        Some(s) => (s.clone(), "--illuminant"),
-        None => {
-            let (spec, source) = table.frame_illuminant(
-                input.frame_metadata(),
-                &crate::l3::Mosaic::Volts(&input.volts),
-                input.width,
-                input.height,
-                iset.as_ref(),
-            )?;
-            (spec, source.describe())
-        }
-    };
+    input.check_dng_cfa(&table, &a.input)?;
+    let (spec, source) = input.light(&table, a.illuminant.as_deref(), iset.as_ref())?;
     let (volts, w, h) = (input.volts, input.width, input.height);
     let mut registry = IlluminantRegistry::with_defaults(table.meta.grid, iset.as_ref())?;
     let entry = registry.resolve(&spec, iset.as_ref())?;

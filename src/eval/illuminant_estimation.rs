@@ -9,7 +9,7 @@
 use serde::Serialize;
 
 use super::{ChartSetup, EvalError, Method, evaluate_capture, simulate_chart};
-use crate::camera::{Camera, Exposure, NoiseSwitches, simulate};
+use crate::camera::Camera;
 use crate::l3::{IlluminantRegistry, L3Table, Mosaic, NeutralStatistic, TableKind};
 use crate::scene::{SceneKind, SceneOptions};
 use crate::spectral::{IlluminantSpec, IsetData};
@@ -144,22 +144,7 @@ fn dead_leaves_frame(
     let opts = SceneOptions::from_samples(*camera.grid(), &light.spd, light.name.clone())?
         .with_mean_luminance(setup.mean_luminance);
     let scene = SceneKind::DeadLeaves.build(iset, &opts, setup.seed)?;
-    let noise = if setup.noise {
-        NoiseSwitches::all()
-    } else {
-        NoiseSwitches::none()
-    };
-    let cap = simulate(
-        camera,
-        &scene,
-        Exposure::Scaled {
-            target_fraction: setup.exposure_fraction,
-            factor: setup.exposure_factor,
-        },
-        &noise,
-        setup.seed,
-    )
-    .map_err(|e| EvalError::Invalid(e.to_string()))?;
+    let cap = super::capture_scene(camera, &scene, setup)?;
     let (h, w) = cap.volts.dim();
     Ok((cap.volts.into_raw_vec_and_offset().0, w, h))
 }

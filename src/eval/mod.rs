@@ -25,8 +25,9 @@ pub use report::{
 };
 pub use workflow::{
     ChannelSet, ChartCapture, ChartSetup, ColourFit, LightLevel, Method, REFERENCE_LUMINANCE,
-    chart_scene, evaluate_capture, evaluate_method, fit_baseline_matrix, fit_colour_matrix,
-    frame_chart_capture, linear_table, matching_linear_map, render_method, simulate_chart,
+    capture_scene, chart_scene, evaluate_capture, evaluate_method, fit_baseline_matrix,
+    fit_colour_matrix, frame_chart_capture, linear_table, matching_linear_map, render_method,
+    simulate_chart,
 };
 
 /// Errors of the evaluation layer.

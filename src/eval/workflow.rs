@@ -170,23 +170,7 @@ pub fn simulate_chart(
     setup: &ChartSetup,
 ) -> Result<ChartCapture, EvalError> {
     let (scene, acq_name) = chart_scene(camera, acquisition, iset, setup)?;
-    let noise = if setup.noise {
-        NoiseSwitches::all()
-    } else {
-        NoiseSwitches::none()
-    };
-    let invalid = |e: crate::camera::CameraError| EvalError::Invalid(e.to_string());
-    let cap = simulate(
-        camera,
-        &scene,
-        Exposure::Scaled {
-            target_fraction: setup.exposure_fraction,
-            factor: setup.exposure_factor,
-        },
-        &noise,
-        setup.seed,
-    )
-    .map_err(invalid)?;
+    let cap = capture_scene(camera, &scene, setup)?;
     let (height, width) = cap.volts.dim();
     let ideal_d65 = ideal_d65_patch_means(camera, &scene)?;
     Ok(ChartCapture {
@@ -198,6 +182,30 @@ pub fn simulate_chart(
         exposure_s: cap.exposure_s,
         ideal_d65,
     })
+}
+
+/// `scene` captured as `setup` says (noise, seed, exposure).
+pub fn capture_scene(
+    camera: &Camera,
+    scene: &Scene,
+    setup: &ChartSetup,
+) -> Result<crate::camera::Capture, EvalError> {
+    let noise = if setup.noise {
+        NoiseSwitches::all()
+    } else {
+        NoiseSwitches::none()
+    };
+    simulate(
+        camera,
+        scene,
+        Exposure::Scaled {
+            target_fraction: setup.exposure_fraction,
+            factor: setup.exposure_factor,
+        },
+        &noise,
+        setup.seed,
+    )
+    .map_err(|e| EvalError::Invalid(e.to_string()))
 }
 
 /// Per patch of `scene`: the noise-free XYZ of its optical image relit by D65, averaged over
