@@ -1,12 +1,13 @@
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 use std::sync::atomic::AtomicBool;
+use std::time::Instant;
 
 use clap::Args;
 use indicatif::{ProgressBar, ProgressStyle};
 
-use super::{Cli, CliError, iset, load_sensor};
-use crate::l3::TableKind;
-use crate::training::{TrainingSpec, train_table};
+use super::{Cli, CliError, iset, load_sensor, write_file};
+use crate::l3::{GramPartial, L3Table, SurveyPartial, TableKind};
+use crate::training::{TrainingRun, TrainingSpec};
 
 #[derive(Args, Debug)]
 pub struct TrainArgs {
@@ -42,6 +43,19 @@ pub struct TrainArgs {
     pub no_saturation: bool,
     #[arg(long, default_value = "table.safetensors")]
     pub out: PathBuf,
+    /// Train in this many shards (batch ranges), one after the other, each
+    /// shard's partial sums written to --shard-dir and read back for the
+    /// merge: the table is the one a single run gives.
+    #[arg(long, default_value_t = 1)]
+    pub shards: usize,
+    /// Folder of the shards' partial sums (default: the output path with
+    /// `.shards` appended).
+    #[arg(long)]
+    pub shard_dir: Option<PathBuf>,
+    /// Zero the creation time and training duration in the table, so that
+    /// equal training gives equal file bytes.
+    #[arg(long)]
+    pub reproducible: bool,
 }
 
 pub fn parse_kind(s: &str) -> Result<TableKind, CliError> {
@@ -80,8 +94,23 @@ pub fn run(cli: &Cli, a: &TrainArgs) -> Result<(), CliError> {
         bar.set_position((f * 1000.0) as u64);
         bar.set_message(stage.to_string());
     };
-    let table = train_table(&design, &spec, iset.as_ref(), &progress, &cancel)?;
+    let run = TrainingRun::new(&design, &spec, iset.as_ref())?;
+    let mut table = if a.shards > 1 || a.shard_dir.is_some() {
+        let dir = a.shard_dir.clone().unwrap_or_else(|| {
+            let mut p = a.out.clone().into_os_string();
+            p.push(".shards");
+            PathBuf::from(p)
+        });
+        bar.finish_and_clear();
+        train_sharded(&run, a.shards, &dir, &cancel)?
+    } else {
+        run.train(&progress, &cancel)?
+    };
     bar.finish_and_clear();
+    if a.reproducible {
+        table.meta.created_unix_s = 0;
+        table.meta.training_seconds = 0.0;
+    }
     table.save(&a.out)?;
     let reps = &table.reports;
     let filled = reps.iter().filter(|r| r.filled_from >= 0).count();
@@ -109,4 +138,95 @@ pub fn run(cli: &Cli, a: &TrainArgs) -> Result<(), CliError> {
         std::fs::metadata(&a.out).map(|m| m.len()).unwrap_or(0)
     );
     Ok(())
+}
+
+fn read_file(path: &Path) -> Result<Vec<u8>, CliError> {
+    std::fs::read(path).map_err(|source| CliError::File {
+        path: path.display().to_string(),
+        source,
+    })
+}
+
+/// Train `run` in `n` shards one after the other, as separate machines
+/// would: survey shards → merged survey → accumulation shards → merge and
+/// solve, every partial written to `dir` and read back. Prints the time of
+/// every step.
+fn train_sharded(
+    run: &TrainingRun,
+    n: usize,
+    dir: &Path,
+    cancel: &AtomicBool,
+) -> Result<L3Table, CliError> {
+    let quiet = |_: &str, _: f64| {};
+    let plan = run.plan(n)?;
+    let started = Instant::now();
+    let mut survey_files = Vec::new();
+    for shard in &plan {
+        let t = Instant::now();
+        let part = run.survey_shard(shard, &quiet, cancel)?;
+        let path = dir.join(format!("survey-{}-of-{n}.l3p", shard.index + 1));
+        let bytes = part.to_bytes()?;
+        write_file(&path, &bytes)?;
+        println!(
+            "survey shard {}/{n} (batches {}..{}): {:.2} s, {} bytes",
+            shard.index + 1,
+            shard.start,
+            shard.end,
+            t.elapsed().as_secs_f64(),
+            bytes.len()
+        );
+        survey_files.push(path);
+    }
+    let t = Instant::now();
+    let surveys = survey_files
+        .iter()
+        .map(|p| Ok(SurveyPartial::from_bytes(&read_file(p)?)?))
+        .collect::<Result<Vec<_>, CliError>>()?;
+    let classes = run.classes(&surveys)?;
+    println!("survey merge: {:.3} s", t.elapsed().as_secs_f64());
+    let mut sum_files = Vec::new();
+    for shard in &plan {
+        let t = Instant::now();
+        let part = run.accumulate_shard(shard, &classes, &quiet, cancel)?;
+        let path = dir.join(format!("sums-{}-of-{n}.l3p", shard.index + 1));
+        let bytes = part.to_bytes()?;
+        write_file(&path, &bytes)?;
+        println!(
+            "accumulation shard {}/{n} (batches {}..{}): {:.2} s, {} bytes",
+            shard.index + 1,
+            shard.start,
+            shard.end,
+            t.elapsed().as_secs_f64(),
+            bytes.len()
+        );
+        sum_files.push(path);
+    }
+    let t = Instant::now();
+    let parts = sum_files
+        .iter()
+        .map(|p| Ok(GramPartial::from_bytes(&read_file(p)?)?))
+        .collect::<Result<Vec<_>, CliError>>()?;
+    let read = t.elapsed().as_secs_f64();
+    // the solve starts when it reports its stage: the rest is the merge
+    let solve_at = std::sync::Mutex::new(None);
+    let mark = |stage: &str, _: f64| {
+        if stage == "solve"
+            && let Ok(mut at) = solve_at.lock()
+        {
+            at.get_or_insert_with(Instant::now);
+        }
+    };
+    let table = run.finish(classes, parts, &mark, cancel)?;
+    let total = t.elapsed().as_secs_f64();
+    let merged = solve_at
+        .into_inner()
+        .ok()
+        .flatten()
+        .map_or(total, |at| at.duration_since(t).as_secs_f64());
+    println!(
+        "merge: {merged:.3} s (reading {read:.3} s); solve: {:.2} s; {n} shards in {:.2} s",
+        total - merged,
+        started.elapsed().as_secs_f64()
+    );
+    Ok(table)
 }
