@@ -107,6 +107,7 @@ pub fn run(cli: &Cli, a: &TrainArgs) -> Result<(), CliError> {
         run.train(&progress, &cancel)?
     };
     bar.finish_and_clear();
+    let seconds = table.meta.training_seconds;
     if a.reproducible {
         table.meta.created_unix_s = 0;
         table.meta.training_seconds = 0.0;
@@ -121,7 +122,7 @@ pub fn run(cli: &Cli, a: &TrainArgs) -> Result<(), CliError> {
         table.meta.kind,
         design.name,
         table.meta.train_illuminants.join("+"),
-        table.meta.training_seconds,
+        seconds,
         table.n_classes(),
         table.n_positions(),
         table.n_levels(),
