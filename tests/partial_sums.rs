@@ -125,6 +125,9 @@ fn survey_shards_merge_to_the_sum_of_their_counts() {
     }
     assert!(merge_surveys(&parts[..1]).is_err(), "batches 0..4 missing");
     assert!(merge_surveys(&[parts[0].clone(), parts[0].clone()]).is_err());
+    let mut short = parts[1].clone();
+    short.hist.pop();
+    assert!(merge_surveys(&[parts[0].clone(), short]).is_err());
 }
 
 #[test]
@@ -141,7 +144,10 @@ fn merge_refuses_nodes_outside_their_shard() {
     assert!(merge_partials(&classes, vec![a.clone(), b2.clone()]).is_ok());
     let mut stray = a.clone();
     stray.nodes[0].0 = Node { lo: 4, log2: 0 };
-    assert!(merge_partials(&classes, vec![stray, b2]).is_err());
+    assert!(merge_partials(&classes, vec![stray, b2.clone()]).is_err());
+    let mut odd = a.clone();
+    odd.nodes[0].1[1] = Some(Box::new(Gram::new(NF + 1)));
+    assert!(merge_partials(&classes, vec![odd, b2]).is_err());
     // parts accumulated for other classes
     assert!(merge_partials(&classes, vec![a, b]).is_err());
 }

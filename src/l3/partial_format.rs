@@ -41,12 +41,15 @@ pub const PARTIAL_FORMAT_VERSION: u32 = 1;
 const FORMAT_NAME: &str = "l3-partial-sums";
 const HEADER_KEY: &str = "l3-partial";
 
-/// Bounds on the sizes a header may state (far above any real run).
-const MAX_BATCHES: usize = 1 << 32;
-const MAX_CELLS: usize = 1 << 24;
-const MAX_BINS: usize = 1 << 16;
+/// Bounds on the sizes a header may state (far above any real run: 10 000
+/// batches, 20 levels × 4 positions × 5 saturation cases × 2 = 800 classes,
+/// 26 features). What a small file may make the reader allocate: at most
+/// 2·24 nodes × `MAX_CLASSES` empty class slots.
+const MAX_BATCHES: usize = 1 << 24;
+const MAX_CELLS: usize = 1 << 20;
+const MAX_BINS: usize = 1 << 12;
 const MAX_FEATURES: usize = 1 << 10;
-const MAX_CLASSES: usize = 1 << 20;
+const MAX_CLASSES: usize = 1 << 17;
 
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
 #[serde(rename_all = "snake_case")]

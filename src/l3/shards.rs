@@ -26,7 +26,15 @@
 //!    (at most about 2·log₂ n) and keeps each node's sums; the merge
 //!    evaluates the root again, taking those nodes as given. Every node's
 //!    sums are then the same additions of the same numbers in the same
-//!    order, whatever the shard boundaries, including one shard.
+//!    order, whatever the shard boundaries, including one shard. (A plain
+//!    left fold in batch order, the earlier scheme, could only be
+//!    reproduced from every batch's own sums, whose volume grows with the
+//!    batches; with the tree a shard hands over O(log n) nodes of at most
+//!    classes × (features + 3)² f64 each. Tables trained before the tree
+//!    differ from today's in the last bits.)
+//!
+//!    Within a batch, samples are folded in blocks of 64
+//!    ([`Gram::push`]); that order depends on the batch alone.
 //!
 //! The single-process path ([`super::learn`]) is this same code with one
 //! shard covering every batch: survey it, derive the classes, accumulate
@@ -218,7 +226,19 @@ impl SurveyPartial {
         }
     }
 
-    /// Add another survey's counts (integers: exact in any order).
+    /// Whether the histograms and counts have the sizes `shape` says.
+    fn sizes_agree(&self) -> bool {
+        let cells = self.shape.n_cells();
+        self.hist.len() == cells
+            && self.count.len() == cells
+            && self
+                .hist
+                .iter()
+                .all(|h| h.is_empty() || h.len() == self.shape.bins)
+    }
+
+    /// Add another survey's counts (integers: exact in any order); both
+    /// have [`SurveyPartial::sizes_agree`] and one shape.
     pub(crate) fn add_counts(&mut self, other: &SurveyPartial) {
         for (k, h) in other.hist.iter().enumerate() {
             if h.is_empty() {
@@ -268,7 +288,11 @@ pub fn merge_surveys(parts: &[SurveyPartial]) -> Result<SurveyPartial, L3Error> 
         .first()
         .ok_or_else(|| L3Error::PartialSums("no survey shards".into()))?;
     for p in parts {
-        if p.run_key != first.run_key || p.n_batches != first.n_batches || p.shape != first.shape {
+        if p.run_key != first.run_key
+            || p.n_batches != first.n_batches
+            || p.shape != first.shape
+            || !p.sizes_agree()
+        {
             return Err(L3Error::PartialSums(format!(
                 "survey of batches {}..{} is of another run or shape",
                 p.batches.start, p.batches.end
@@ -389,9 +413,10 @@ pub fn merge_partials(classes: &Classes, parts: Vec<GramPartial>) -> Result<Vec<
                     p.batches.start, p.batches.end
                 )));
             }
-            if sums.len() != nc || stored.insert(node, sums).is_some() {
+            let bad_size = sums.iter().flatten().any(|g| g.n_features() != nf);
+            if bad_size || sums.len() != nc || stored.insert(node, sums).is_some() {
                 return Err(L3Error::PartialSums(format!(
-                    "node {node:?}: wrong class count or given twice"
+                    "node {node:?}: wrong class count or size, or given twice"
                 )));
             }
         }
