@@ -6,8 +6,16 @@ use clap::Args;
 use indicatif::{ProgressBar, ProgressStyle};
 
 use super::{Cli, CliError, iset, load_sensor, write_file};
-use crate::l3::{GramPartial, L3Table, SurveyPartial, TableKind};
+use crate::l3::{Classes, GramPartial, L3Table, ShardSpec, SurveyPartial, TableKind};
 use crate::training::{TrainingRun, TrainingSpec};
+
+/// A step of a sharded training run.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
+pub enum Phase {
+    Survey,
+    Accumulate,
+    Merge,
+}
 
 #[derive(Args, Debug)]
 pub struct TrainArgs {
@@ -52,6 +60,14 @@ pub struct TrainArgs {
     /// `.shards` appended).
     #[arg(long)]
     pub shard_dir: Option<PathBuf>,
+    /// Run one step of a sharded run and stop (as separate machines would,
+    /// sharing --shard-dir): `survey` or `accumulate` for --shard K, then
+    /// `merge` once every shard's file is there. Without it every step runs.
+    #[arg(long, requires = "shards")]
+    pub phase: Option<Phase>,
+    /// The shard (1 to --shards) of --phase survey or accumulate.
+    #[arg(long)]
+    pub shard: Option<usize>,
     /// Zero the creation time and training duration in the table, so that
     /// equal training gives equal file bytes.
     #[arg(long)]
@@ -95,14 +111,37 @@ pub fn run(cli: &Cli, a: &TrainArgs) -> Result<(), CliError> {
         bar.set_message(stage.to_string());
     };
     let run = TrainingRun::new(&design, &spec, iset.as_ref())?;
-    let mut table = if a.shards > 1 || a.shard_dir.is_some() {
+    let mut table = if a.shards > 1 || a.shard_dir.is_some() || a.phase.is_some() {
         let dir = a.shard_dir.clone().unwrap_or_else(|| {
             let mut p = a.out.clone().into_os_string();
             p.push(".shards");
             PathBuf::from(p)
         });
         bar.finish_and_clear();
-        train_sharded(&run, a.shards, &dir, &cancel)?
+        let step = |shard: Option<usize>| -> Result<usize, CliError> {
+            match shard {
+                Some(k) if (1..=a.shards).contains(&k) => Ok(k - 1),
+                _ => Err(CliError::Usage(format!(
+                    "--phase survey or accumulate needs --shard 1 to {}",
+                    a.shards
+                ))),
+            }
+        };
+        let sharded = Sharded {
+            run: &run,
+            plan: run.plan(a.shards)?,
+            dir,
+            cancel: &cancel,
+        };
+        match a.phase {
+            None => sharded.all()?,
+            Some(Phase::Survey) => return sharded.survey(step(a.shard)?),
+            Some(Phase::Accumulate) => {
+                let classes = sharded.classes()?;
+                return sharded.accumulate(step(a.shard)?, &classes);
+            }
+            Some(Phase::Merge) => sharded.merge(sharded.classes()?)?,
+        }
     } else {
         run.train(&progress, &cancel)?
     };
@@ -148,86 +187,132 @@ fn read_file(path: &Path) -> Result<Vec<u8>, CliError> {
     })
 }
 
-/// Train `run` in `n` shards one after the other, as separate machines
-/// would: survey shards → merged survey → accumulation shards → merge and
-/// solve, every partial written to `dir` and read back. Prints the time of
-/// every step.
-fn train_sharded(
-    run: &TrainingRun,
-    n: usize,
-    dir: &Path,
-    cancel: &AtomicBool,
-) -> Result<L3Table, CliError> {
-    let quiet = |_: &str, _: f64| {};
-    let plan = run.plan(n)?;
-    let started = Instant::now();
-    let mut survey_files = Vec::new();
-    for shard in &plan {
+/// The steps of a sharded run, each partial written to `dir` and read back
+/// from there, as separate machines would; each prints its time.
+struct Sharded<'a> {
+    run: &'a TrainingRun,
+    plan: Vec<ShardSpec>,
+    dir: PathBuf,
+    cancel: &'a AtomicBool,
+}
+
+fn quiet(_: &str, _: f64) {}
+
+impl Sharded<'_> {
+    fn path(&self, stage: &str, k: usize) -> PathBuf {
+        self.dir
+            .join(format!("{stage}-{}-of-{}.l3p", k + 1, self.plan.len()))
+    }
+
+    fn shard(&self, k: usize) -> Result<&ShardSpec, CliError> {
+        self.plan
+            .get(k)
+            .ok_or_else(|| CliError::Usage(format!("no shard {}", k + 1)))
+    }
+
+    /// Survey shard `k` (0-based).
+    fn survey(&self, k: usize) -> Result<(), CliError> {
         let t = Instant::now();
-        let part = run.survey_shard(shard, &quiet, cancel)?;
-        let path = dir.join(format!("survey-{}-of-{n}.l3p", shard.index + 1));
-        let bytes = part.to_bytes()?;
-        write_file(&path, &bytes)?;
+        let shard = self.shard(k)?;
+        let bytes = self
+            .run
+            .survey_shard(shard, &quiet, self.cancel)?
+            .to_bytes()?;
+        write_file(&self.path("survey", k), &bytes)?;
         println!(
-            "survey shard {}/{n} (batches {}..{}): {:.2} s, {} bytes",
-            shard.index + 1,
+            "survey shard {}/{} (batches {}..{}): {:.2} s, {} bytes",
+            k + 1,
+            self.plan.len(),
             shard.start,
             shard.end,
             t.elapsed().as_secs_f64(),
             bytes.len()
         );
-        survey_files.push(path);
+        Ok(())
     }
-    let t = Instant::now();
-    let surveys = survey_files
-        .iter()
-        .map(|p| Ok(SurveyPartial::from_bytes(&read_file(p)?)?))
-        .collect::<Result<Vec<_>, CliError>>()?;
-    let classes = run.classes(&surveys)?;
-    println!("survey merge: {:.3} s", t.elapsed().as_secs_f64());
-    let mut sum_files = Vec::new();
-    for shard in &plan {
+
+    /// The run's classes from every survey shard's file.
+    fn classes(&self) -> Result<Classes, CliError> {
         let t = Instant::now();
-        let part = run.accumulate_shard(shard, &classes, &quiet, cancel)?;
-        let path = dir.join(format!("sums-{}-of-{n}.l3p", shard.index + 1));
+        let surveys = (0..self.plan.len())
+            .map(|k| {
+                Ok(SurveyPartial::from_bytes(&read_file(
+                    &self.path("survey", k),
+                )?)?)
+            })
+            .collect::<Result<Vec<_>, CliError>>()?;
+        let classes = self.run.classes(&surveys)?;
+        println!("survey merge: {:.3} s", t.elapsed().as_secs_f64());
+        Ok(classes)
+    }
+
+    /// Accumulation shard `k` (0-based).
+    fn accumulate(&self, k: usize, classes: &Classes) -> Result<(), CliError> {
+        let t = Instant::now();
+        let shard = self.shard(k)?;
+        let part = self
+            .run
+            .accumulate_shard(shard, classes, &quiet, self.cancel)?;
         let bytes = part.to_bytes()?;
-        write_file(&path, &bytes)?;
+        write_file(&self.path("sums", k), &bytes)?;
         println!(
-            "accumulation shard {}/{n} (batches {}..{}): {:.2} s, {} bytes",
-            shard.index + 1,
+            "accumulation shard {}/{} (batches {}..{}): {:.2} s, {} bytes",
+            k + 1,
+            self.plan.len(),
             shard.start,
             shard.end,
             t.elapsed().as_secs_f64(),
             bytes.len()
         );
-        sum_files.push(path);
+        Ok(())
     }
-    let t = Instant::now();
-    let parts = sum_files
-        .iter()
-        .map(|p| Ok(GramPartial::from_bytes(&read_file(p)?)?))
-        .collect::<Result<Vec<_>, CliError>>()?;
-    let read = t.elapsed().as_secs_f64();
-    // the solve starts when it reports its stage: the rest is the merge
-    let solve_at = std::sync::Mutex::new(None);
-    let mark = |stage: &str, _: f64| {
-        if stage == "solve"
-            && let Ok(mut at) = solve_at.lock()
-        {
-            at.get_or_insert_with(Instant::now);
+
+    /// Merge every shard's sums, solve, package.
+    fn merge(&self, classes: Classes) -> Result<L3Table, CliError> {
+        let t = Instant::now();
+        let parts = (0..self.plan.len())
+            .map(|k| Ok(GramPartial::from_bytes(&read_file(&self.path("sums", k))?)?))
+            .collect::<Result<Vec<_>, CliError>>()?;
+        let read = t.elapsed().as_secs_f64();
+        // the solve starts when it reports its stage: the rest is the merge
+        let solve_at = std::sync::Mutex::new(None);
+        let mark = |stage: &str, _: f64| {
+            if stage == "solve"
+                && let Ok(mut at) = solve_at.lock()
+            {
+                at.get_or_insert_with(Instant::now);
+            }
+        };
+        let table = self.run.finish(classes, parts, &mark, self.cancel)?;
+        let total = t.elapsed().as_secs_f64();
+        let merged = solve_at
+            .into_inner()
+            .ok()
+            .flatten()
+            .map_or(total, |at| at.duration_since(t).as_secs_f64());
+        println!(
+            "merge: {merged:.3} s (reading {read:.3} s); solve: {:.2} s",
+            total - merged
+        );
+        Ok(table)
+    }
+
+    /// Every step, one shard after the other.
+    fn all(&self) -> Result<L3Table, CliError> {
+        let started = Instant::now();
+        for k in 0..self.plan.len() {
+            self.survey(k)?;
         }
-    };
-    let table = run.finish(classes, parts, &mark, cancel)?;
-    let total = t.elapsed().as_secs_f64();
-    let merged = solve_at
-        .into_inner()
-        .ok()
-        .flatten()
-        .map_or(total, |at| at.duration_since(t).as_secs_f64());
-    println!(
-        "merge: {merged:.3} s (reading {read:.3} s); solve: {:.2} s; {n} shards in {:.2} s",
-        total - merged,
-        started.elapsed().as_secs_f64()
-    );
-    Ok(table)
+        let classes = self.classes()?;
+        for k in 0..self.plan.len() {
+            self.accumulate(k, &classes)?;
+        }
+        let table = self.merge(classes)?;
+        println!(
+            "{} shards in {:.2} s",
+            self.plan.len(),
+            started.elapsed().as_secs_f64()
+        );
+        Ok(table)
+    }
 }

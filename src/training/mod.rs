@@ -1,6 +1,10 @@
 //! Training an L3 table from the camera simulation: the training scenes,
 //! the frames simulated from them, and the call into the learner
 //! (DESIGN.md §5). Shared by the CLI and the service's training jobs.
+//!
+//! A [`TrainingRun`] trains in one call or in shards (batch ranges) whose
+//! partial sums can be computed on other machines and merged into the same
+//! table bytes (`src/l3/shards.rs` explains why they are equal).
 
 mod colour_samples;
 mod scenes;
@@ -203,7 +207,7 @@ impl TrainingSpec {
 /// and illuminants, the L3 parameters and the per-level colour maps. It
 /// trains in one call ([`TrainingRun::train`]) or in shards
 /// ([`TrainingRun::survey_shard`], [`TrainingRun::accumulate_shard`],
-/// [`TrainingRun::finish`]; see [`crate::l3::shards`]) with byte-identical
+/// [`TrainingRun::finish`]; see `src/l3/shards.rs`) with byte-identical
 /// tables; both go through the same core functions.
 pub struct TrainingRun {
     spec: TrainingSpec,
