@@ -415,3 +415,54 @@ fn bad_arguments_are_clear_errors() {
     let (ok, _, err) = l3(&["simulate", "--exposure=-1", "--out", "x"], d);
     assert!(!ok && err.contains("exposure"), "{err}");
 }
+
+#[test]
+fn train_in_shards_gives_the_same_table_file() {
+    let tmp = tempfile::tempdir().unwrap();
+    let d = tmp.path();
+    let train = |out: &str, extra: &[&str]| {
+        let mut args = vec![
+            "train",
+            "--illuminants",
+            "D65,Tungsten",
+            "--scenes",
+            "5",
+            "--scene-size",
+            "32",
+            "--levels",
+            "6",
+            "--reproducible",
+            "--out",
+            out,
+        ];
+        args.extend_from_slice(extra);
+        let (ok, stdout, err) = l3(&args, d);
+        assert!(ok, "train {extra:?} failed: {stdout}{err}");
+        (std::fs::read(d.join(out)).unwrap_or_default(), stdout)
+    };
+    let (one, _) = train("one.safetensors", &[]);
+    let (two, stdout) = train(
+        "two.safetensors",
+        &["--shards", "2", "--shard-dir", "parts"],
+    );
+    assert_eq!(one, two, "2 shards give the single run's bytes");
+    assert!(stdout.contains("accumulation shard 2/2"), "{stdout}");
+    assert!(d.join("parts/sums-2-of-2.l3p").is_file());
+    // one step per process, as on separate machines: surveys, then sums
+    // (shards in any order), then the merge
+    let steps: [&[&str]; 5] = [
+        &["--phase", "survey", "--shard", "2"],
+        &["--phase", "survey", "--shard", "1"],
+        &["--phase", "accumulate", "--shard", "2"],
+        &["--phase", "accumulate", "--shard", "1"],
+        &["--phase", "merge"],
+    ];
+    for step in steps {
+        let args = [&["--shards", "2", "--shard-dir", "steps"][..], step].concat();
+        train("steps.safetensors", &args);
+    }
+    assert_eq!(std::fs::read(d.join("steps.safetensors")).unwrap(), one);
+    // more shards than batches is a clear error
+    let (ok, _, err) = l3(&["train", "--shards", "6", "--scenes", "5"], d);
+    assert!(!ok && err.contains("6 shards for 5 batches"), "{err}");
+}

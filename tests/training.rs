@@ -1,11 +1,12 @@
 //! Training from the simulator: bit-for-bit reproducible whatever the
-//! thread count, cancellable, and every table finite with bounded kernels.
+//! thread count or the sharding, cancellable, and every table finite with
+//! bounded kernels.
 
 use std::sync::atomic::{AtomicBool, Ordering};
 
 use l3::camera::SensorDesign;
-use l3::l3::{L3Error, TableKind};
-use l3::training::{TrainError, TrainingSpec, train_table};
+use l3::l3::{Classes, GramPartial, L3Error, L3Table, SurveyPartial, TableKind};
+use l3::training::{TrainError, TrainingRun, TrainingSpec, train_table};
 
 fn tiny(seed: u64) -> TrainingSpec {
     TrainingSpec {
@@ -95,4 +96,84 @@ fn bad_specs_are_rejected() {
     }
     let bad_json = r#"{"kind":"si","illuminants":["D65"],"bogus":1}"#;
     assert!(serde_json::from_str::<TrainingSpec>(bad_json).is_err());
+}
+
+/// A table's bytes with its time stamps zeroed: what two equal runs share.
+fn table_bytes(mut t: L3Table) -> Vec<u8> {
+    t.meta.created_unix_s = 0;
+    t.meta.training_seconds = 0.0;
+    t.to_bytes().unwrap()
+}
+
+/// The shards of `run`, each partial written to bytes and read back, the
+/// shards taken in reverse order (the merge orders them).
+fn shard_parts(run: &TrainingRun, n: usize) -> (Vec<SurveyPartial>, Classes, Vec<GramPartial>) {
+    let cancel = AtomicBool::new(false);
+    let plan = run.plan(n).unwrap();
+    let surveys: Vec<SurveyPartial> = plan
+        .iter()
+        .rev()
+        .map(|s| {
+            let part = run.survey_shard(s, &|_, _| {}, &cancel).unwrap();
+            SurveyPartial::from_bytes(&part.to_bytes().unwrap()).unwrap()
+        })
+        .collect();
+    let classes = run.classes(&surveys).unwrap();
+    let sums = plan
+        .iter()
+        .rev()
+        .map(|s| {
+            let part = run
+                .accumulate_shard(s, &classes, &|_, _| {}, &cancel)
+                .unwrap();
+            GramPartial::from_bytes(&part.to_bytes().unwrap()).unwrap()
+        })
+        .collect();
+    (surveys, classes, sums)
+}
+
+#[test]
+fn sharded_training_gives_the_single_run_table_byte_for_byte() {
+    let design = SensorDesign::paper_default();
+    let cancel = AtomicBool::new(false);
+    let quiet = |_: &str, _: f64| {};
+    let spec = tiny(3);
+    let single = train_table(&design, &spec, None, &quiet, &cancel).unwrap();
+    let single_bytes = table_bytes(single);
+    let run = TrainingRun::new(&design, &spec, None).unwrap();
+    assert_eq!(
+        table_bytes(run.train(&quiet, &cancel).unwrap()),
+        single_bytes,
+        "equal runs give equal bytes"
+    );
+    for n in [2, 3] {
+        let (surveys, classes, sums) = shard_parts(&run, n);
+        let table = run.finish(classes.clone(), sums.clone(), &quiet, &cancel);
+        assert_eq!(table_bytes(table.unwrap()), single_bytes, "{n} shards");
+
+        // a missing, doubled or foreign shard is refused
+        assert!(run.classes(&surveys[1..]).is_err());
+        let missing = sums[1..].to_vec();
+        assert!(
+            run.finish(classes.clone(), missing, &quiet, &cancel)
+                .is_err()
+        );
+        let mut doubled = sums.clone();
+        doubled.push(sums[0].clone());
+        assert!(
+            run.finish(classes.clone(), doubled, &quiet, &cancel)
+                .is_err()
+        );
+        let mut foreign = sums.clone();
+        foreign[0].run_key = "another run".into();
+        assert!(
+            run.finish(classes.clone(), foreign, &quiet, &cancel)
+                .is_err()
+        );
+        let mut other_classes = classes.clone();
+        other_classes.thresholds[0] *= 2.0;
+        assert!(run.finish(other_classes, sums, &quiet, &cancel).is_err());
+    }
+    assert!(run.plan(0).is_err());
+    assert!(run.plan(spec.scenes + 1).is_err());
 }

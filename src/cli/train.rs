@@ -1,12 +1,21 @@
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 use std::sync::atomic::AtomicBool;
+use std::time::Instant;
 
 use clap::Args;
 use indicatif::{ProgressBar, ProgressStyle};
 
-use super::{Cli, CliError, iset, load_sensor};
-use crate::l3::TableKind;
-use crate::training::{TrainingSpec, train_table};
+use super::{Cli, CliError, iset, load_sensor, write_file};
+use crate::l3::{Classes, GramPartial, L3Table, ShardSpec, SurveyPartial, TableKind};
+use crate::training::{TrainingRun, TrainingSpec};
+
+/// A step of a sharded training run.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
+pub enum Phase {
+    Survey,
+    Accumulate,
+    Merge,
+}
 
 #[derive(Args, Debug)]
 pub struct TrainArgs {
@@ -42,6 +51,27 @@ pub struct TrainArgs {
     pub no_saturation: bool,
     #[arg(long, default_value = "table.safetensors")]
     pub out: PathBuf,
+    /// Train in this many shards (batch ranges), one after the other, each
+    /// shard's partial sums written to --shard-dir and read back for the
+    /// merge: the table is the one a single run gives.
+    #[arg(long, default_value_t = 1)]
+    pub shards: usize,
+    /// Folder of the shards' partial sums (default: the output path with
+    /// `.shards` appended).
+    #[arg(long)]
+    pub shard_dir: Option<PathBuf>,
+    /// Run one step of a sharded run and stop (as separate machines would,
+    /// sharing --shard-dir): `survey` or `accumulate` for --shard K, then
+    /// `merge` once every shard's file is there. Without it every step runs.
+    #[arg(long, requires = "shards")]
+    pub phase: Option<Phase>,
+    /// The shard (1 to --shards) of --phase survey or accumulate.
+    #[arg(long)]
+    pub shard: Option<usize>,
+    /// Zero the creation time and training duration in the table, so that
+    /// equal training gives equal file bytes.
+    #[arg(long)]
+    pub reproducible: bool,
 }
 
 pub fn parse_kind(s: &str) -> Result<TableKind, CliError> {
@@ -80,8 +110,47 @@ pub fn run(cli: &Cli, a: &TrainArgs) -> Result<(), CliError> {
         bar.set_position((f * 1000.0) as u64);
         bar.set_message(stage.to_string());
     };
-    let table = train_table(&design, &spec, iset.as_ref(), &progress, &cancel)?;
+    let run = TrainingRun::new(&design, &spec, iset.as_ref())?;
+    let mut table = if a.shards > 1 || a.shard_dir.is_some() || a.phase.is_some() {
+        let dir = a.shard_dir.clone().unwrap_or_else(|| {
+            let mut p = a.out.clone().into_os_string();
+            p.push(".shards");
+            PathBuf::from(p)
+        });
+        bar.finish_and_clear();
+        let step = |shard: Option<usize>| -> Result<usize, CliError> {
+            match shard {
+                Some(k) if (1..=a.shards).contains(&k) => Ok(k - 1),
+                _ => Err(CliError::Usage(format!(
+                    "--phase survey or accumulate needs --shard 1 to {}",
+                    a.shards
+                ))),
+            }
+        };
+        let sharded = Sharded {
+            run: &run,
+            plan: run.plan(a.shards)?,
+            dir,
+            cancel: &cancel,
+        };
+        match a.phase {
+            None => sharded.all()?,
+            Some(Phase::Survey) => return sharded.survey(step(a.shard)?),
+            Some(Phase::Accumulate) => {
+                let classes = sharded.classes()?;
+                return sharded.accumulate(step(a.shard)?, &classes);
+            }
+            Some(Phase::Merge) => sharded.merge(sharded.classes()?)?,
+        }
+    } else {
+        run.train(&progress, &cancel)?
+    };
     bar.finish_and_clear();
+    let seconds = table.meta.training_seconds;
+    if a.reproducible {
+        table.meta.created_unix_s = 0;
+        table.meta.training_seconds = 0.0;
+    }
     table.save(&a.out)?;
     let reps = &table.reports;
     let filled = reps.iter().filter(|r| r.filled_from >= 0).count();
@@ -92,7 +161,7 @@ pub fn run(cli: &Cli, a: &TrainArgs) -> Result<(), CliError> {
         table.meta.kind,
         design.name,
         table.meta.train_illuminants.join("+"),
-        table.meta.training_seconds,
+        seconds,
         table.n_classes(),
         table.n_positions(),
         table.n_levels(),
@@ -109,4 +178,141 @@ pub fn run(cli: &Cli, a: &TrainArgs) -> Result<(), CliError> {
         std::fs::metadata(&a.out).map(|m| m.len()).unwrap_or(0)
     );
     Ok(())
+}
+
+fn read_file(path: &Path) -> Result<Vec<u8>, CliError> {
+    std::fs::read(path).map_err(|source| CliError::File {
+        path: path.display().to_string(),
+        source,
+    })
+}
+
+/// The steps of a sharded run, each partial written to `dir` and read back
+/// from there, as separate machines would; each prints its time.
+struct Sharded<'a> {
+    run: &'a TrainingRun,
+    plan: Vec<ShardSpec>,
+    dir: PathBuf,
+    cancel: &'a AtomicBool,
+}
+
+fn quiet(_: &str, _: f64) {}
+
+impl Sharded<'_> {
+    fn path(&self, stage: &str, k: usize) -> PathBuf {
+        self.dir
+            .join(format!("{stage}-{}-of-{}.l3p", k + 1, self.plan.len()))
+    }
+
+    fn shard(&self, k: usize) -> Result<&ShardSpec, CliError> {
+        self.plan
+            .get(k)
+            .ok_or_else(|| CliError::Usage(format!("no shard {}", k + 1)))
+    }
+
+    /// Survey shard `k` (0-based).
+    fn survey(&self, k: usize) -> Result<(), CliError> {
+        let t = Instant::now();
+        let shard = self.shard(k)?;
+        let bytes = self
+            .run
+            .survey_shard(shard, &quiet, self.cancel)?
+            .to_bytes()?;
+        write_file(&self.path("survey", k), &bytes)?;
+        println!(
+            "survey shard {}/{} (batches {}..{}): {:.2} s, {} bytes",
+            k + 1,
+            self.plan.len(),
+            shard.start,
+            shard.end,
+            t.elapsed().as_secs_f64(),
+            bytes.len()
+        );
+        Ok(())
+    }
+
+    /// The run's classes from every survey shard's file.
+    fn classes(&self) -> Result<Classes, CliError> {
+        let t = Instant::now();
+        let surveys = (0..self.plan.len())
+            .map(|k| {
+                Ok(SurveyPartial::from_bytes(&read_file(
+                    &self.path("survey", k),
+                )?)?)
+            })
+            .collect::<Result<Vec<_>, CliError>>()?;
+        let classes = self.run.classes(&surveys)?;
+        println!("survey merge: {:.3} s", t.elapsed().as_secs_f64());
+        Ok(classes)
+    }
+
+    /// Accumulation shard `k` (0-based).
+    fn accumulate(&self, k: usize, classes: &Classes) -> Result<(), CliError> {
+        let t = Instant::now();
+        let shard = self.shard(k)?;
+        let part = self
+            .run
+            .accumulate_shard(shard, classes, &quiet, self.cancel)?;
+        let bytes = part.to_bytes()?;
+        write_file(&self.path("sums", k), &bytes)?;
+        println!(
+            "accumulation shard {}/{} (batches {}..{}): {:.2} s, {} bytes",
+            k + 1,
+            self.plan.len(),
+            shard.start,
+            shard.end,
+            t.elapsed().as_secs_f64(),
+            bytes.len()
+        );
+        Ok(())
+    }
+
+    /// Merge every shard's sums, solve, package.
+    fn merge(&self, classes: Classes) -> Result<L3Table, CliError> {
+        let t = Instant::now();
+        let parts = (0..self.plan.len())
+            .map(|k| Ok(GramPartial::from_bytes(&read_file(&self.path("sums", k))?)?))
+            .collect::<Result<Vec<_>, CliError>>()?;
+        let read = t.elapsed().as_secs_f64();
+        // the solve starts when it reports its stage: the rest is the merge
+        let solve_at = std::sync::Mutex::new(None);
+        let mark = |stage: &str, _: f64| {
+            if stage == "solve"
+                && let Ok(mut at) = solve_at.lock()
+            {
+                at.get_or_insert_with(Instant::now);
+            }
+        };
+        let table = self.run.finish(classes, parts, &mark, self.cancel)?;
+        let total = t.elapsed().as_secs_f64();
+        let merged = solve_at
+            .into_inner()
+            .ok()
+            .flatten()
+            .map_or(total, |at| at.duration_since(t).as_secs_f64());
+        println!(
+            "merge: {merged:.3} s (reading {read:.3} s); solve: {:.2} s",
+            total - merged
+        );
+        Ok(table)
+    }
+
+    /// Every step, one shard after the other.
+    fn all(&self) -> Result<L3Table, CliError> {
+        let started = Instant::now();
+        for k in 0..self.plan.len() {
+            self.survey(k)?;
+        }
+        let classes = self.classes()?;
+        for k in 0..self.plan.len() {
+            self.accumulate(k, &classes)?;
+        }
+        let table = self.merge(classes)?;
+        println!(
+            "{} shards in {:.2} s",
+            self.plan.len(),
+            started.elapsed().as_secs_f64()
+        );
+        Ok(table)
+    }
 }

@@ -11,7 +11,9 @@ mod illuminant_estimate;
 mod normal_eq;
 mod output;
 mod params;
+mod partial_format;
 mod render;
+mod shards;
 mod table;
 mod trainer;
 
@@ -35,9 +37,17 @@ pub use output::{
     xyz_to_srgb16,
 };
 pub use params::{DEFAULT_LEVELS_1V8, L3Params};
+pub use partial_format::PARTIAL_FORMAT_VERSION;
 pub use render::{RenderStats, fuse_kernels, render_reference, resolve_sat_case};
+pub use shards::{
+    ClassSums, Classes, GramPartial, Node, ShardSpec, SurveyPartial, SurveyShape, cover,
+    merge_partials, merge_surveys, plan_shards,
+};
 pub use table::{ClassReport, L3Table, TABLE_FORMAT_VERSION, TableKind, TableMeta};
-pub use trainer::{Learned, NoiseModel, TrainControl, TrainingFrame, learn, package};
+pub use trainer::{
+    Learned, NoiseModel, TrainControl, TrainSetup, TrainingFrame, accumulate_batches,
+    classes_from_survey, learn, package, solve_learned, survey_batches,
+};
 
 /// Errors of the L3 core.
 #[derive(Debug, thiserror::Error)]
@@ -58,6 +68,9 @@ pub enum L3Error {
     },
     #[error("training was canceled")]
     Canceled,
+    /// Partial sums of a sharded training run that cannot be read or merged.
+    #[error("partial sums: {0}")]
+    PartialSums(String),
     #[error(transparent)]
     Spectral(#[from] crate::spectral::SpectralError),
 }

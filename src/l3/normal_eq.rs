@@ -105,6 +105,48 @@ impl Gram {
         self.n += o.n;
     }
 
+    /// Add another accumulator's samples, consuming it: the same sums as
+    /// [`Gram::merge`] without the copy.
+    pub fn merge_owned(&mut self, mut other: Gram) {
+        other.flush();
+        self.flush();
+        self.gram += &other.gram;
+        self.n += other.n;
+    }
+
+    /// The accumulated `[x; y]ᵀ[x; y]` (row-major, `dim × dim` with
+    /// `dim = n_features + 3`) and sample count, when every sample has been
+    /// folded in (after [`Gram::flush`]); `None` while samples are buffered.
+    pub fn flushed_sums(&self) -> Option<(&[f64], u64)> {
+        if self.filled != 0 {
+            return None;
+        }
+        self.gram.as_slice().map(|m| (m, self.n))
+    }
+
+    /// The accumulator holding exactly the sums `matrix` (row-major,
+    /// `(n_features + 3)²` values) over `n` samples, as
+    /// [`Gram::flushed_sums`] gives them.
+    pub fn from_sums(n_features: usize, matrix: Vec<f64>, n: u64) -> Result<Gram, L3Error> {
+        let dim = n_features + 3;
+        if n_features == 0 || matrix.len() != dim * dim {
+            return Err(L3Error::InvalidInput(format!(
+                "{} sums for {n_features} features",
+                matrix.len()
+            )));
+        }
+        let gram = Array2::from_shape_vec((dim, dim), matrix)
+            .map_err(|e| L3Error::InvalidInput(format!("sums: {e}")))?;
+        Ok(Self {
+            n_features,
+            dim,
+            gram,
+            buf: Array2::zeros((BATCH, dim)),
+            filled: 0,
+            n,
+        })
+    }
+
     /// The accumulated matrix (flushes first).
     pub fn matrix(&mut self) -> ArrayView2<'_, f64> {
         self.flush();

@@ -331,7 +331,7 @@ impl L3Table {
                     .map_err(|e| L3Error::Table(format!("tensor {name}: {e}")))
             })
             .collect::<Result<Vec<_>, _>>()?;
-        safetensors::serialize(views, Some(info)).map_err(|e| L3Error::Table(e.to_string()))
+        serialize_sorted(views, info).map_err(L3Error::Table)
     }
 
     /// Parse and verify a table file's bytes. `origin` names it in errors.
@@ -469,6 +469,33 @@ impl L3Table {
         })?;
         Self::from_bytes(&bytes, &path.display().to_string())
     }
+}
+
+/// `safetensors::serialize` with the header's keys in sorted order: the
+/// header metadata is a `HashMap`, whose order varies from run to run, and
+/// equal contents must give equal bytes.
+pub(crate) fn serialize_sorted(
+    views: Vec<(String, TensorView<'_>)>,
+    info: HashMap<String, String>,
+) -> Result<Vec<u8>, String> {
+    let raw = safetensors::serialize(views, Some(info)).map_err(|e| e.to_string())?;
+    let n = raw
+        .get(..8)
+        .and_then(|b| b.try_into().ok())
+        .map(u64::from_le_bytes)
+        .and_then(|n| usize::try_from(n).ok())
+        .filter(|&n| raw.len() >= 8 + n)
+        .ok_or("safetensors header length")?;
+    // serde_json's maps are sorted by key (no `preserve_order`)
+    let header: serde_json::Value =
+        serde_json::from_slice(&raw[8..8 + n]).map_err(|e| e.to_string())?;
+    let mut h = serde_json::to_vec(&header).map_err(|e| e.to_string())?;
+    h.resize(h.len().next_multiple_of(8), b' ');
+    let mut out = Vec::with_capacity(8 + h.len() + raw.len() - 8 - n);
+    out.extend_from_slice(&(h.len() as u64).to_le_bytes());
+    out.extend_from_slice(&h);
+    out.extend_from_slice(&raw[8 + n..]);
+    Ok(out)
 }
 
 fn f32_bytes(v: &[f32]) -> Vec<u8> {

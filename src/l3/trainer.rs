@@ -1,14 +1,21 @@
 //! Learning a table from (noisy mosaic, ideal XYZ) frame pairs, streaming
 //! and in parallel, in four stages:
-//! 1. [`survey`]: contrast histograms and saturation cases on a subset of
-//!    frames, giving the saturation cases that get kernels and the
-//!    flat/texture thresholds;
-//! 2. [`accumulate`]: per-class normal equations in f64 over every frame;
+//! 1. [`survey_batches`]: contrast histograms and saturation cases on a
+//!    subset of frames, giving the saturation cases that get kernels and
+//!    the flat/texture thresholds ([`classes_from_survey`]);
+//! 2. [`accumulate_batches`]: per-class normal equations in f64 over every
+//!    frame, summed over a fixed tree of batches ([`super::shards`]);
 //! 3. [`fill`]: classes with too few samples borrow from their neighbours;
 //! 4. [`solve_classes`]: ridge regression per class, the channel sums of
 //!    unsaturated kernels fixed to the level's colour map (see
 //!    [`super::colour_map`]).
+//!
+//! Stages 1 and 2 work on a range of batches, so that a run can be split
+//! into shards computed anywhere and merged bit for bit
+//! ([`super::shards`]); [`learn`] runs them on one range covering every
+//! batch.
 
+use std::ops::Range;
 use std::sync::atomic::{AtomicBool, AtomicUsize, Ordering};
 
 use rayon::prelude::*;
@@ -16,6 +23,10 @@ use rayon::prelude::*;
 use super::classify::MAX_CHANNELS;
 use super::classify::sat_case_index;
 use super::normal_eq::{ChannelSumConstraint, solve_with};
+use super::shards::{
+    ClassSums, Classes, GramPartial, Node, SurveyPartial, SurveyShape, add_class_sums, cover,
+    merge_partials, tree_sum,
+};
 use super::{
     ClassReport, ColourMatrix, Gram, L3Error, L3Params, L3Table, PatchGeometry, RidgeChoice,
     TableMeta,
@@ -75,15 +86,6 @@ fn hist_edge(bin: usize) -> f32 {
     10f64.powf(HIST_LO + bin as f64 * (HIST_HI - HIST_LO) / HIST_BINS as f64) as f32
 }
 
-/// Pass-1 statistics.
-#[derive(Clone)]
-struct Survey {
-    /// Per (pos, level, mask): contrast histogram.
-    hist: Vec<Vec<u32>>,
-    /// Samples per (pos, level, mask).
-    count: Vec<u64>,
-}
-
 struct Dims {
     n_pos: usize,
     n_levels: usize,
@@ -106,30 +108,115 @@ pub struct Learned {
     pub samples: u64,
 }
 
-/// The classes of a run: saturation cases and contrast thresholds.
-struct Classes {
-    sat_cases: Vec<u32>,
-    /// Per (pos, level, case).
-    thresholds: Vec<f32>,
+/// What every stage and every shard of a training run share.
+#[derive(Clone, Copy)]
+pub struct TrainSetup<'a> {
+    pub geo: &'a PatchGeometry,
+    pub params: &'a L3Params,
+    pub noise: NoiseModel,
+    /// Batches of the run, numbered `0..n_batches`.
+    pub n_batches: usize,
+    /// One per level: the channel sums of every unsaturated kernel; `None`
+    /// leaves every kernel to plain ridge regression.
+    pub colour_maps: Option<&'a [ColourMatrix]>,
+    /// Names the run in its partial sums, whose merge refuses parts of
+    /// another run (e.g. a digest of the training spec).
+    pub run_key: &'a str,
 }
 
-impl Classes {
-    fn n_sat(&self) -> usize {
-        self.sat_cases.len()
+impl TrainSetup<'_> {
+    pub fn validate(&self) -> Result<(), L3Error> {
+        let (geo, params) = (self.geo, self.params);
+        params.validate()?;
+        if self.n_batches == 0 {
+            return Err(L3Error::InvalidParams("no training frames".into()));
+        }
+        if params.ridge == RidgeChoice::NoiseVariance && self.noise.conversion_gain_v <= 0.0 {
+            return Err(L3Error::InvalidParams(
+                "noise-variance ridge needs a noise model".into(),
+            ));
+        }
+        if let Some(maps) = self.colour_maps
+            && (maps.len() != geo.n_levels() || maps.iter().any(|m| m.m.len() != geo.n_channels()))
+        {
+            return Err(L3Error::InvalidParams(format!(
+                "{} colour maps for {} levels and {} channels",
+                maps.len(),
+                geo.n_levels(),
+                geo.n_channels()
+            )));
+        }
+        Ok(())
+    }
+
+    fn dims(&self) -> Dims {
+        Dims {
+            n_pos: self.geo.n_positions(),
+            n_levels: self.geo.n_levels(),
+            n_masks: 1 << self.geo.n_channels(),
+        }
+    }
+
+    /// The sizes of this run's survey.
+    pub fn survey_shape(&self) -> SurveyShape {
+        let d = self.dims();
+        SurveyShape {
+            n_positions: d.n_pos,
+            n_levels: d.n_levels,
+            n_masks: d.n_masks,
+            bins: HIST_BINS,
+        }
+    }
+
+    /// Classes of the run for `classes`' saturation cases.
+    pub fn n_classes(&self, classes: &Classes) -> usize {
+        let d = self.dims();
+        d.n_pos * d.n_levels * classes.n_sat() * 2
+    }
+
+    fn check_range(&self, batches: &Range<usize>) -> Result<(), L3Error> {
+        if batches.start >= batches.end || batches.end > self.n_batches {
+            return Err(L3Error::InvalidParams(format!(
+                "batches {}..{} of 0..{}",
+                batches.start, batches.end, self.n_batches
+            )));
+        }
+        Ok(())
     }
 }
 
-/// Progress over the two passes, and cancellation.
+/// Whether batch `i` is surveyed (every fourth one).
+fn is_surveyed(i: usize) -> bool {
+    i.is_multiple_of(4)
+}
+
+/// Progress over the two passes, and cancellation. Tick `k` of `total`
+/// reports `base + span · k / total`.
 struct Ticker<'a> {
     ctl: &'a TrainControl<'a>,
     done: AtomicUsize,
     total: usize,
+    base: f64,
+    span: f64,
 }
 
-impl Ticker<'_> {
+impl<'a> Ticker<'a> {
+    fn new(ctl: &'a TrainControl<'a>, total: usize, base: f64, span: f64) -> Self {
+        Self {
+            ctl,
+            done: AtomicUsize::new(0),
+            total,
+            base,
+            span,
+        }
+    }
+
     fn tick(&self, stage: &str) {
         let k = self.done.fetch_add(1, Ordering::Relaxed) + 1;
-        (self.ctl.progress)(stage, 0.95 * k as f64 / self.total.max(1) as f64);
+        (self.ctl.progress)(
+            stage,
+            self.base + self.span * k as f64 / self.total.max(1) as f64,
+        );
     }
 
     fn check(&self) -> Result<(), L3Error> {
@@ -149,6 +236,9 @@ impl Ticker<'_> {
 /// `colour_maps`, one per level, fix the channel sums of every unsaturated
 /// kernel (how it renders a uniform patch); `None` leaves every kernel to
 /// plain ridge regression on the patches.
+///
+/// This is the sharded path of [`super::shards`] with one shard: survey,
+/// classes, accumulation, merge, solve.
 pub fn learn<F>(
     geo: &PatchGeometry,
     params: &L3Params,
@@ -161,74 +251,62 @@ pub fn learn<F>(
 where
     F: Fn(usize) -> Result<Vec<TrainingFrame>, L3Error> + Sync,
 {
-    params.validate()?;
-    if n_frames == 0 {
-        return Err(L3Error::InvalidParams("no training frames".into()));
-    }
-    if params.ridge == RidgeChoice::NoiseVariance && noise.conversion_gain_v <= 0.0 {
-        return Err(L3Error::InvalidParams(
-            "noise-variance ridge needs a noise model".into(),
-        ));
-    }
-    if let Some(maps) = colour_maps
-        && (maps.len() != geo.n_levels() || maps.iter().any(|m| m.m.len() != geo.n_channels()))
-    {
-        return Err(L3Error::InvalidParams(format!(
-            "{} colour maps for {} levels and {} channels",
-            maps.len(),
-            geo.n_levels(),
-            geo.n_channels()
-        )));
-    }
-    let d = Dims {
-        n_pos: geo.n_positions(),
-        n_levels: geo.n_levels(),
-        n_masks: 1 << geo.n_channels(),
+    let setup = TrainSetup {
+        geo,
+        params,
+        noise,
+        n_batches: n_frames,
+        colour_maps,
+        run_key: "",
     };
-    let survey_idx: Vec<usize> = (0..n_frames).step_by(4).collect();
-    let ticker = Ticker {
-        ctl,
-        done: AtomicUsize::new(0),
-        total: survey_idx.len() + n_frames,
-    };
-    let surveyed = survey(geo, params, &d, &survey_idx, &frame, &ticker)?;
-    let classes = classes_from_survey(&surveyed, params, &d);
-    let grams = accumulate(geo, params, &d, &classes, n_frames, &frame, &ticker)?;
+    setup.validate()?;
+    let all = 0..n_frames;
+    let n_survey = all.clone().filter(|&i| is_surveyed(i)).count();
+    let survey_part = 0.95 * n_survey as f64 / (n_survey + n_frames) as f64;
+    let ticker = Ticker::new(ctl, n_survey, 0.0, survey_part);
+    let surveyed = survey_with(&setup, all.clone(), &frame, &ticker)?;
+    let classes = classes_from_survey(&setup, &surveyed)?;
+    let ticker = Ticker::new(ctl, n_frames, survey_part, 0.95 - survey_part);
+    let partial = accumulate_with(&setup, &classes, all, &frame, &ticker)?;
     ticker.check()?;
-    (ctl.progress)("solve", 0.95);
-    let samples: u64 = grams.iter().map(|g| g.count()).sum();
-    let learned = solve_classes(geo, params, &noise, &d, &classes, grams, colour_maps)?;
-    (ctl.progress)("done", 1.0);
-    Ok(Learned {
-        kernels: learned.0,
-        contrast_thresholds: classes.thresholds,
-        reports: learned.1,
-        sat_cases: classes.sat_cases,
-        samples,
-    })
+    let grams = merge_partials(&classes, vec![partial])?;
+    solve_learned(&setup, classes, grams, ctl)
 }
 
-/// Stage 1: contrast histograms and sample counts per (position, level,
-/// saturation mask) on the frames `idx`.
-fn survey<F>(
-    geo: &PatchGeometry,
-    params: &L3Params,
-    d: &Dims,
-    idx: &[usize],
+/// Stage 1 on batches `batches` of a run: contrast histograms and sample
+/// counts per (position, level, saturation mask) of its surveyed batches.
+/// `ctl` sees this shard's progress (0 to 1).
+pub fn survey_batches<F>(
+    setup: &TrainSetup,
+    batches: Range<usize>,
     frame: &F,
-    ticker: &Ticker,
-) -> Result<Survey, L3Error>
+    ctl: &TrainControl,
+) -> Result<SurveyPartial, L3Error>
 where
     F: Fn(usize) -> Result<Vec<TrainingFrame>, L3Error> + Sync,
 {
-    let n_pl = d.n_pos * d.n_levels * d.n_masks;
-    let empty = || Survey {
-        hist: vec![Vec::new(); n_pl],
-        count: vec![0; n_pl],
-    };
+    setup.validate()?;
+    setup.check_range(&batches)?;
+    let n = batches.clone().filter(|&i| is_surveyed(i)).count();
+    survey_with(setup, batches, frame, &Ticker::new(ctl, n, 0.0, 1.0))
+}
+
+fn survey_with<F>(
+    setup: &TrainSetup,
+    batches: Range<usize>,
+    frame: &F,
+    ticker: &Ticker,
+) -> Result<SurveyPartial, L3Error>
+where
+    F: Fn(usize) -> Result<Vec<TrainingFrame>, L3Error> + Sync,
+{
+    let (geo, params, d) = (setup.geo, setup.params, setup.dims());
+    let shape = setup.survey_shape();
+    let empty = || SurveyPartial::empty(setup.run_key, setup.n_batches, batches.clone(), shape);
+    let idx: Vec<usize> = batches.clone().filter(|&i| is_surveyed(i)).collect();
     let s = idx
         .par_iter()
-        .map(|&i| -> Result<Survey, L3Error> {
+        .map(|&i| -> Result<SurveyPartial, L3Error> {
             ticker.check()?;
             let frames = frame(i)?;
             let mut s = empty();
@@ -252,18 +330,7 @@ where
             Ok(s)
         })
         .try_reduce(empty, |mut a, b| {
-            for k in 0..n_pl {
-                if !b.hist[k].is_empty() {
-                    if a.hist[k].is_empty() {
-                        a.hist[k] = b.hist[k].clone();
-                    } else {
-                        for (x, y) in a.hist[k].iter_mut().zip(&b.hist[k]) {
-                            *x += y;
-                        }
-                    }
-                }
-                a.count[k] += b.count[k];
-            }
+            a.add_counts(&b);
             Ok(a)
         })?;
     ticker.check()?;
@@ -272,8 +339,27 @@ where
 
 /// The saturation cases seen often enough (the empty case first) and the
 /// contrast threshold of every (position, level, case): the quantile of the
-/// contrasts of the samples that map to that case.
-fn classes_from_survey(survey: &Survey, params: &L3Params, d: &Dims) -> Classes {
+/// contrasts of the samples that map to that case. `survey` must cover
+/// every batch of the run ([`super::shards::merge_surveys`]).
+pub fn classes_from_survey(setup: &TrainSetup, survey: &SurveyPartial) -> Result<Classes, L3Error> {
+    let params = setup.params;
+    let d = setup.dims();
+    if survey.run_key != setup.run_key
+        || survey.n_batches != setup.n_batches
+        || survey.batches != (0..setup.n_batches)
+        || survey.shape != setup.survey_shape()
+        || survey.hist.len() != survey.shape.n_cells()
+        || survey.count.len() != survey.shape.n_cells()
+        || survey
+            .hist
+            .iter()
+            .any(|h| !h.is_empty() && h.len() != HIST_BINS)
+    {
+        return Err(L3Error::PartialSums(format!(
+            "the survey of batches {}..{} is not this run's whole survey",
+            survey.batches.start, survey.batches.end
+        )));
+    }
     let total: u64 = survey.count.iter().sum();
     let mut mask_count = vec![0u64; d.n_masks];
     for pos in 0..d.n_pos {
@@ -306,8 +392,8 @@ fn classes_from_survey(survey: &Survey, params: &L3Params, d: &Dims) -> Classes 
                 // channel index order stands in for darkness)
                 let case = sat_case_index(&sat_cases, m as u32, &[0.0; MAX_CHANNELS]).0;
                 for (b, &v) in h.iter().enumerate() {
-                    hs[case][b] += v as u64;
-                    pooled[b] += v as u64;
+                    hs[case][b] += v;
+                    pooled[b] += v;
                 }
             }
             for (c, h) in hs.iter().enumerate() {
@@ -321,35 +407,58 @@ fn classes_from_survey(survey: &Survey, params: &L3Params, d: &Dims) -> Classes 
             }
         }
     }
-    Classes {
+    Ok(Classes {
         sat_cases,
         thresholds,
-    }
+    })
 }
 
-/// Stage 2: the normal equations of every class, over every frame. Batches
-/// run in parallel a chunk at a time and their f64 sums are merged in batch
-/// order, so the result does not depend on thread timing.
-fn accumulate<F>(
-    geo: &PatchGeometry,
-    params: &L3Params,
-    d: &Dims,
+/// Stage 2 on batches `batches` of a run: the normal equations of every
+/// class, as the sums of the tree nodes tiling the range (each node's
+/// halves in parallel; see [`super::shards`] for why the sums do not
+/// depend on the split). `ctl` sees this shard's progress (0 to 1).
+pub fn accumulate_batches<F>(
+    setup: &TrainSetup,
     classes: &Classes,
-    n_frames: usize,
+    batches: Range<usize>,
     frame: &F,
-    ticker: &Ticker,
-) -> Result<Vec<Gram>, L3Error>
+    ctl: &TrainControl,
+) -> Result<GramPartial, L3Error>
 where
     F: Fn(usize) -> Result<Vec<TrainingFrame>, L3Error> + Sync,
 {
+    setup.validate()?;
+    setup.check_range(&batches)?;
+    let ticker = Ticker::new(ctl, batches.len(), 0.0, 1.0);
+    let partial = accumulate_with(setup, classes, batches, frame, &ticker)?;
+    ticker.check()?;
+    Ok(partial)
+}
+
+fn accumulate_with<F>(
+    setup: &TrainSetup,
+    classes: &Classes,
+    batches: Range<usize>,
+    frame: &F,
+    ticker: &Ticker,
+) -> Result<GramPartial, L3Error>
+where
+    F: Fn(usize) -> Result<Vec<TrainingFrame>, L3Error> + Sync,
+{
+    let (geo, params, d) = (setup.geo, setup.params, setup.dims());
     let nf = geo.n_features();
     let n_sat = classes.n_sat();
-    let n_classes = d.n_pos * d.n_levels * n_sat * 2;
-    let new_acc = || -> Vec<Option<Box<Gram>>> { (0..n_classes).map(|_| None).collect() };
-    let batch = |i: usize| -> Result<Vec<Option<Box<Gram>>>, L3Error> {
+    let n_classes = setup.n_classes(classes);
+    if n_sat == 0 || classes.thresholds.len() != d.n_pos * d.n_levels * n_sat {
+        return Err(L3Error::InvalidParams(format!(
+            "{} thresholds for {n_sat} saturation cases",
+            classes.thresholds.len()
+        )));
+    }
+    let batch = |i: usize| -> Result<ClassSums, L3Error> {
         ticker.check()?;
         let frames = frame(i)?;
-        let mut acc = new_acc();
+        let mut acc: ClassSums = (0..n_classes).map(|_| None).collect();
         let mut feat = vec![0f32; nf];
         for f in &frames {
             ticker.check()?;
@@ -375,28 +484,78 @@ where
         ticker.tick("accumulate");
         Ok(acc)
     };
-    const CHUNK: usize = 8;
-    let mut accs = new_acc();
-    for start in (0..n_frames).step_by(CHUNK) {
-        let end = (start + CHUNK).min(n_frames);
-        let parts = (start..end)
-            .into_par_iter()
-            .map(batch)
-            .collect::<Result<Vec<_>, L3Error>>()?;
-        for part in parts {
-            for (x, y) in accs.iter_mut().zip(part) {
-                match (x.as_mut(), y) {
-                    (Some(g), Some(h)) => g.merge(&h),
-                    (None, Some(h)) => *x = Some(h),
-                    _ => {}
-                }
-            }
+    let n = setup.n_batches;
+    let leaf = |node: Node| -> Result<Option<ClassSums>, L3Error> {
+        if node.log2 == 0 {
+            batch(node.lo).map(Some)
+        } else {
+            Ok(None)
         }
+    };
+    let nodes = cover(batches.clone(), n)
+        .into_par_iter()
+        .map(|node| -> Result<(Node, ClassSums), L3Error> {
+            let mut sums = tree_sum(node, n, &leaf, &add_class_sums)?;
+            for g in sums.iter_mut().flatten() {
+                g.flush();
+            }
+            Ok((node, sums))
+        })
+        .collect::<Result<Vec<_>, L3Error>>()?;
+    Ok(GramPartial {
+        run_key: setup.run_key.to_string(),
+        n_batches: n,
+        batches,
+        n_features: nf,
+        n_classes,
+        classes_digest: classes.digest(),
+        nodes,
+    })
+}
+
+/// Stages 3 and 4 on a run's merged normal equations
+/// ([`super::shards::merge_partials`]): fill and solve every class.
+pub fn solve_learned(
+    setup: &TrainSetup,
+    classes: Classes,
+    grams: Vec<Gram>,
+    ctl: &TrainControl,
+) -> Result<Learned, L3Error> {
+    setup.validate()?;
+    let n_classes = setup.n_classes(&classes);
+    let nf = setup.geo.n_features();
+    if grams.len() != n_classes
+        || grams.iter().any(|g| g.n_features() != nf)
+        || classes.thresholds.len() != n_classes / 2
+    {
+        return Err(L3Error::PartialSums(format!(
+            "{} class sums for {n_classes} classes",
+            grams.len()
+        )));
     }
-    Ok(accs
-        .into_iter()
-        .map(|g| g.map(|b| *b).unwrap_or_else(|| Gram::new(nf)))
-        .collect())
+    if ctl.cancel.load(Ordering::Relaxed) {
+        return Err(L3Error::Canceled);
+    }
+    (ctl.progress)("solve", 0.95);
+    let samples: u64 = grams.iter().map(|g| g.count()).sum();
+    let d = setup.dims();
+    let learned = solve_classes(
+        setup.geo,
+        setup.params,
+        &setup.noise,
+        &d,
+        &classes,
+        grams,
+        setup.colour_maps,
+    )?;
+    (ctl.progress)("done", 1.0);
+    Ok(Learned {
+        kernels: learned.0,
+        contrast_thresholds: classes.thresholds,
+        reports: learned.1,
+        sat_cases: classes.sat_cases,
+        samples,
+    })
 }
 
 /// Index of class (position, level, case, texture).

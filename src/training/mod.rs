@@ -1,6 +1,10 @@
 //! Training an L3 table from the camera simulation: the training scenes,
 //! the frames simulated from them, and the call into the learner
 //! (DESIGN.md §5). Shared by the CLI and the service's training jobs.
+//!
+//! A [`TrainingRun`] trains in one call or in shards (batch ranges) whose
+//! partial sums can be computed on other machines and merged into the same
+//! table bytes (`src/l3/shards.rs` explains why they are equal).
 
 mod colour_samples;
 mod scenes;
@@ -11,16 +15,20 @@ use std::time::Instant;
 use rand::{RngExt, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use serde::{Deserialize, Serialize};
+use sha2::{Digest, Sha256};
 
 use crate::camera::{Camera, CameraError, NoiseSwitches, SensorDesign, mosaic};
 use crate::l3::{
-    ColourMatrix, L3Error, L3Params, L3Table, NoiseModel, PatchGeometry, RidgeChoice,
-    TABLE_FORMAT_VERSION, TableKind, TableMeta, TrainControl, TrainingFrame, learn, level_maps,
-    package,
+    Classes, ColourMatrix, GramPartial, L3Error, L3Params, L3Table, Learned, NoiseModel,
+    PatchGeometry, RidgeChoice, ShardSpec, SurveyPartial, TABLE_FORMAT_VERSION, TableKind,
+    TableMeta, TrainControl, TrainSetup, TrainingFrame, accumulate_batches, classes_from_survey,
+    learn, level_maps, merge_partials, merge_surveys, package, plan_shards, solve_learned,
+    survey_batches,
 };
 use crate::scene::SceneError;
 use crate::spectral::{
-    Extrapolation, IlluminantSpec, IsetData, SpectralError, WavelengthGrid, cie_illuminant,
+    Extrapolation, IlluminantSpec, IsetData, SpectralError, Spectrum, WavelengthGrid,
+    cie_illuminant,
 };
 
 pub use crate::scene::training_reflectances;
@@ -195,62 +203,243 @@ impl TrainingSpec {
     }
 }
 
-/// Train a table for `design` as `spec` says. `progress(stage, fraction)`
-/// is called as work completes; setting `cancel` stops the run with
-/// [`L3Error::Canceled`].
-pub fn train_table(
-    design: &SensorDesign,
-    spec: &TrainingSpec,
-    iset: Option<&IsetData>,
-    progress: &(dyn Fn(&str, f64) + Sync),
-    cancel: &AtomicBool,
-) -> Result<L3Table, TrainError> {
-    spec.validate()?;
-    let started = Instant::now();
-    let grid = WavelengthGrid::default();
-    let camera = Camera::new(design, grid, iset)?;
-    let swing = design.voltage_swing_v;
-    let params = spec.params(swing)?;
-    let sat_threshold = swing - params.saturation_margin_v;
-    let geo = PatchGeometry::new(
-        params.patch_size,
-        camera.cfa(),
-        &params.levels,
-        sat_threshold,
-    )?;
-    let illuminants = spec
-        .illuminants
-        .iter()
-        .map(|s| {
-            let named = IlluminantSpec::parse(s)?.resolve(iset)?;
-            Ok((named.name, named.spd.resample(&grid, Extrapolation::Zero)))
+/// A training run prepared from a spec: the camera, the training scenes
+/// and illuminants, the L3 parameters and the per-level colour maps. It
+/// trains in one call ([`TrainingRun::train`]) or in shards
+/// ([`TrainingRun::survey_shard`], [`TrainingRun::accumulate_shard`],
+/// [`TrainingRun::finish`]; see `src/l3/shards.rs`) with byte-identical
+/// tables; both go through the same core functions.
+pub struct TrainingRun {
+    spec: TrainingSpec,
+    design: SensorDesign,
+    started: Instant,
+    grid: WavelengthGrid,
+    camera: Camera,
+    params: L3Params,
+    sat_threshold: f64,
+    geo: PatchGeometry,
+    illuminants: Vec<(String, Spectrum)>,
+    d65: Spectrum,
+    scenes: TrainingScenes,
+    noise: NoiseSwitches,
+    nm: NoiseModel,
+    maps: Option<Vec<ColourMatrix>>,
+    run_key: String,
+}
+
+impl TrainingRun {
+    /// Check `spec` and prepare everything its batches are simulated from.
+    pub fn new(
+        design: &SensorDesign,
+        spec: &TrainingSpec,
+        iset: Option<&IsetData>,
+    ) -> Result<Self, TrainError> {
+        spec.validate()?;
+        let started = Instant::now();
+        let grid = WavelengthGrid::default();
+        let camera = Camera::new(design, grid, iset)?;
+        let swing = design.voltage_swing_v;
+        let params = spec.params(swing)?;
+        let sat_threshold = swing - params.saturation_margin_v;
+        let geo = PatchGeometry::new(
+            params.patch_size,
+            camera.cfa(),
+            &params.levels,
+            sat_threshold,
+        )?;
+        let illuminants = spec
+            .illuminants
+            .iter()
+            .map(|s| {
+                let named = IlluminantSpec::parse(s)?.resolve(iset)?;
+                Ok((named.name, named.spd.resample(&grid, Extrapolation::Zero)))
+            })
+            .collect::<Result<Vec<_>, TrainError>>()?;
+        let d65 = cie_illuminant("D65")
+            .ok_or_else(|| TrainError::Invalid("D65 missing".into()))?
+            .resample(&grid, Extrapolation::Zero);
+        let scenes =
+            TrainingScenes::new(grid, iset, spec.seed, spec.scene_size, spec.mean_luminance)?;
+        let noise = if spec.noise {
+            NoiseSwitches::all()
+        } else {
+            NoiseSwitches::none()
+        };
+        let nm = NoiseModel {
+            conversion_gain_v: design.conversion_gain_v(),
+            read_noise_v: design.read_noise_v(),
+            dsnu_v: design.dsnu_v(),
+            prnu_fraction: design.prnu_fraction(),
+        };
+        let maps = match &params.colour_map {
+            Some(fit) => {
+                let spds: Vec<_> = illuminants.iter().map(|(_, s)| s.clone()).collect();
+                let refl: Vec<_> = scenes.reflectances().to_vec();
+                let samples = colour_samples(&camera, &spds, spec.kind, &d65, &refl)?;
+                Some(level_maps(&samples, &params.levels, &nm, swing, fit)?)
+            }
+            None => None,
+        };
+        let run_key = run_key(design, spec, iset.is_some());
+        Ok(Self {
+            spec: spec.clone(),
+            design: design.clone(),
+            started,
+            grid,
+            camera,
+            params,
+            sat_threshold,
+            geo,
+            illuminants,
+            d65,
+            scenes,
+            noise,
+            nm,
+            maps,
+            run_key,
         })
-        .collect::<Result<Vec<_>, TrainError>>()?;
-    let d65 = cie_illuminant("D65")
-        .ok_or_else(|| TrainError::Invalid("D65 missing".into()))?
-        .resample(&grid, Extrapolation::Zero);
-    let scenes = TrainingScenes::new(grid, iset, spec.seed, spec.scene_size, spec.mean_luminance)?;
-    let noise = if spec.noise {
-        NoiseSwitches::all()
-    } else {
-        NoiseSwitches::none()
-    };
-    let n_ill = illuminants.len();
-    let levels = params.levels.clone();
-    let cfa = camera.cfa().clone();
-    // A fixed scene budget: scene s is lit by illuminant s mod n (an
-    // ensemble is a mixture of scenes, not every scene under every light),
-    // so an ensemble costs what a single-illuminant table costs.
-    let n_batches = spec.scenes;
-    let frame = |b: usize| -> Result<Vec<TrainingFrame>, L3Error> {
+    }
+
+    /// Batches of the run (one training scene each).
+    pub fn n_batches(&self) -> usize {
+        // A fixed scene budget: scene s is lit by illuminant s mod n (an
+        // ensemble is a mixture of scenes, not every scene under every
+        // light), so an ensemble costs what a single-illuminant table costs.
+        self.spec.scenes
+    }
+
+    /// SHA-256 (hex) of the sensor design and the spec: names the run in
+    /// its partial sums, so that parts of different runs are not merged.
+    pub fn run_key(&self) -> &str {
+        &self.run_key
+    }
+
+    /// Split the run into `n_shards` contiguous batch ranges.
+    pub fn plan(&self, n_shards: usize) -> Result<Vec<ShardSpec>, TrainError> {
+        Ok(plan_shards(self.n_batches(), n_shards)?)
+    }
+
+    fn setup(&self) -> TrainSetup<'_> {
+        TrainSetup {
+            geo: &self.geo,
+            params: &self.params,
+            noise: self.nm,
+            n_batches: self.n_batches(),
+            colour_maps: self.maps.as_deref(),
+            run_key: &self.run_key,
+        }
+    }
+
+    fn check_shard(&self, shard: &ShardSpec) -> Result<(), TrainError> {
+        if shard.n_batches != self.n_batches() {
+            return Err(TrainError::Invalid(format!(
+                "shard of {} batches for a run of {}",
+                shard.n_batches,
+                self.n_batches()
+            )));
+        }
+        Ok(())
+    }
+
+    /// Train the whole run in this process.
+    pub fn train(
+        &self,
+        progress: &(dyn Fn(&str, f64) + Sync),
+        cancel: &AtomicBool,
+    ) -> Result<L3Table, TrainError> {
+        let ctl = TrainControl { progress, cancel };
+        let frame = |b: usize| self.frame(b);
+        let learned = learn(
+            &self.geo,
+            &self.params,
+            self.nm,
+            self.n_batches(),
+            frame,
+            self.maps.as_deref(),
+            &ctl,
+        )?;
+        self.package(learned)
+    }
+
+    /// Survey statistics of one shard's batches (phase 1 of a sharded run).
+    pub fn survey_shard(
+        &self,
+        shard: &ShardSpec,
+        progress: &(dyn Fn(&str, f64) + Sync),
+        cancel: &AtomicBool,
+    ) -> Result<SurveyPartial, TrainError> {
+        self.check_shard(shard)?;
+        let ctl = TrainControl { progress, cancel };
+        let frame = |b: usize| self.frame(b);
+        Ok(survey_batches(
+            &self.setup(),
+            shard.batches(),
+            &frame,
+            &ctl,
+        )?)
+    }
+
+    /// The classes of the run from its survey shards, merged.
+    pub fn classes(&self, surveys: &[SurveyPartial]) -> Result<Classes, TrainError> {
+        let all = merge_surveys(surveys)?;
+        Ok(classes_from_survey(&self.setup(), &all)?)
+    }
+
+    /// Normal equations of one shard's batches for the run's `classes`
+    /// (phase 2 of a sharded run).
+    pub fn accumulate_shard(
+        &self,
+        shard: &ShardSpec,
+        classes: &Classes,
+        progress: &(dyn Fn(&str, f64) + Sync),
+        cancel: &AtomicBool,
+    ) -> Result<GramPartial, TrainError> {
+        self.check_shard(shard)?;
+        let ctl = TrainControl { progress, cancel };
+        let frame = |b: usize| self.frame(b);
+        Ok(accumulate_batches(
+            &self.setup(),
+            classes,
+            shard.batches(),
+            &frame,
+            &ctl,
+        )?)
+    }
+
+    /// Merge every shard's normal equations in batch order, solve, and
+    /// package the table (`training_seconds` counts from [`TrainingRun::new`]
+    /// in this process).
+    pub fn finish(
+        &self,
+        classes: Classes,
+        parts: Vec<GramPartial>,
+        progress: &(dyn Fn(&str, f64) + Sync),
+        cancel: &AtomicBool,
+    ) -> Result<L3Table, TrainError> {
+        let ctl = TrainControl { progress, cancel };
+        if parts.iter().any(|p| p.run_key != self.run_key) {
+            return Err(L3Error::PartialSums("sums of another training run".into()).into());
+        }
+        let grams = merge_partials(&classes, parts)?;
+        let learned = solve_learned(&self.setup(), classes, grams, &ctl)?;
+        self.package(learned)
+    }
+
+    /// Batch `b`: scene `b` under illuminant `b mod n`, at every level
+    /// (exposure jittered across the level's bin) and CFA shift.
+    fn frame(&self, b: usize) -> Result<Vec<TrainingFrame>, L3Error> {
+        let (spec, camera, design) = (&self.spec, &self.camera, &self.design);
+        let levels = &self.params.levels;
+        let cfa = camera.cfa();
+        let n_ill = self.illuminants.len();
         let (s, i) = (b, b % n_ill);
-        let (ill_name, ill) = &illuminants[i];
-        let scene = scenes.scene(s, ill, ill_name)?;
+        let (ill_name, ill) = &self.illuminants[i];
+        let scene = self.scenes.scene(s, ill, ill_name)?;
         let optical = camera.optical_image(&scene).map_err(TrainError::from)?;
         let rates = camera.channel_rates(&optical).map_err(TrainError::from)?;
         let target_ill = match spec.kind {
             TableKind::SameIlluminant => ill,
-            TableKind::CrossIlluminant => &d65,
+            TableKind::CrossIlluminant => &self.d65,
         };
         let xyz_rates = camera
             .xyz_rates(&optical, target_ill)
@@ -290,7 +479,7 @@ pub fn train_table(
                 let mean = mosaic(&rates, &shifted).map_err(TrainError::from)?;
                 let seed = mix(spec.seed, b as u64, (l * 64 + shift) as u64);
                 let volts = camera
-                    .capture(&mean, exposure, &noise, seed)
+                    .capture(&mean, exposure, &self.noise, seed)
                     .map_err(TrainError::from)?;
                 let t = exposure as f32;
                 frames.push(TrainingFrame {
@@ -303,63 +492,78 @@ pub fn train_table(
             }
         }
         Ok(frames)
-    };
-    let ctl = TrainControl { progress, cancel };
-    let nm = NoiseModel {
-        conversion_gain_v: design.conversion_gain_v(),
-        read_noise_v: design.read_noise_v(),
-        dsnu_v: design.dsnu_v(),
-        prnu_fraction: design.prnu_fraction(),
-    };
-    let maps = match &params.colour_map {
-        Some(fit) => {
-            let spds: Vec<_> = illuminants.iter().map(|(_, s)| s.clone()).collect();
-            let refl: Vec<_> = scenes.reflectances().to_vec();
-            let samples = colour_samples(&camera, &spds, spec.kind, &d65, &refl)?;
-            Some(level_maps(&samples, &params.levels, &nm, swing, fit)?)
-        }
-        None => None,
-    };
-    let learned = learn(&geo, &params, nm, n_batches, frame, maps.as_deref(), &ctl)?;
-    let samples = learned.samples;
-    let meta = TableMeta {
-        format: "l3-table".into(),
-        version: TABLE_FORMAT_VERSION,
-        kind: spec.kind,
-        train_illuminants: illuminants.iter().map(|(n, _)| n.clone()).collect(),
-        target_illuminant: match spec.kind {
-            TableKind::SameIlluminant => "same".into(),
-            TableKind::CrossIlluminant => "D65".into(),
-        },
-        sensor_name: design.name.clone(),
-        sensor: serde_json::to_value(design).unwrap_or(serde_json::Value::Null),
-        cfa: cfa.clone(),
-        grid,
-        params,
-        voltage_swing: swing,
-        saturation_threshold: sat_threshold,
-        sat_cases: vec![0],
-        xyz_scale_note: format!(
-            "XYZ in volts-equivalent: an equal-energy irradiance gives Y equal to the mean channel volts (kappa = {:.6e})",
-            camera.xyz_scale()
-        ),
-        seed: spec.seed,
-        created_unix_s: std::time::SystemTime::now()
-            .duration_since(std::time::UNIX_EPOCH)
-            .map(|d| d.as_secs())
-            .unwrap_or(0),
-        training_seconds: started.elapsed().as_secs_f64(),
-        summary: serde_json::json!({
-            "spec": spec,
-            "batches": n_batches,
-            "frames": n_batches * levels.len() * cfa.n_positions(),
-            "samples": samples,
-            "colour_maps": maps.as_deref().map(map_summary),
-        }),
-    };
-    let mut table = package(meta, learned)?;
-    table.meta.training_seconds = started.elapsed().as_secs_f64();
-    Ok(table)
+    }
+
+    fn package(&self, learned: Learned) -> Result<L3Table, TrainError> {
+        let (spec, design) = (&self.spec, &self.design);
+        let cfa = self.camera.cfa().clone();
+        let n_batches = self.n_batches();
+        let samples = learned.samples;
+        let maps = self.maps.as_deref();
+        let meta = TableMeta {
+            format: "l3-table".into(),
+            version: TABLE_FORMAT_VERSION,
+            kind: spec.kind,
+            train_illuminants: self.illuminants.iter().map(|(n, _)| n.clone()).collect(),
+            target_illuminant: match spec.kind {
+                TableKind::SameIlluminant => "same".into(),
+                TableKind::CrossIlluminant => "D65".into(),
+            },
+            sensor_name: design.name.clone(),
+            sensor: serde_json::to_value(design).unwrap_or(serde_json::Value::Null),
+            cfa: cfa.clone(),
+            grid: self.grid,
+            params: self.params.clone(),
+            voltage_swing: design.voltage_swing_v,
+            saturation_threshold: self.sat_threshold,
+            sat_cases: vec![0],
+            xyz_scale_note: format!(
+                "XYZ in volts-equivalent: an equal-energy irradiance gives Y equal to the mean channel volts (kappa = {:.6e})",
+                self.camera.xyz_scale()
+            ),
+            seed: spec.seed,
+            created_unix_s: std::time::SystemTime::now()
+                .duration_since(std::time::UNIX_EPOCH)
+                .map(|d| d.as_secs())
+                .unwrap_or(0),
+            training_seconds: self.started.elapsed().as_secs_f64(),
+            summary: serde_json::json!({
+                "spec": spec,
+                "batches": n_batches,
+                "frames": n_batches * self.params.levels.len() * cfa.n_positions(),
+                "samples": samples,
+                "colour_maps": maps.map(map_summary),
+            }),
+        };
+        let mut table = package(meta, learned)?;
+        table.meta.training_seconds = self.started.elapsed().as_secs_f64();
+        Ok(table)
+    }
+}
+
+/// SHA-256 (hex) of what a run's batches depend on.
+fn run_key(design: &SensorDesign, spec: &TrainingSpec, iset: bool) -> String {
+    let text = serde_json::json!({
+        "design": design,
+        "spec": spec,
+        "iset": iset,
+        "partial_format": crate::l3::PARTIAL_FORMAT_VERSION,
+    })
+    .to_string();
+    hex::encode(Sha256::digest(text.as_bytes()))
+}
+
+/// Train a table for `design` as `spec` says. `progress(stage, fraction)`
+/// is called as work completes; setting `cancel` stops the run with
+/// [`L3Error::Canceled`].
+pub fn train_table(
+    design: &SensorDesign,
+    spec: &TrainingSpec,
+    iset: Option<&IsetData>,
+    progress: &(dyn Fn(&str, f64) + Sync),
+    cancel: &AtomicBool,
+) -> Result<L3Table, TrainError> {
+    TrainingRun::new(design, spec, iset)?.train(progress, cancel)
 }
 
 /// The per-level colour maps as JSON for the table's summary: `[level][channel]
