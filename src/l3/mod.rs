@@ -21,7 +21,7 @@ pub use colour_map::{
 };
 pub use correction::{
     CorrectionSource, IDENTITY, IlluminantEntry, IlluminantRegistry, MAX_MATRIX_ENTRY, Mat3,
-    correction_matrix, default_reflectances,
+    correction_matrix, default_reflectances, xy_spec_cct,
 };
 pub use fast::{FastOptions, FastRenderer, Frame, Mosaic, Region};
 pub use normal_eq::{ChannelSumConstraint, ClassSolution, Gram, RidgeChoice, solve, solve_with};
@@ -53,6 +53,8 @@ pub enum L3Error {
     },
     #[error("training was canceled")]
     Canceled,
+    #[error("the render was canceled")]
+    RenderCanceled,
     #[error(transparent)]
     Spectral(#[from] crate::spectral::SpectralError),
 }
