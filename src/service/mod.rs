@@ -3,6 +3,7 @@
 //! the core knows nothing of it. CPU work runs on rayon, never on the async runtime's threads.
 
 mod accept;
+mod admission;
 mod config;
 mod cpu;
 mod error;
@@ -26,6 +27,7 @@ use arc_swap::ArcSwapOption;
 use sqlx::sqlite::{SqliteConnectOptions, SqliteJournalMode, SqlitePoolOptions};
 use tokio::sync::{Notify, Semaphore};
 
+pub use admission::Admission;
 pub use config::{DEFAULT_CONFIG_TOML, DataConfig, ServerConfig, ServiceConfig, TrainingConfig};
 pub use error::ServiceError;
 pub use illuminants::{IlluminantDefinition, SpdSamples, apply as apply_illuminant};
@@ -165,7 +167,7 @@ pub async fn start_with(
     let default_spec = default_training_spec(&cfg)?;
     let pools = cpu::CpuPools::new(cfg.server.render_threads, cfg.training.background_threads)?;
     let state = AppState(Arc::new(Inner {
-        render_slots: Arc::new(Semaphore::new(cfg.server.render_concurrency)),
+        admission: admission::Admission::new(&cfg.server),
         cpu_gate: Arc::new(Semaphore::new(
             (pools.render.current_num_threads() / 2).max(1),
         )),
