@@ -55,12 +55,6 @@ pub struct ServerConfig {
     pub bearer_token: String,
     #[serde(default = "default_log_format")]
     pub log_format: String,
-    /// Fault injection for crash tests (0: off). When set, storing a table pauses this long
-    /// after its temporary file is written (before the rename), and switching the active table
-    /// pauses after the new file is verified (before the switch is recorded), each announced
-    /// by a log line, so a test can kill the process inside those windows.
-    #[serde(default)]
-    pub test_pause_activation_ms: u64,
 }
 
 fn default_render_queue_depth() -> usize {
@@ -186,9 +180,6 @@ impl ServiceConfig {
             "L3_REQUEST_TIMEOUT_S" => self.server.request_timeout_s = num(key, value)?,
             "L3_BEARER_TOKEN" => self.server.bearer_token = value.to_string(),
             "L3_LOG_FORMAT" => self.server.log_format = value.to_string(),
-            "L3_TEST_PAUSE_ACTIVATION_MS" => {
-                self.server.test_pause_activation_ms = num(key, value)?
-            }
             "L3_AUTO_TRAIN" => {
                 self.training.auto_train_default = match value.trim() {
                     "1" | "true" | "yes" => true,

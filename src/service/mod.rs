@@ -6,6 +6,7 @@ mod accept;
 mod admission;
 mod config;
 mod cpu;
+mod debug_hooks;
 mod error;
 mod evaluations;
 mod illuminants;

@@ -32,7 +32,7 @@ pub fn write_table_file(dir: &Path, table: &L3Table) -> Result<StoredTable, Serv
     write_table_file_with_pause(dir, table, 0)
 }
 
-/// [`write_table_file`] with the fault-injection pause (`test_pause_activation_ms`) between
+/// [`write_table_file`] with the fault-injection pause ([`super::debug_hooks`]) between
 /// the fsync of the temporary file and the rename. Blocking.
 pub(super) fn write_table_file_with_pause(
     dir: &Path,
@@ -289,7 +289,7 @@ pub async fn activate_table(state: &AppState, id: &str) -> Result<(), ServiceErr
             "table '{id}' uses a wavelength grid other than the service's"
         )));
     }
-    let pause = state.config.server.test_pause_activation_ms;
+    let pause = super::debug_hooks::activation_pause_ms();
     if pause > 0 && state.active.load().is_some() {
         tracing::warn!(
             table = id,
