@@ -205,3 +205,36 @@ async fn a_render_abandoned_by_its_request_is_canceled() {
     assert_eq!(render_16(&server).await.status(), 200);
     server.shutdown().await.unwrap();
 }
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_render_whose_client_leaves_is_canceled() {
+    let data = tempfile::tempdir().unwrap();
+    let mut cfg = test_config(data.path());
+    cfg.server.render_threads = 1;
+    let (server, _) = server_with_table(data.path(), Some(cfg)).await;
+    let (release, wait) = std::sync::mpsc::channel::<()>();
+    server.state().pools.render.spawn(move || {
+        let _ = wait.recv();
+    });
+    // a whole request, which passes the gate and waits for the busy render pool
+    let body = gradient_raw(16, 16);
+    let client_gone = start_upload(&server, body.len(), &body).await;
+    eventually("the render waits for the pool", || async {
+        server.state().cpu_gate.available_permits() == 0
+    })
+    .await;
+    drop(client_gone);
+    // the server notices the closed connection and drops the request (its body reservation
+    // returns with it); only then does the pool come free
+    eventually("the request is dropped", || async {
+        metric(&server, "l3_render_body_bytes_reserved").await == 0.0
+    })
+    .await;
+    release.send(()).unwrap();
+    eventually("the render is canceled", || async {
+        metric(&server, "l3_renders_canceled_total").await == 1.0
+    })
+    .await;
+    assert_eq!(render_16(&server).await.status(), 200);
+    server.shutdown().await.unwrap();
+}
