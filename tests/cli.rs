@@ -164,6 +164,56 @@ fn simulate_train_render_eval() {
         std::fs::read(d.join("from_png.tiff")).unwrap()
     );
 
+    // an xy: illuminant, a region and a preview
+    let render = |extra: &[&str], out: &str| {
+        let input = sim.join("mosaic.raw");
+        let out = d.join(out);
+        let mut args = vec![
+            "render",
+            "--table",
+            table.to_str().unwrap(),
+            "--in",
+            input.to_str().unwrap(),
+            "--out",
+            out.to_str().unwrap(),
+        ];
+        args.extend_from_slice(extra);
+        l3(&args, d)
+    };
+    let (ok, out, err) = render(&["--illuminant", "xy:0.4476,0.4074"], "xy.png");
+    assert!(ok, "xy: render failed: {out}{err}");
+    assert!(out.contains("cct:28"), "{out}");
+    let (ok, out, err) = render(
+        &[
+            "--illuminant",
+            "Tungsten",
+            "--region",
+            "8,8,32,16",
+            "--preview",
+            "2",
+        ],
+        "crop.png",
+    );
+    assert!(ok, "region render failed: {out}{err}");
+    let crop = image::open(d.join("crop.png")).unwrap();
+    assert_eq!((crop.width(), crop.height()), (16, 8));
+    let (ok, out, err) = render(&["--region", "8,8,32,16", "--preview", "2"], "crop.raw");
+    assert!(ok, "{out}{err}");
+    assert_eq!(
+        std::fs::metadata(d.join("crop.raw")).unwrap().len(),
+        16 * 8 * 3 * 4
+    );
+    for (extra, says) in [
+        (vec!["--region", "0,0,100000,4"], "not inside"),
+        (vec!["--region", "1,2,3"], "four numbers"),
+        (vec!["--preview", "17"], "from 1 to 16"),
+        (vec!["--illuminant", "xy:0.9,0.9"], "spectrum locus"),
+    ] {
+        let (ok, out, err) = render(&extra, "bad.png");
+        assert!(!ok, "{extra:?} succeeded: {out}");
+        assert!(err.contains(says), "{extra:?}: {err}");
+    }
+
     let report = d.join("report.json");
     let (ok, out, err) = l3(
         &[

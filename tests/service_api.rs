@@ -1000,15 +1000,17 @@ async fn hostile_input_gets_a_clear_4xx() {
 }
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
-async fn overload_gets_503_with_retry_after_and_mutations_need_the_token() {
+async fn a_render_queued_past_the_longest_wait_gets_503_with_retry_after_and_mutations_need_the_token()
+ {
     let data = tempfile::tempdir().unwrap();
     let mut cfg = test_config(data.path());
     cfg.server.render_concurrency = 2;
+    cfg.server.render_queue_wait_s = 0.3;
     cfg.server.bearer_token = "s3cret".into();
     let (server, _) = server_with_table(data.path(), Some(cfg)).await;
     let c = client();
-    // hold both render slots
-    let slots = server.state().render_slots.clone();
+    // hold both render slots: a render waits in the queue, then gives up
+    let slots = server.state().admission.render_slots.clone();
     let held = slots.clone().try_acquire_many_owned(2).unwrap();
     let r = c
         .post(url(&server, "/v1/render?width=16&height=16"))

@@ -3,8 +3,8 @@
 //! and no table is lost or corrupted. Then a table file corrupted on disk: the service says so
 //! at start and stays up on the last good table.
 //!
-//! The windows are hit deterministically with the fault-injection knob
-//! `L3_TEST_PAUSE_ACTIVATION_MS`, which makes the service pause (and log) just before the
+//! The windows are hit deterministically with the debug hook
+//! `L3_DEBUG_PAUSE_ACTIVATION_MS`, which makes the service pause (and log) just before the
 //! rename of a new table file and just before recording a table switch.
 
 use std::io::{BufRead, BufReader};
@@ -43,7 +43,7 @@ impl Service {
             .env("L3_LOG_FORMAT", "text")
             .env("L3_LOG", "info,sqlx=warn")
             .env("NO_COLOR", "1")
-            .env("L3_TEST_PAUSE_ACTIVATION_MS", pause_ms.to_string())
+            .env("L3_DEBUG_PAUSE_ACTIVATION_MS", pause_ms.to_string())
             .env("L3_ISET_DIR", data.join("no-iset"))
             .stdout(Stdio::piped())
             .stderr(Stdio::piped());

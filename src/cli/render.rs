@@ -1,4 +1,5 @@
 use std::path::{Path, PathBuf};
+use std::sync::atomic::AtomicBool;
 
 use clap::Args;
 
@@ -8,8 +9,12 @@ use crate::io::{
     encode_tiff_rgb16, read_mosaic,
 };
 use crate::l3::{
-    FastRenderer, IlluminantRegistry, L3Table, Mosaic, RenderStats, TableKind, WhiteLevel,
-    fuse_kernels, render_reference, white_y, xyz_to_srgb8, xyz_to_srgb16,
+    IlluminantRegistry, L3Table, Mosaic, RenderStats, TableKind, WhiteLevel, render_reference,
+    white_y, xyz_to_srgb8, xyz_to_srgb16,
+};
+use crate::render_pipeline::{
+    OutputFormat, PipelineError, RenderOptions, RenderPipeline, check_preview, kernels_for,
+    parse_region,
 };
 
 #[derive(Args, Debug)]
@@ -18,7 +23,7 @@ pub struct RenderArgs {
     #[arg(long)]
     pub table: PathBuf,
     /// Acquisition illuminant: a registry name (D65, D50, A, F2, F11, Tungsten,
-    /// Fluorescent), cct:K, or any illuminant spec. Default: the sidecar's `illuminant`, else
+    /// Fluorescent), cct:K, xy:x,y (a chromaticity), or any illuminant spec. Default: the sidecar's `illuminant`, else
     /// a DNG's AsShotNeutral (matched to a colour temperature through the table's sensor),
     /// else D65.
     #[arg(long)]
@@ -35,6 +40,12 @@ pub struct RenderArgs {
     /// For .tiff output: `xyz` (float) or `srgb16`.
     #[arg(long, default_value = "xyz")]
     pub tiff: String,
+    /// Render only this crop of the frame: `x,y,width,height` (fast renderer).
+    #[arg(long)]
+    pub region: Option<String>,
+    /// Integer box-average downscale of the output, 1–16 (fast renderer).
+    #[arg(long, default_value_t = 1)]
+    pub preview: usize,
     /// `fast` (tiled, SIMD) or `reference` (the simple per-pixel renderer the fast one is
     /// tested against). Both put every pixel in the same class.
     #[arg(long, default_value = "fast")]
@@ -145,79 +156,38 @@ pub fn run(cli: &Cli, a: &RenderArgs) -> Result<(), CliError> {
     let mut registry = IlluminantRegistry::with_defaults(table.meta.grid, iset.as_ref())?;
     let entry = registry.resolve(&spec, iset.as_ref())?;
     let illuminant = format!("{} (from {source})", entry.name);
-    let kernels = match table.meta.kind {
-        TableKind::SameIlluminant => fuse_kernels(&table, &entry.t),
-        TableKind::CrossIlluminant => {
-            if !table
-                .meta
-                .train_illuminants
-                .iter()
-                .any(|n| n.eq_ignore_ascii_case(&entry.name))
-            {
-                eprintln!(
-                    "warning: cross-illuminant table trained for {} used for {}",
-                    table.meta.train_illuminants.join("+"),
-                    entry.name
-                );
-            }
-            table.kernels.clone()
-        }
-    };
+    if table.meta.kind == TableKind::CrossIlluminant
+        && !table
+            .meta
+            .train_illuminants
+            .iter()
+            .any(|n| n.eq_ignore_ascii_case(&entry.name))
+    {
+        eprintln!(
+            "warning: cross-illuminant table trained for {} used for {}",
+            table.meta.train_illuminants.join("+"),
+            entry.name
+        );
+    }
     let ext = a
         .out
         .extension()
         .and_then(|e| e.to_str())
         .unwrap_or("")
         .to_ascii_lowercase();
-    let fast = match a.renderer.as_str() {
-        "fast" => true,
-        "reference" => false,
-        other => {
-            return Err(CliError::Usage(format!(
-                "--renderer '{other}': expected fast or reference"
-            )));
-        }
-    };
-    let started = std::time::Instant::now();
-    let renderer = FastRenderer::new(&table, &kernels)?;
-    let frame = Mosaic::Volts(&volts);
-    if fast && (ext == "png" || ext == "ppm") {
-        // straight to 8-bit sRGB, as the service answers a PNG or PPM request
-        let (rgb, _, stats) = renderer.render_srgb8(frame, w, h, None, white)?;
-        let ms = started.elapsed().as_secs_f64() * 1e3;
-        let bytes = if ext == "ppm" {
-            encode_ppm_rgb8(w, h, &rgb)?
-        } else {
-            encode_png_rgb8(w, h, &rgb, PngCompression::Default)?
-        };
-        write_file(&a.out, &bytes)?;
-        report(a, &illuminant, w, h, ms, &stats);
-        return Ok(());
-    }
-    let (xyz, stats) = if fast {
-        renderer.render_xyz(frame, w, h, None)?
-    } else {
-        render_reference(&table, &kernels, &volts, w, h)?
-    };
-    let ms = started.elapsed().as_secs_f64() * 1e3;
-    let bytes = match ext.as_str() {
-        "png" => encode_png_rgb8(
-            w,
-            h,
-            &xyz_to_srgb8(&xyz, white_y(&xyz, w, h, white)),
-            PngCompression::Default,
-        )?,
-        "ppm" => encode_ppm_rgb8(w, h, &xyz_to_srgb8(&xyz, white_y(&xyz, w, h, white)))?,
+    let format = match ext.as_str() {
+        "png" => OutputFormat::Png,
+        "ppm" => OutputFormat::Ppm,
         "tif" | "tiff" => match a.tiff.as_str() {
-            "xyz" => encode_tiff_f32_rgb(w, h, &xyz)?,
-            "srgb16" => encode_tiff_rgb16(w, h, &xyz_to_srgb16(&xyz, white_y(&xyz, w, h, white)))?,
+            "xyz" => OutputFormat::TiffXyz,
+            "srgb16" => OutputFormat::TiffSrgb16,
             other => {
                 return Err(CliError::Usage(format!(
                     "--tiff '{other}': expected xyz or srgb16"
                 )));
             }
         },
-        "raw" | "bin" | "f32" => xyz.iter().flat_map(|v| v.to_le_bytes()).collect(),
+        "raw" | "bin" | "f32" => OutputFormat::F32,
         _ => {
             return Err(CliError::Usage(format!(
                 "--out {}: use .png, .ppm, .tiff or .raw",
@@ -225,8 +195,61 @@ pub fn run(cli: &Cli, a: &RenderArgs) -> Result<(), CliError> {
             )));
         }
     };
+    let usage = |e: PipelineError| CliError::Usage(e.to_string());
+    let opts = RenderOptions {
+        white,
+        region: a
+            .region
+            .as_deref()
+            .map(parse_region)
+            .transpose()
+            .map_err(usage)?,
+        preview: check_preview(a.preview).map_err(usage)?,
+        png: PngCompression::Default,
+    };
+    let started = std::time::Instant::now();
+    let frame = Mosaic::Volts(&volts);
+    let (bytes, ow, oh, stats) = match a.renderer.as_str() {
+        "fast" => {
+            let pipeline = RenderPipeline::new(&table, &entry)?;
+            let r = pipeline
+                .render(frame, w, h, format, &opts, &AtomicBool::new(false))
+                .map_err(|e| match e {
+                    PipelineError::Options(m) => CliError::Usage(m),
+                    PipelineError::Render(e) => e.into(),
+                    PipelineError::Encode(e) => e.into(),
+                })?;
+            (r.output.into_vec(), r.width, r.height, r.stats)
+        }
+        "reference" => {
+            if opts.region.is_some() || opts.preview != 1 {
+                return Err(CliError::Usage(
+                    "--region and --preview need the fast renderer".into(),
+                ));
+            }
+            let (xyz, stats) =
+                render_reference(&table, &kernels_for(&table, &entry), &volts, w, h)?;
+            let wy = || white_y(&xyz, w, h, white);
+            let bytes = match format {
+                OutputFormat::Png => {
+                    encode_png_rgb8(w, h, &xyz_to_srgb8(&xyz, wy()), PngCompression::Default)?
+                }
+                OutputFormat::Ppm => encode_ppm_rgb8(w, h, &xyz_to_srgb8(&xyz, wy()))?,
+                OutputFormat::TiffXyz => encode_tiff_f32_rgb(w, h, &xyz)?,
+                OutputFormat::TiffSrgb16 => encode_tiff_rgb16(w, h, &xyz_to_srgb16(&xyz, wy()))?,
+                OutputFormat::F32 => xyz.iter().flat_map(|v| v.to_le_bytes()).collect(),
+            };
+            (bytes, w, h, stats)
+        }
+        other => {
+            return Err(CliError::Usage(format!(
+                "--renderer '{other}': expected fast or reference"
+            )));
+        }
+    };
+    let ms = started.elapsed().as_secs_f64() * 1e3;
     write_file(&a.out, &bytes)?;
-    report(a, &illuminant, w, h, ms, &stats);
+    report(a, &illuminant, ow, oh, ms, &stats);
     Ok(())
 }
 

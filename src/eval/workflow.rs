@@ -7,10 +7,7 @@ use serde::{Deserialize, Serialize};
 
 use super::{ChartTruth, DeltaEReport, EvalError, evaluate_chart};
 use crate::camera::{Camera, Exposure, NoiseSwitches, simulate};
-use crate::l3::{
-    ColourMatrix, FastRenderer, IlluminantEntry, L3Table, Mosaic, TableKind, fuse_kernels,
-    render_baseline,
-};
+use crate::l3::{ColourMatrix, IlluminantEntry, L3Table, Mosaic, TableKind, render_baseline};
 use crate::scene::{Scene, SceneOptions, natural100_chart};
 use crate::spectral::{Extrapolation, IlluminantSpec, IsetData, Spectrum, cie_illuminant};
 use crate::training::colour_samples;
@@ -272,11 +269,8 @@ pub fn render_method(
 ) -> Result<Vec<f32>, EvalError> {
     Ok(match method {
         Method::Table(t) => {
-            let kernels = match t.meta.kind {
-                TableKind::SameIlluminant => fuse_kernels(t, &correction.t),
-                TableKind::CrossIlluminant => t.kernels.clone(),
-            };
-            FastRenderer::new(t, &kernels)?
+            crate::render_pipeline::RenderPipeline::new(t, correction)?
+                .renderer()
                 .render_xyz(Mosaic::Volts(volts), width, height, None)?
                 .0
         }

@@ -353,7 +353,8 @@ impl IlluminantRegistry {
     }
 
     /// Resolve a request's illuminant: a registered name, or `cct:K`
-    /// (computed and cached as `cct:K`), or any other spec that resolves to
+    /// (computed and cached as `cct:K`), or `xy:x,y` (the illuminant of that
+    /// chromaticity's CCT, see [`xy_spec_cct`]), or any other spec that resolves to
     /// an SPD (a CIE name, an ISET light, a CSV), computed and cached.
     pub fn resolve(
         &mut self,
@@ -362,6 +363,10 @@ impl IlluminantRegistry {
     ) -> Result<IlluminantEntry, L3Error> {
         if let Some(e) = self.get(spec) {
             return Ok(e.clone());
+        }
+        if let Some(cct) = xy_spec_cct(spec)? {
+            // corrected as the illuminant of that CCT (blackbody below 4000 K, daylight above)
+            return self.resolve(&format!("cct:{}", cct.round()), iset);
         }
         let parsed = IlluminantSpec::parse(spec)?;
         match &parsed {
@@ -391,9 +396,54 @@ impl IlluminantRegistry {
     }
 }
 
+/// The correlated colour temperature of an `xy:x,y` illuminant spec (`None` when `spec` is
+/// not one): a chromaticity inside the spectrum locus triangle whose CCT lies in
+/// 1000–25000 K.
+pub fn xy_spec_cct(spec: &str) -> Result<Option<f64>, L3Error> {
+    let spec = spec.trim();
+    let Some(rest) = spec
+        .get(..3)
+        .filter(|p| p.eq_ignore_ascii_case("xy:"))
+        .map(|_| &spec[3..])
+    else {
+        return Ok(None);
+    };
+    let bad = |why: String| L3Error::InvalidInput(format!("illuminant '{spec}': {why}"));
+    let parts: Vec<f64> = rest
+        .split(',')
+        .map(|p| p.trim().parse::<f64>())
+        .collect::<Result<_, _>>()
+        .map_err(|_| bad("expected xy:x,y with two numbers".into()))?;
+    let [x, y] = parts[..] else {
+        return Err(bad("expected xy:x,y with two numbers".into()));
+    };
+    if !(x > 0.0 && y > 0.0 && x + y < 1.0) {
+        return Err(bad(format!(
+            "chromaticity ({x}, {y}) is not inside the spectrum locus triangle"
+        )));
+    }
+    let cct =
+        cct_from_xy([x, y]).map_err(|e| bad(format!("no correlated colour temperature: {e}")))?;
+    if !(1000.0..=25_000.0).contains(&cct) {
+        return Err(bad(format!("its CCT {cct:.0} K is outside 1000–25000 K")));
+    }
+    Ok(Some(cct))
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn xy_specs_resolve_to_the_cct_of_their_chromaticity() {
+        assert_eq!(xy_spec_cct("D65").unwrap(), None);
+        let k = xy_spec_cct("xy:0.4476,0.4074").unwrap().unwrap();
+        assert!((k - 2856.0).abs() < 5.0, "{k}");
+        assert!(xy_spec_cct("XY: 0.3127, 0.3290").unwrap().is_some());
+        assert!(xy_spec_cct("xy:0.9,0.9").is_err());
+        assert!(xy_spec_cct("xy:1,2,3").is_err());
+        assert!(xy_spec_cct("xy:ä").is_err());
+    }
 
     #[test]
     fn d65_is_identity_and_a_is_plausible() {

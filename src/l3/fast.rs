@@ -25,6 +25,8 @@
 //! than 2×2 take the reference classification, so both renderers put every
 //! pixel in the same class; outputs then differ by float rounding only.
 
+use std::sync::atomic::{AtomicBool, Ordering};
+
 use rayon::prelude::*;
 
 #[cfg(target_arch = "x86_64")]
@@ -478,10 +480,23 @@ impl FastRenderer {
         height: usize,
         region: Option<Region>,
     ) -> Result<(Vec<f32>, RenderStats), L3Error> {
+        self.render_xyz_until(mosaic, width, height, region, &AtomicBool::new(false))
+    }
+
+    /// [`render_xyz`](Self::render_xyz) that stops between bands of rows once `cancel` is
+    /// set, with [`L3Error::RenderCanceled`].
+    pub fn render_xyz_until(
+        &self,
+        mosaic: Mosaic<'_>,
+        width: usize,
+        height: usize,
+        region: Option<Region>,
+        cancel: &AtomicBool,
+    ) -> Result<(Vec<f32>, RenderStats), L3Error> {
         let (src, clamped) = self.source(mosaic, width, height)?;
         let reg = check_region(region, width, height)?;
         let mut out = crate::buffers::zeroed::<f32>(reg.width * reg.height * 3);
-        let mut stats = self.run(&src, reg, &self.xyz, &mut out, &XyzSink);
+        let mut stats = self.run(&src, reg, &self.xyz, &mut out, &XyzSink, cancel)?;
         stats.clamped = clamped;
         Ok((out, stats))
     }
@@ -498,9 +513,31 @@ impl FastRenderer {
         region: Option<Region>,
         white: WhiteLevel,
     ) -> Result<(Frame, f64, RenderStats), L3Error> {
+        self.render_srgb8_until(
+            mosaic,
+            width,
+            height,
+            region,
+            white,
+            &AtomicBool::new(false),
+        )
+    }
+
+    /// [`render_srgb8`](Self::render_srgb8) that stops between bands of rows once `cancel`
+    /// is set, with [`L3Error::RenderCanceled`].
+    pub fn render_srgb8_until(
+        &self,
+        mosaic: Mosaic<'_>,
+        width: usize,
+        height: usize,
+        region: Option<Region>,
+        white: WhiteLevel,
+        cancel: &AtomicBool,
+    ) -> Result<(Frame, f64, RenderStats), L3Error> {
         let reg = check_region(region, width, height)?;
         let mut out = Frame::take(reg.width * reg.height * 3);
-        let (wy, stats) = self.render_srgb8_into(mosaic, width, height, region, white, &mut out)?;
+        let (wy, stats) =
+            self.srgb8_into(mosaic, width, height, region, white, &mut out, cancel)?;
         Ok((out, wy, stats))
     }
 
@@ -515,6 +552,28 @@ impl FastRenderer {
         region: Option<Region>,
         white: WhiteLevel,
         out: &mut [u8],
+    ) -> Result<(f64, RenderStats), L3Error> {
+        self.srgb8_into(
+            mosaic,
+            width,
+            height,
+            region,
+            white,
+            out,
+            &AtomicBool::new(false),
+        )
+    }
+
+    #[allow(clippy::too_many_arguments)]
+    fn srgb8_into(
+        &self,
+        mosaic: Mosaic<'_>,
+        width: usize,
+        height: usize,
+        region: Option<Region>,
+        white: WhiteLevel,
+        out: &mut [u8],
+        cancel: &AtomicBool,
     ) -> Result<(f64, RenderStats), L3Error> {
         let reg = check_region(region, width, height)?;
         let need = reg.width * reg.height * 3;
@@ -535,7 +594,7 @@ impl FastRenderer {
             self.geo.size,
             self.sat_cases.len(),
         );
-        let mut stats = self.run(&src, reg, &set, out, Srgb8Sink::shared());
+        let mut stats = self.run(&src, reg, &set, out, Srgb8Sink::shared(), cancel)?;
         stats.clamped = clamped;
         Ok((wy, stats))
     }
@@ -681,7 +740,8 @@ impl FastRenderer {
         ))
     }
 
-    /// Render the region band by band into `out` (`chans` values per pixel).
+    /// Render the region band by band into `out` (`chans` values per pixel); bands not yet
+    /// started when `cancel` is set are skipped and the render fails.
     fn run<T: Send, S: Sink<T>>(
         &self,
         src: &Source<'_>,
@@ -689,7 +749,8 @@ impl FastRenderer {
         set: &KernelSet,
         out: &mut [T],
         sink: &S,
-    ) -> RenderStats {
+        cancel: &AtomicBool,
+    ) -> Result<RenderStats, L3Error> {
         let chans = 3;
         let row_len = reg.width * chans;
         let simd = if self.uses_avx512() {
@@ -699,9 +760,13 @@ impl FastRenderer {
         } else {
             Isa::Portable
         };
-        out.par_chunks_mut(BAND_ROWS * row_len)
+        let stats = out
+            .par_chunks_mut(BAND_ROWS * row_len)
             .enumerate()
             .map(|(b, band)| {
+                if cancel.load(Ordering::Relaxed) {
+                    return RenderStats::default();
+                }
                 // the thread's buffers, reused across bands and renders
                 SCRATCH.with(|cell| match cell.try_borrow_mut() {
                     Ok(mut scratch) => {
@@ -723,7 +788,11 @@ impl FastRenderer {
             .reduce(RenderStats::default, |mut a, b| {
                 a += b;
                 a
-            })
+            });
+        if cancel.load(Ordering::Relaxed) {
+            return Err(L3Error::RenderCanceled);
+        }
+        Ok(stats)
     }
 
     /// Render band `b` (rows `reg.y + b·BAND_ROWS …`) tile by tile.

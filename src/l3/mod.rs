@@ -24,7 +24,7 @@ pub use colour_map::{
 };
 pub use correction::{
     CorrectionSource, IDENTITY, IlluminantEntry, IlluminantRegistry, MAX_MATRIX_ENTRY, Mat3,
-    correction_matrix, default_reflectances,
+    correction_matrix, default_reflectances, xy_spec_cct,
 };
 pub use fast::{FastOptions, FastRenderer, Frame, Mosaic, Region};
 pub use illuminant_estimate::{
@@ -71,6 +71,8 @@ pub enum L3Error {
     /// Partial sums of a sharded training run that cannot be read or merged.
     #[error("partial sums: {0}")]
     PartialSums(String),
+    #[error("the render was canceled")]
+    RenderCanceled,
     #[error(transparent)]
     Spectral(#[from] crate::spectral::SpectralError),
 }

@@ -343,3 +343,22 @@ fn fast_srgb_and_dn_input_match_the_reference_pipeline() {
         .is_err()
     );
 }
+
+#[test]
+fn a_canceled_render_stops_with_render_canceled() {
+    let table = train_synthetic(0.01);
+    let f = synth_frame(13, 64, 1.0, 0.01, (0, 0));
+    let fast = FastRenderer::new(&table, &table.kernels).unwrap();
+    let frame = Mosaic::Volts(&f.volts);
+    let go = AtomicBool::new(false);
+    let stop = AtomicBool::new(true);
+    assert!(fast.render_xyz_until(frame, 64, 64, None, &go).is_ok());
+    assert!(matches!(
+        fast.render_xyz_until(frame, 64, 64, None, &stop),
+        Err(L3Error::RenderCanceled)
+    ));
+    assert!(matches!(
+        fast.render_srgb8_until(frame, 64, 64, None, WhiteLevel::Auto, &stop),
+        Err(L3Error::RenderCanceled)
+    ));
+}

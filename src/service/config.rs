@@ -27,7 +27,25 @@ pub struct ServerConfig {
     pub bind: SocketAddr,
     pub max_body_bytes: usize,
     pub max_pixels: usize,
+    /// Renders past the queue at once (decoding, rendering, encoding).
     pub render_concurrency: usize,
+    /// Requests that may wait for a render slot once their body is read; more get 503.
+    #[serde(default = "default_render_queue_depth")]
+    pub render_queue_depth: usize,
+    /// Longest wait for a render slot (seconds); past it, 503 with Retry-After.
+    #[serde(default = "default_render_queue_wait_s")]
+    pub render_queue_wait_s: f64,
+    /// Longest time a render body may take to arrive (seconds); past it, 408.
+    #[serde(default = "default_body_timeout_s")]
+    pub body_timeout_s: f64,
+    /// Slowest average body transfer accepted (bytes/s, judged after the first two seconds;
+    /// 0: none); slower bodies get 408.
+    #[serde(default)]
+    pub min_body_rate_bytes_s: u64,
+    /// Memory all render bodies in flight may hold together (bytes); a body that would pass
+    /// it gets 503 with Retry-After before it is read.
+    #[serde(default = "default_body_budget_bytes")]
+    pub body_budget_bytes: usize,
     /// Threads of the render pool (0: one per core).
     #[serde(default)]
     pub render_threads: usize,
@@ -37,12 +55,22 @@ pub struct ServerConfig {
     pub bearer_token: String,
     #[serde(default = "default_log_format")]
     pub log_format: String,
-    /// Fault injection for crash tests (0: off). When set, storing a table pauses this long
-    /// after its temporary file is written (before the rename), and switching the active table
-    /// pauses after the new file is verified (before the switch is recorded), each announced
-    /// by a log line, so a test can kill the process inside those windows.
-    #[serde(default)]
-    pub test_pause_activation_ms: u64,
+}
+
+fn default_render_queue_depth() -> usize {
+    64
+}
+
+fn default_render_queue_wait_s() -> f64 {
+    30.0
+}
+
+fn default_body_timeout_s() -> f64 {
+    30.0
+}
+
+fn default_body_budget_bytes() -> usize {
+    1 << 30
 }
 
 fn default_log_format() -> String {
@@ -156,14 +184,16 @@ impl ServiceConfig {
             "L3_MAX_BODY_BYTES" => self.server.max_body_bytes = num(key, value)?,
             "L3_MAX_PIXELS" => self.server.max_pixels = num(key, value)?,
             "L3_RENDER_CONCURRENCY" => self.server.render_concurrency = num(key, value)?,
+            "L3_RENDER_QUEUE_DEPTH" => self.server.render_queue_depth = num(key, value)?,
+            "L3_RENDER_QUEUE_WAIT_S" => self.server.render_queue_wait_s = num(key, value)?,
+            "L3_BODY_TIMEOUT_S" => self.server.body_timeout_s = num(key, value)?,
+            "L3_MIN_BODY_RATE_BYTES_S" => self.server.min_body_rate_bytes_s = num(key, value)?,
+            "L3_BODY_BUDGET_BYTES" => self.server.body_budget_bytes = num(key, value)?,
             "L3_RENDER_THREADS" => self.server.render_threads = num(key, value)?,
             "L3_BACKGROUND_THREADS" => self.training.background_threads = num(key, value)?,
             "L3_REQUEST_TIMEOUT_S" => self.server.request_timeout_s = num(key, value)?,
             "L3_BEARER_TOKEN" => self.server.bearer_token = value.to_string(),
             "L3_LOG_FORMAT" => self.server.log_format = value.to_string(),
-            "L3_TEST_PAUSE_ACTIVATION_MS" => {
-                self.server.test_pause_activation_ms = num(key, value)?
-            }
             "L3_AUTO_TRAIN" => {
                 self.training.auto_train_default = match value.trim() {
                     "1" | "true" | "yes" => true,
@@ -195,6 +225,24 @@ impl ServiceConfig {
         }
         if s.render_concurrency == 0 {
             return Err(bad("render_concurrency must be at least 1".into()));
+        }
+        if !(s.render_queue_wait_s.is_finite() && s.render_queue_wait_s >= 0.0) {
+            return Err(bad(format!(
+                "render_queue_wait_s {} (a non-negative number of seconds)",
+                s.render_queue_wait_s
+            )));
+        }
+        if !(s.body_timeout_s.is_finite() && s.body_timeout_s > 0.0) {
+            return Err(bad(format!(
+                "body_timeout_s {} (a positive number of seconds)",
+                s.body_timeout_s
+            )));
+        }
+        if s.body_budget_bytes < s.max_body_bytes {
+            return Err(bad(format!(
+                "body_budget_bytes {} is below max_body_bytes {}: the largest body could never be read",
+                s.body_budget_bytes, s.max_body_bytes
+            )));
         }
         if !(s.request_timeout_s.is_finite() && s.request_timeout_s > 0.0) {
             return Err(bad(format!(

@@ -52,6 +52,9 @@ pub enum ServiceError {
     NotReady(String),
     #[error("{0}")]
     Timeout(String),
+    /// The request body did not arrive in time (too slow, or stalled).
+    #[error("{0}")]
+    BodyTimeout(String),
     /// Configuration errors (at start).
     #[error("configuration: {0}")]
     Config(String),
@@ -81,6 +84,7 @@ impl ServiceError {
             Unauthorized(_) => StatusCode::UNAUTHORIZED,
             Overloaded { .. } | NotReady(_) => StatusCode::SERVICE_UNAVAILABLE,
             Timeout(_) => StatusCode::GATEWAY_TIMEOUT,
+            BodyTimeout(_) => StatusCode::REQUEST_TIMEOUT,
             Config(_) | Database(_) | Internal(_) => StatusCode::INTERNAL_SERVER_ERROR,
         }
     }
@@ -105,6 +109,7 @@ impl ServiceError {
             Overloaded { .. } => "overloaded",
             NotReady(_) => "not_ready",
             Timeout(_) => "request_timeout",
+            BodyTimeout(_) => "body_timeout",
             Config(_) => "config",
             Database(_) => "database",
             Internal(_) => "internal",
@@ -142,6 +147,11 @@ impl IntoResponse for ServiceError {
             && let Ok(v) = HeaderValue::from_str(&retry_after_s.to_string())
         {
             resp.headers_mut().insert(header::RETRY_AFTER, v);
+        }
+        if let ServiceError::BodyTimeout(_) = &self {
+            // the rest of the body is not read: the connection cannot be reused
+            resp.headers_mut()
+                .insert(header::CONNECTION, HeaderValue::from_static("close"));
         }
         if let ServiceError::NotReady(_) = &self {
             resp.headers_mut()
@@ -185,6 +195,27 @@ impl From<crate::io::IoError> for ServiceError {
             | NonFinite { .. }
             | Sidecar { .. }
             | InvalidMeta(_) => ServiceError::InvalidImage(e.to_string()),
+        }
+    }
+}
+
+impl From<crate::render_pipeline::PipelineError> for ServiceError {
+    fn from(e: crate::render_pipeline::PipelineError) -> Self {
+        use crate::l3::L3Error;
+        use crate::render_pipeline::PipelineError;
+        match e {
+            PipelineError::Options(m) => ServiceError::BadRequest(m),
+            PipelineError::Encode(e) => e.into(),
+            PipelineError::Render(e) => match e {
+                L3Error::InvalidInput(_) | L3Error::InvalidParams(_) => {
+                    ServiceError::InvalidImage(e.to_string())
+                }
+                // nobody waits for the answer of a canceled render any more
+                L3Error::RenderCanceled => {
+                    ServiceError::Timeout("the render was abandoned by its request".into())
+                }
+                other => ServiceError::Internal(other.to_string()),
+            },
         }
     }
 }

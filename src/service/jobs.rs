@@ -450,7 +450,7 @@ async fn run_job(state: &AppState, id: &str, request: &str) {
             Ok(table) => match write_table_file_with_pause(
                 &st.tables_dir,
                 &table,
-                st.config.server.test_pause_activation_ms,
+                super::debug_hooks::activation_pause_ms(),
             ) {
                 Ok(stored) => Outcome::Done(Box::new(table), stored),
                 Err(e) => Outcome::Failed(e.to_string()),

@@ -25,6 +25,21 @@ pub struct Metrics {
     requests: Mutex<BTreeMap<(String, String, u16), Histogram>>,
     rendered_pixels: AtomicU64,
     renders: AtomicU64,
+    /// Render admission refusals and cancellations, by kind.
+    pub admission: AdmissionCounters,
+}
+
+/// What render admission refused or abandoned.
+#[derive(Default)]
+pub struct AdmissionCounters {
+    /// Bodies that did not arrive within the body deadline (408).
+    pub body_timeouts: AtomicU64,
+    /// Bodies refused before reading: the body budget was spent (503).
+    pub budget_refusals: AtomicU64,
+    /// Requests refused by the queue: full, or waited too long (503).
+    pub queue_refusals: AtomicU64,
+    /// Renders abandoned by their request (timed out or client gone) and stopped early.
+    pub renders_canceled: AtomicU64,
 }
 
 impl Metrics {
@@ -108,6 +123,35 @@ impl Metrics {
             "# HELP l3_renders_total Renders completed.\n# TYPE l3_renders_total counter\nl3_renders_total {}",
             self.renders.load(Ordering::Relaxed)
         );
+        let a = &self.admission;
+        for (name, help, v) in [
+            (
+                "l3_render_body_timeouts_total",
+                "Render bodies that missed their deadline (408).",
+                &a.body_timeouts,
+            ),
+            (
+                "l3_render_budget_refusals_total",
+                "Render bodies refused unread because the body budget was spent (503).",
+                &a.budget_refusals,
+            ),
+            (
+                "l3_render_queue_refusals_total",
+                "Renders refused by a full queue or a wait past the limit (503).",
+                &a.queue_refusals,
+            ),
+            (
+                "l3_renders_canceled_total",
+                "Renders abandoned by their request and stopped early.",
+                &a.renders_canceled,
+            ),
+        ] {
+            let _ = writeln!(
+                out,
+                "# HELP {name} {help}\n# TYPE {name} counter\n{name} {}",
+                v.load(Ordering::Relaxed)
+            );
+        }
         let _ = writeln!(
             out,
             "# HELP l3_training_jobs Training jobs by state.\n# TYPE l3_training_jobs gauge"

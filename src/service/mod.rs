@@ -3,8 +3,10 @@
 //! the core knows nothing of it. CPU work runs on rayon, never on the async runtime's threads.
 
 mod accept;
+mod admission;
 mod config;
 mod cpu;
+mod debug_hooks;
 mod error;
 mod evaluations;
 mod illuminants;
@@ -25,6 +27,7 @@ use std::sync::{Arc, Mutex};
 use arc_swap::ArcSwapOption;
 use tokio::sync::{Notify, Semaphore};
 
+pub use admission::Admission;
 pub use config::{DEFAULT_CONFIG_TOML, DataConfig, ServerConfig, ServiceConfig, TrainingConfig};
 pub use error::ServiceError;
 pub use illuminants::{IlluminantDefinition, SpdSamples, apply as apply_illuminant};
@@ -171,7 +174,7 @@ pub async fn start_with(
     let default_spec = default_training_spec(&cfg)?;
     let pools = cpu::CpuPools::new(cfg.server.render_threads, cfg.training.background_threads)?;
     let state = AppState(Arc::new(Inner {
-        render_slots: Arc::new(Semaphore::new(cfg.server.render_concurrency)),
+        admission: admission::Admission::new(&cfg.server),
         cpu_gate: Arc::new(Semaphore::new(
             (pools.render.current_num_threads() / 2).max(1),
         )),

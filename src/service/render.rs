@@ -8,6 +8,7 @@
 //! unclipped signal) D65. `x-l3-illuminant-source` says which: `query`, `metadata`,
 //! `estimated` or `default`.
 
+use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::{Arc, Mutex};
 use std::time::Instant;
 
@@ -25,9 +26,12 @@ use super::ServiceError;
 use super::state::AppState;
 use crate::io::{
     DecodedMosaic, Limits, PngCompression, decode_mosaic_with_meta, decode_raw_u16_le,
-    encode_png_rgb8, encode_ppm_rgb8, encode_tiff_f32_rgb, encode_tiff_rgb16, ppm_header,
 };
-use crate::l3::{FrameMetadata, Mosaic, Region, WhiteLevel, xyz_to_srgb8, xyz_to_srgb16};
+use crate::l3::{FrameMetadata, Mosaic, WhiteLevel};
+use crate::render_pipeline::{
+    Encoded, OutputFormat as PipelineFormat, PipelineError, RenderOptions, check_preview,
+    parse_region,
+};
 
 /// Query parameters of a render.
 #[derive(Debug, Default, Deserialize)]
@@ -143,231 +147,107 @@ const IMAGE_TYPES: [&str; 8] = [
     "image/x-pgm",
 ];
 
-/// A crop `x,y,width,height`.
-fn parse_region(s: &str, w: usize, h: usize) -> Result<(usize, usize, usize, usize), ServiceError> {
-    let v: Vec<usize> = s
-        .split(',')
-        .map(|p| p.trim().parse::<usize>())
-        .collect::<Result<_, _>>()
-        .map_err(|_| {
-            ServiceError::BadRequest(format!(
-                "region '{s}': expected x,y,width,height (non-negative integers)"
-            ))
-        })?;
-    let [x, y, rw, rh] = v[..] else {
-        return Err(ServiceError::BadRequest(format!(
-            "region '{s}': expected four numbers x,y,width,height"
-        )));
-    };
-    if rw == 0 || rh == 0 || x.saturating_add(rw) > w || y.saturating_add(rh) > h {
-        return Err(ServiceError::BadRequest(format!(
-            "region {x},{y},{rw}×{rh} is empty or not inside the {w}×{h} frame"
-        )));
-    }
-    Ok((x, y, rw, rh))
-}
-
-/// Box-average downscale by `k` (partial edge blocks dropped).
-fn downscale(xyz: &[f32], w: usize, h: usize, k: usize) -> (Vec<f32>, usize, usize) {
-    let (ow, oh) = (w / k, h / k);
-    let mut out = vec![0f32; ow * oh * 3];
-    let n = (k * k) as f64;
-    for oy in 0..oh {
-        for ox in 0..ow {
-            let mut acc = [0f64; 3];
-            for dy in 0..k {
-                let row = (oy * k + dy) * w;
-                for dx in 0..k {
-                    let p = (row + ox * k + dx) * 3;
-                    for c in 0..3 {
-                        acc[c] += f64::from(xyz[p + c]);
-                    }
-                }
-            }
-            for c in 0..3 {
-                out[(oy * ow + ox) * 3 + c] = (acc[c] / n) as f32;
-            }
-        }
-    }
-    (out, ow, oh)
-}
-
 /// A decoded mosaic as the renderer takes it.
 enum Input {
     Dn(Vec<u16>),
     Volts(Vec<f32>),
 }
 
-/// What the renderer produced.
-enum Rendered8 {
-    Srgb(crate::l3::Frame),
-    Xyz(Vec<f32>),
-}
-
-/// An encoded answer: one buffer, or a header followed by the rendered frame itself (PPM:
-/// the pixels are sent from the render's buffer, which returns to the pool once sent).
-enum Encoded {
-    Whole(Vec<u8>),
-    Framed {
-        header: Vec<u8>,
-        frame: crate::l3::Frame,
-    },
-}
-
-impl Encoded {
-    fn len(&self) -> usize {
-        match self {
-            Encoded::Whole(b) => b.len(),
-            Encoded::Framed { header, frame } => header.len() + frame.len(),
-        }
-    }
-
-    fn into_body(self) -> axum::body::Body {
-        match self {
-            Encoded::Whole(b) => axum::body::Body::from(b),
-            Encoded::Framed { header, frame } => {
-                let parts = [bytes::Bytes::from(header), bytes::Bytes::from_owner(frame)];
-                axum::body::Body::from_stream(futures_util::stream::iter(
-                    parts.map(Ok::<_, std::convert::Infallible>),
-                ))
-            }
-        }
-    }
-}
-
+/// The answer of the CPU part of a render.
 struct Rendered {
     illuminant: String,
     illuminant_source: &'static str,
-    bytes: Encoded,
-    width: usize,
-    height: usize,
+    out: crate::render_pipeline::Rendered,
     in_width: usize,
     in_height: usize,
-    stats: crate::l3::RenderStats,
     decode_ms: f64,
-    render_ms: f64,
-    encode_ms: f64,
 }
 
-/// Encodes a rendered image as a whole buffer (every format but a PPM of an sRGB frame).
-fn encode(
-    format: OutputFormat,
-    out: Rendered8,
-    ow: usize,
-    oh: usize,
-    wy: f64,
-    tiff_srgb16: bool,
-) -> Result<Vec<u8>, ServiceError> {
-    Ok(match (format, out) {
-        (OutputFormat::Png, Rendered8::Srgb(rgb)) => {
-            encode_png_rgb8(ow, oh, &rgb, PngCompression::Fast)?
+/// Sets its flag when dropped unless disarmed: a render whose request is dropped (timed
+/// out, or its client gone) tells its CPU work to stop.
+struct CancelOnDrop(Arc<AtomicBool>, bool);
+
+impl Drop for CancelOnDrop {
+    fn drop(&mut self) {
+        if !self.1 {
+            self.0.store(true, Ordering::Relaxed);
         }
-        (OutputFormat::Png, Rendered8::Xyz(xyz)) => {
-            encode_png_rgb8(ow, oh, &xyz_to_srgb8(&xyz, wy), PngCompression::Fast)?
-        }
-        (OutputFormat::Ppm, Rendered8::Srgb(rgb)) => encode_ppm_rgb8(ow, oh, &rgb)?,
-        (OutputFormat::Ppm, Rendered8::Xyz(xyz)) => {
-            encode_ppm_rgb8(ow, oh, &xyz_to_srgb8(&xyz, wy))?
-        }
-        (OutputFormat::Tiff, Rendered8::Xyz(xyz)) if tiff_srgb16 => {
-            encode_tiff_rgb16(ow, oh, &xyz_to_srgb16(&xyz, wy))?
-        }
-        (OutputFormat::Tiff, Rendered8::Xyz(xyz)) => encode_tiff_f32_rgb(ow, oh, &xyz)?,
-        (OutputFormat::F32, Rendered8::Xyz(xyz)) => {
-            let mut b = crate::buffers::with_capacity(xyz.len() * 4);
-            b.extend(xyz.iter().flat_map(|v| v.to_le_bytes()));
-            b
-        }
-        _ => {
-            return Err(ServiceError::Internal(
-                "render output does not match the format".into(),
-            ));
-        }
-    })
+    }
 }
 
-/// A render slot taken by [`admit`] before the body is read.
+fn into_body(e: Encoded) -> axum::body::Body {
+    match e {
+        Encoded::Whole(b) => axum::body::Body::from(b),
+        // the pixels are sent from the render's buffer, which returns to the pool once sent
+        Encoded::Framed { header, frame } => {
+            let parts = [bytes::Bytes::from(header), bytes::Bytes::from_owner(frame)];
+            axum::body::Body::from_stream(futures_util::stream::iter(
+                parts.map(Ok::<_, std::convert::Infallible>),
+            ))
+        }
+    }
+}
+
+/// What [`admit`] hands the handler: the body, read in full, the render slot the request
+/// waited for, and how long it waited.
 #[derive(Clone)]
-pub struct RenderSlot(Arc<Mutex<Option<OwnedSemaphorePermit>>>);
-
-/// Admission of renders: takes a slot before the body is read, or answers 503 with
-/// Retry-After at once (an overloaded service decodes no bodies; it discards what the client
-/// already sends, so the client can read the 503 and keep its connection).
-pub async fn admit(State(state): State<AppState>, mut req: Request, next: Next) -> Response {
-    match state.render_slots.clone().try_acquire_owned() {
-        Ok(p) => {
-            req.extensions_mut()
-                .insert(RenderSlot(Arc::new(Mutex::new(Some(p)))));
-            next.run(req).await
-        }
-        Err(_) => {
-            let keep_alive = discard_body(req, state.config.server.max_body_bytes).await;
-            let mut resp = ServiceError::Overloaded {
-                msg: format!(
-                    "{} renders are already running; retry shortly",
-                    state.config.server.render_concurrency
-                ),
-                retry_after_s: 1,
-            }
-            .into_response();
-            if !keep_alive {
-                resp.headers_mut()
-                    .insert(header::CONNECTION, HeaderValue::from_static("close"));
-            }
-            resp
-        }
-    }
+pub struct Admitted {
+    body: Bytes,
+    slot: Arc<Mutex<Option<OwnedSemaphorePermit>>>,
+    queue_ms: f64,
 }
 
-/// Largest body an overloaded render reads and throws away before its 503.
-const DISCARD_LIMIT: usize = 64 << 20;
-
-/// Reads and drops a refused request's body (up to [`DISCARD_LIMIT`], within 10 s) so that a
-/// client still sending it sees the answer instead of a broken pipe. Without this, answering
-/// before the body is read makes the server close the connection mid-upload. A client that
-/// sent `Expect: 100-continue` has not sent the body yet: nothing is read. Returns whether
-/// the connection can be kept.
-async fn discard_body(req: Request, max_body_bytes: usize) -> bool {
-    use axum::body::HttpBody;
-    if req
-        .headers()
-        .get(header::EXPECT)
-        .is_some_and(|v| v.as_bytes().eq_ignore_ascii_case(b"100-continue"))
-    {
-        return true;
-    }
-    let limit = DISCARD_LIMIT.min(max_body_bytes);
-    let mut body = req.into_body();
-    let drain = async {
-        let mut seen = 0usize;
-        loop {
-            match std::future::poll_fn(|cx| std::pin::Pin::new(&mut body).poll_frame(cx)).await {
-                None => return true,
-                Some(Err(_)) => return false,
-                Some(Ok(frame)) => {
-                    seen += frame.data_ref().map_or(0, |d| d.len());
-                    if seen > limit {
-                        return false;
-                    }
-                }
-            }
-        }
+/// Admission of renders (see [`super::admission`]): reserve the body's memory, read the
+/// body, then wait in the FIFO queue for a render slot. A refusal before or while the body
+/// is read closes the connection (the rest of the body is never read).
+pub async fn admit(State(state): State<AppState>, req: Request, next: Next) -> Response {
+    let adm = &state.admission;
+    let counters = &state.metrics.admission;
+    let (mut parts, body) = req.into_parts();
+    let declared = super::admission::content_length(&parts.headers);
+    let close = |e: ServiceError| {
+        let mut resp = e.into_response();
+        resp.headers_mut()
+            .insert(header::CONNECTION, HeaderValue::from_static("close"));
+        resp
     };
-    tokio::time::timeout(std::time::Duration::from_secs(10), drain)
+    let mut reservation = match adm.reserve(declared.unwrap_or(0), counters) {
+        Ok(r) => r,
+        Err(e) => return close(e),
+    };
+    let body = match adm
+        .read_body(body, declared, &mut reservation, counters)
         .await
-        .unwrap_or(false)
+    {
+        Ok(b) => b,
+        Err(e) => return close(e),
+    };
+    let queued = Instant::now();
+    let slot = match adm.render_slot(counters).await {
+        Ok(p) => p,
+        Err(e) => return e.into_response(),
+    };
+    parts.extensions.insert(Admitted {
+        body,
+        slot: Arc::new(Mutex::new(Some(slot))),
+        queue_ms: queued.elapsed().as_secs_f64() * 1e3,
+    });
+    let resp = next
+        .run(Request::from_parts(parts, axum::body::Body::empty()))
+        .await;
+    drop(reservation);
+    resp
 }
 
 /// `POST /v1/render`
 pub async fn render(
     State(state): State<AppState>,
-    Extension(permit): Extension<RenderSlot>,
+    Extension(admitted): Extension<Admitted>,
     headers: HeaderMap,
     query: Result<Query<RenderQuery>, QueryRejection>,
-    body: Result<Bytes, BytesRejection>,
 ) -> Result<Response, ServiceError> {
     let Query(q) = query.map_err(|e| ServiceError::BadRequest(e.body_text()))?;
-    let body = body_bytes(body, state.config.server.max_body_bytes)?;
+    let body = admitted.body;
     let format = negotiate(headers.get(header::ACCEPT).and_then(|v| v.to_str().ok()))?;
     let ctype = content_type(&headers).ok_or_else(|| {
         ServiceError::UnsupportedMediaType(
@@ -394,21 +274,31 @@ pub async fn render(
             .parse()
             .map_err(|e: crate::l3::L3Error| ServiceError::BadRequest(e.to_string()))?,
     };
-    let tiff_srgb16 = match q.tiff.as_deref() {
-        None | Some("xyz") => false,
-        Some("srgb16") => true,
-        Some(other) => {
+    let pipeline_format = match (format, q.tiff.as_deref()) {
+        (OutputFormat::Png, _) => PipelineFormat::Png,
+        (OutputFormat::Ppm, _) => PipelineFormat::Ppm,
+        (OutputFormat::F32, _) => PipelineFormat::F32,
+        (OutputFormat::Tiff, None | Some("xyz")) => PipelineFormat::TiffXyz,
+        (OutputFormat::Tiff, Some("srgb16")) => PipelineFormat::TiffSrgb16,
+        (OutputFormat::Tiff, Some(other)) => {
             return Err(ServiceError::BadRequest(format!(
                 "tiff '{other}': expected xyz or srgb16"
             )));
         }
     };
-    let preview = q.preview.unwrap_or(1);
-    if !(1..=16).contains(&preview) {
+    if let Some(t) = q.tiff.as_deref()
+        && !["xyz", "srgb16"].contains(&t)
+    {
         return Err(ServiceError::BadRequest(format!(
-            "preview {preview}: an integer downscale factor from 1 to 16"
+            "tiff '{t}': expected xyz or srgb16"
         )));
     }
+    let opts = RenderOptions {
+        white,
+        region: q.region.as_deref().map(parse_region).transpose()?,
+        preview: check_preview(q.preview.unwrap_or(1))?,
+        png: PngCompression::Fast,
+    };
     if raw && (q.width.is_none() || q.height.is_none()) {
         return Err(ServiceError::BadRequest(
             "a raw application/octet-stream body needs the width and height query parameters"
@@ -436,8 +326,8 @@ pub async fn render(
         .as_deref()
         .map(|s| state.resolve_illuminant(s))
         .transpose()?;
-    let permit = permit
-        .0
+    let permit = admitted
+        .slot
         .lock()
         .unwrap_or_else(|p| p.into_inner())
         .take()
@@ -451,15 +341,21 @@ pub async fn render(
         .acquire_owned()
         .await
         .map_err(|_| ServiceError::Internal("the render gate is closed".into()))?;
-    let queue_ms = queued.elapsed().as_secs_f64() * 1e3;
+    let queue_ms = admitted.queue_ms + queued.elapsed().as_secs_f64() * 1e3;
     let limits = Limits {
         max_pixels: state.config.server.max_pixels,
         ..Limits::default()
     };
     let st = state.clone();
     let table_id = active.id.clone();
+    let cancel = Arc::new(AtomicBool::new(false));
+    let mut cancel_on_drop = CancelOnDrop(cancel.clone(), false);
     let r = super::cpu::run(&state.pools.render, "the render", move || {
         let run = || -> Result<Rendered, ServiceError> {
+            if cancel.load(Ordering::Relaxed) {
+                // abandoned while it waited for a thread
+                return Err(PipelineError::Render(crate::l3::L3Error::RenderCanceled).into());
+            }
             let t0 = Instant::now();
             let mut black = q.black_level.unwrap_or(0);
             let mut white_dn = q.white_level.unwrap_or(65535);
@@ -539,84 +435,37 @@ pub async fn render(
                     (st.resolve_illuminant(&spec)?, source.name())
                 }
             };
-            let region = q
-                .region
-                .as_deref()
-                .map(|s| parse_region(s, w, h))
-                .transpose()?
-                .map(|(x, y, width, height)| Region {
-                    x,
-                    y,
-                    width,
-                    height,
-                });
-            let (ow, oh) = region.map_or((w, h), |r| (r.width, r.height));
-            if preview > 1 && (ow / preview == 0 || oh / preview == 0) {
-                return Err(ServiceError::BadRequest(format!(
-                    "preview {preview} leaves nothing of a {ow}×{oh} image"
-                )));
-            }
-            let t1 = Instant::now();
-            let renderer = st.renderer_for(&active, &entry)?;
-            let bad = |e: crate::l3::L3Error| ServiceError::InvalidImage(e.to_string());
-            // only what the answer needs: 8-bit sRGB straight from the kernels for a PNG,
-            // XYZ otherwise; only the region's pixels
-            let srgb8 = matches!(format, OutputFormat::Png | OutputFormat::Ppm);
-            let (out, stats, wy) = if srgb8 && preview == 1 {
-                let (rgb, wy, stats) = renderer
-                    .render_srgb8(mosaic, w, h, region, white)
-                    .map_err(bad)?;
-                (Rendered8::Srgb(rgb), stats, wy)
-            } else {
-                let (xyz, stats) = renderer.render_xyz(mosaic, w, h, region).map_err(bad)?;
-                let wy = match format {
-                    OutputFormat::F32 => 1.0,
-                    OutputFormat::Tiff if !tiff_srgb16 => 1.0,
-                    _ => renderer.white_y(mosaic, w, h, white).map_err(bad)?,
-                };
-                (Rendered8::Xyz(xyz), stats, wy)
-            };
-            let t2 = Instant::now();
-            let (out, ow, oh) = match out {
-                Rendered8::Xyz(xyz) if preview > 1 => {
-                    let (d, dw, dh) = downscale(&xyz, ow, oh, preview);
-                    (Rendered8::Xyz(d), dw, dh)
-                }
-                other => (other, ow, oh),
-            };
-            let bytes = match (format, out) {
-                (OutputFormat::Ppm, Rendered8::Srgb(frame)) => Encoded::Framed {
-                    header: ppm_header(ow, oh)?,
-                    frame,
-                },
-                (format, out) => Encoded::Whole(encode(format, out, ow, oh, wy, tiff_srgb16)?),
-            };
-            let t3 = Instant::now();
-            let ms = |a: Instant, b: Instant| (b - a).as_secs_f64() * 1e3;
+            let decode_ms = t0.elapsed().as_secs_f64() * 1e3;
+            let pipeline = st.renderer_for(&active, &entry)?;
+            let out = pipeline.render(mosaic, w, h, pipeline_format, &opts, &cancel)?;
             Ok(Rendered {
                 illuminant: entry.name.clone(),
                 illuminant_source: source,
-                bytes,
-                width: ow,
-                height: oh,
+                out,
                 in_width: w,
                 in_height: h,
-                stats,
-                decode_ms: ms(t0, t1),
-                render_ms: ms(t1, t2),
-                encode_ms: ms(t2, t3),
+                decode_ms,
             })
         };
         let result = run();
+        if cancel.load(Ordering::Relaxed) {
+            st.metrics
+                .admission
+                .renders_canceled
+                .fetch_add(1, Ordering::Relaxed);
+        }
         // free the slots before answering, so a client's next request finds them free
         drop(gate);
         drop(permit);
         result
     })
-    .await??;
+    .await;
+    cancel_on_drop.1 = true;
+    let r = r??;
     state.metrics.rendered((r.in_width * r.in_height) as u64);
-    let length = r.bytes.len();
-    let mut resp = r.bytes.into_body().into_response();
+    let length = r.out.output.len();
+    let out = r.out;
+    let mut resp = into_body(out.output).into_response();
     let h = resp.headers_mut();
     h.insert(
         header::CONTENT_TYPE,
@@ -633,23 +482,23 @@ pub async fn render(
     put("x-l3-table", table_id);
     put("x-l3-illuminant", r.illuminant.clone());
     put("x-l3-illuminant-source", r.illuminant_source.to_string());
-    put("x-l3-width", r.width.to_string());
-    put("x-l3-height", r.height.to_string());
+    put("x-l3-width", out.width.to_string());
+    put("x-l3-height", out.height.to_string());
     put("x-l3-input-pixels", (r.in_width * r.in_height).to_string());
     put("x-l3-queue-ms", format!("{queue_ms:.3}"));
     put("x-l3-decode-ms", format!("{:.3}", r.decode_ms));
-    put("x-l3-render-ms", format!("{:.3}", r.render_ms));
-    put("x-l3-encode-ms", format!("{:.3}", r.encode_ms));
-    put("x-l3-saturated-pixels", r.stats.saturated.to_string());
-    put("x-l3-texture-pixels", r.stats.texture.to_string());
-    put("x-l3-fallback-pixels", r.stats.fallback.to_string());
-    put("x-l3-clamped-pixels", r.stats.clamped.to_string());
-    put("x-l3-exact-path-pixels", r.stats.exact_path.to_string());
+    put("x-l3-render-ms", format!("{:.3}", out.render_ms));
+    put("x-l3-encode-ms", format!("{:.3}", out.encode_ms));
+    put("x-l3-saturated-pixels", out.stats.saturated.to_string());
+    put("x-l3-texture-pixels", out.stats.texture.to_string());
+    put("x-l3-fallback-pixels", out.stats.fallback.to_string());
+    put("x-l3-clamped-pixels", out.stats.clamped.to_string());
+    put("x-l3-exact-path-pixels", out.stats.exact_path.to_string());
     put(
         "server-timing",
         format!(
             "queue;dur={queue_ms:.3}, decode;dur={:.3}, render;dur={:.3}, encode;dur={:.3}",
-            r.decode_ms, r.render_ms, r.encode_ms
+            r.decode_ms, out.render_ms, out.encode_ms
         ),
     );
     Ok(resp)
@@ -677,18 +526,5 @@ mod tests {
             OutputFormat::Tiff
         );
         assert_eq!(negotiate(Some("text/html")).unwrap_err().status(), 406);
-    }
-
-    #[test]
-    fn region_and_preview() {
-        assert!(parse_region("0,0,2,2", 4, 4).is_ok());
-        assert!(parse_region("3,0,2,2", 4, 4).is_err());
-        assert!(parse_region("0,0,0,2", 4, 4).is_err());
-        assert!(parse_region("a,b", 4, 4).is_err());
-        let xyz: Vec<f32> = (0..4 * 2 * 3).map(|v| v as f32).collect();
-        let (d, w, h) = downscale(&xyz, 4, 2, 2);
-        assert_eq!((w, h), (2, 1));
-        // mean of pixels 0,1,4,5 channel 0: (0+3+12+15)/4
-        assert_eq!(d[0], 7.5);
     }
 }

@@ -99,7 +99,8 @@ async fn readyz(State(state): State<AppState>) -> Result<Response, ServiceError>
 
 async fn metrics(State(state): State<AppState>) -> Result<Response, ServiceError> {
     let counts = jobs::counts(&state).await?;
-    let text = state.metrics.render(&counts, state.active.load().is_some());
+    let mut text = state.metrics.render(&counts, state.active.load().is_some());
+    text.push_str(&state.admission.exposition());
     let mut r = text.into_response();
     r.headers_mut().insert(
         header::CONTENT_TYPE,
@@ -208,7 +209,7 @@ pub fn router(state: AppState) -> Router {
     for (m, p) in ROUTES {
         if let Some(mut h) = handler(m, p) {
             if *p == "/v1/render" {
-                // render slots are taken before the body is read
+                // the body is read, then the request queues for a render slot
                 h = h.route_layer(middleware::from_fn_with_state(state.clone(), render::admit));
             }
             r = r.route(p, h);

@@ -15,9 +15,8 @@ use super::ServiceError;
 use super::config::ServiceConfig;
 use super::metrics::Metrics;
 use super::store::{IlluminantRow, Store};
-use crate::l3::{
-    FastRenderer, IlluminantEntry, IlluminantRegistry, L3Table, TableKind, fuse_kernels,
-};
+use crate::l3::{IlluminantEntry, IlluminantRegistry, L3Table};
+use crate::render_pipeline::{RenderPipeline, uses_own_kernels};
 use crate::spectral::IsetData;
 
 /// The table renders use, with its id. Renders hold an `Arc` of it, so an activation never
@@ -29,8 +28,8 @@ pub struct ActiveTable {
     pub table: L3Table,
 }
 
-/// Fast renderers (fused kernels) by (table id, lower-case illuminant name).
-pub type KernelCache = HashMap<(String, String), Arc<FastRenderer>>;
+/// Render pipelines (fused kernels) by (table id, lower-case illuminant name).
+pub type KernelCache = HashMap<(String, String), Arc<RenderPipeline>>;
 
 /// Everything the handlers share (cheap to clone).
 #[derive(Clone)]
@@ -64,8 +63,8 @@ pub struct Inner {
     pub active: ArcSwapOption<ActiveTable>,
     /// Fused kernels per (table id, lower-case illuminant name).
     pub kernel_cache: Mutex<KernelCache>,
-    /// Admission: renders accepted at once (`render_concurrency`); excess gets 503.
-    pub render_slots: Arc<Semaphore>,
+    /// Admission of renders: the body budget, the queue and the render slots.
+    pub admission: super::admission::Admission,
     /// Execution: renders running on rayon at once (FIFO); the rest of the admitted wait.
     pub cpu_gate: Arc<Semaphore>,
     /// The render pool and the background (training, evaluation) pool.
@@ -112,46 +111,18 @@ impl Inner {
         if let Some(e) = reg.get(spec) {
             return Ok(e.clone());
         }
-        if let Some(rest) = lower.strip_prefix("xy:") {
-            let parts: Vec<f64> = rest
-                .split(',')
-                .map(|p| p.trim().parse::<f64>())
-                .collect::<Result<_, _>>()
-                .map_err(|_| unknown("expected xy:x,y with two numbers".into()))?;
-            let [x, y] = parts[..] else {
-                return Err(unknown("expected xy:x,y with two numbers".into()));
-            };
-            if !(x > 0.0 && y > 0.0 && x + y < 1.0) {
-                return Err(unknown(format!(
-                    "chromaticity ({x}, {y}) is not inside the spectrum locus triangle"
-                )));
-            }
-            let cct = crate::colour::cct_from_xy([x, y])
-                .map_err(|e| unknown(format!("no correlated colour temperature: {e}")))?;
-            if !(1000.0..=25_000.0).contains(&cct) {
-                return Err(unknown(format!(
-                    "its CCT {cct:.0} K is outside 1000–25000 K"
-                )));
-            }
-            // corrected as the illuminant of that CCT (blackbody below 4000 K, daylight above)
-            return reg
-                .resolve(&format!("cct:{}", cct.round()), self.iset.as_ref())
-                .map_err(|e| unknown(e.to_string()));
-        }
         reg.resolve(spec, self.iset.as_ref())
             .map_err(|e| unknown(e.to_string()))
     }
 
-    /// The renderer for `active` under `entry`: the table's own kernels for
-    /// cross-illuminant tables, else the fused (T · kernel) set, prepared for the fast
-    /// renderer and cached per (table, illuminant).
+    /// The render pipeline for `active` under `entry` (kernel selection:
+    /// [`crate::render_pipeline::kernels_for`]), cached per (table, illuminant).
     pub fn renderer_for(
         &self,
         active: &ActiveTable,
         entry: &IlluminantEntry,
-    ) -> Result<Arc<FastRenderer>, ServiceError> {
-        let own = active.table.meta.kind == TableKind::CrossIlluminant;
-        let key = if own {
+    ) -> Result<Arc<RenderPipeline>, ServiceError> {
+        let key = if uses_own_kernels(&active.table) {
             (active.id.clone(), String::from("\0own"))
         } else {
             (active.id.clone(), entry.name.to_ascii_lowercase())
@@ -164,13 +135,8 @@ impl Inner {
         {
             return Ok(k.clone());
         }
-        let kernels = if own {
-            active.table.kernels.clone()
-        } else {
-            fuse_kernels(&active.table, &entry.t)
-        };
         let r = Arc::new(
-            FastRenderer::new(&active.table, &kernels)
+            RenderPipeline::new(&active.table, entry)
                 .map_err(|e| ServiceError::Internal(format!("table {}: {e}", active.id)))?,
         );
         let mut cache = self.kernel_cache.lock().unwrap_or_else(|p| p.into_inner());

@@ -34,7 +34,7 @@ pub fn write_table_file(dir: &Path, table: &L3Table) -> Result<StoredTable, Serv
     write_table_file_with_pause(dir, table, 0)
 }
 
-/// [`write_table_file`] with the fault-injection pause (`test_pause_activation_ms`) between
+/// [`write_table_file`] with the fault-injection pause ([`super::debug_hooks`]) between
 /// the fsync of the temporary file and the rename. Blocking.
 pub(super) fn write_table_file_with_pause(
     dir: &Path,
@@ -357,7 +357,7 @@ pub async fn follow_recorded_active(state: &Inner) -> Result<(), ServiceError> {
 /// it to the other replicas.
 pub async fn activate_table(state: &AppState, id: &str) -> Result<(), ServiceError> {
     let loaded = load_for_activation(state, id).await?;
-    let pause = state.config.server.test_pause_activation_ms;
+    let pause = super::debug_hooks::activation_pause_ms();
     if pause > 0 && state.active.load().is_some() {
         tracing::warn!(
             table = id,
