@@ -68,7 +68,7 @@ fn survey_partial(start: usize, end: usize, seed: u64) -> SurveyPartial {
     let cells = shape.n_cells();
     let hist = (0..cells)
         .map(|k| {
-            if (k as u64 + seed).is_multiple_of(3) {
+            if (k as u64).wrapping_add(seed).is_multiple_of(3) {
                 (0..16).map(|b| seed.wrapping_mul(b + 1) >> 3).collect()
             } else {
                 Vec::new()
@@ -81,7 +81,7 @@ fn survey_partial(start: usize, end: usize, seed: u64) -> SurveyPartial {
         batches: start..end,
         shape,
         hist,
-        count: (0..cells as u64).map(|k| k * seed).collect(),
+        count: (0..cells as u64).map(|k| k.wrapping_mul(seed)).collect(),
     }
 }
 

@@ -248,12 +248,13 @@ impl SurveyPartial {
                 self.hist[k] = h.clone();
             } else {
                 for (x, y) in self.hist[k].iter_mut().zip(h) {
-                    *x += y;
+                    *x = x.saturating_add(*y);
                 }
             }
         }
+        // saturating: a crafted partial cannot overflow (real counts are far below 2⁶⁴)
         for (x, y) in self.count.iter_mut().zip(&other.count) {
-            *x += y;
+            *x = x.saturating_add(*y);
         }
     }
 }
