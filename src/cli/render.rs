@@ -50,6 +50,10 @@ pub struct RenderArgs {
     /// tested against). Both put every pixel in the same class.
     #[arg(long, default_value = "fast")]
     pub renderer: String,
+    /// PNG compression: `fast`, `default` or `best`. The service's default (config
+    /// `png_compression`) is the same, so both write the same PNG bytes.
+    #[arg(long, default_value_t = RenderOptions::default().png)]
+    pub png_compression: PngCompression,
 }
 
 /// A mosaic in volts with what its file says about the capture.
@@ -205,7 +209,7 @@ pub fn run(cli: &Cli, a: &RenderArgs) -> Result<(), CliError> {
             .transpose()
             .map_err(usage)?,
         preview: check_preview(a.preview).map_err(usage)?,
-        png: PngCompression::Default,
+        png: a.png_compression,
     };
     let started = std::time::Instant::now();
     let frame = Mosaic::Volts(&volts);
@@ -231,9 +235,7 @@ pub fn run(cli: &Cli, a: &RenderArgs) -> Result<(), CliError> {
                 render_reference(&table, &kernels_for(&table, &entry), &volts, w, h)?;
             let wy = || white_y(&xyz, w, h, white);
             let bytes = match format {
-                OutputFormat::Png => {
-                    encode_png_rgb8(w, h, &xyz_to_srgb8(&xyz, wy()), PngCompression::Default)?
-                }
+                OutputFormat::Png => encode_png_rgb8(w, h, &xyz_to_srgb8(&xyz, wy()), opts.png)?,
                 OutputFormat::Ppm => encode_ppm_rgb8(w, h, &xyz_to_srgb8(&xyz, wy()))?,
                 OutputFormat::TiffXyz => encode_tiff_f32_rgb(w, h, &xyz)?,
                 OutputFormat::TiffSrgb16 => encode_tiff_rgb16(w, h, &xyz_to_srgb16(&xyz, wy()))?,
