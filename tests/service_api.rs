@@ -1177,6 +1177,49 @@ async fn readyz_is_503_until_a_table_is_active() {
     server.shutdown().await.unwrap();
 }
 
+/// A panic inside a render (injected through the `fault-injection` feature, which only the
+/// crate's own tests enable) is a 500 `internal` answer; its render slot is given back and
+/// the next render succeeds.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn an_injected_panic_inside_a_render_is_a_500_and_the_next_render_succeeds() {
+    let data = tempfile::tempdir().unwrap();
+    let cfg = test_config(data.path());
+    let slots = cfg.server.render_concurrency;
+    let (server, _) = server_with_table(data.path(), Some(cfg)).await;
+    let c = client();
+    let (w, h) = (64, 48);
+    let post = |fault: Option<&'static str>| {
+        let mut r = c
+            .post(url(&server, &format!("/v1/render?width={w}&height={h}")))
+            .header("content-type", "application/octet-stream")
+            .body(gradient_raw(w, h));
+        if let Some(f) = fault {
+            r = r.header(l3::service::fault_injection::FAULT_HEADER, f);
+        }
+        r.send()
+    };
+    // more panics than there are render slots: each must give its slot back
+    for _ in 0..slots + 2 {
+        let r = post(Some(l3::service::fault_injection::RENDER_PANIC))
+            .await
+            .unwrap();
+        assert!(r.headers().contains_key("x-request-id"));
+        let detail = problem(r, 500, "internal").await;
+        assert!(detail.contains("render"), "{detail}");
+    }
+    // an unknown fault name is no fault
+    let r = post(Some("nothing")).await.unwrap();
+    assert_eq!(r.status(), 200);
+    let r = post(None).await.unwrap();
+    assert_eq!(r.status(), 200);
+    assert_eq!(r.headers()["content-type"], "image/png");
+    let img = decode_png(&r.bytes().await.unwrap());
+    assert_eq!(img.dimensions(), (w as u32, h as u32));
+    let r = c.get(url(&server, "/healthz")).send().await.unwrap();
+    assert_eq!(r.status(), 200);
+    server.shutdown().await.unwrap();
+}
+
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn a_request_over_the_time_limit_gets_504() {
     let data = tempfile::tempdir().unwrap();

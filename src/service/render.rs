@@ -357,11 +357,17 @@ pub async fn render(
     let table_id = active.id.clone();
     let cancel = Arc::new(AtomicBool::new(false));
     let mut cancel_on_drop = CancelOnDrop(cancel.clone(), false);
+    #[cfg(feature = "fault-injection")]
+    let inject_panic = super::fault_injection::render_panic_requested(&headers);
     let r = super::cpu::run(&state.pools.render, "the render", move || {
         let run = || -> Result<Rendered, ServiceError> {
             if cancel.load(Ordering::Relaxed) {
                 // abandoned while it waited for a thread
                 return Err(PipelineError::Render(crate::l3::L3Error::RenderCanceled).into());
+            }
+            #[cfg(feature = "fault-injection")]
+            if inject_panic {
+                panic!("injected fault: {}", super::fault_injection::RENDER_PANIC);
             }
             let t0 = Instant::now();
             let mut black = q.black_level.unwrap_or(0);
