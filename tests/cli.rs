@@ -214,6 +214,51 @@ fn simulate_train_render_eval() {
         assert!(err.contains(says), "{extra:?}: {err}");
     }
 
+    // without --table: the one table of the data directory, else an error that says what to do
+    let data = d.join("data");
+    let input = sim.join("mosaic.raw");
+    let no_table = |out: &str| {
+        l3(
+            &[
+                "render",
+                "--data-dir",
+                data.to_str().unwrap(),
+                "--illuminant",
+                "Tungsten",
+                "--in",
+                input.to_str().unwrap(),
+                "--out",
+                out,
+            ],
+            d,
+        )
+    };
+    let (ok, out, err) = no_table("none.png");
+    assert!(!ok, "render without a table succeeded: {out}");
+    assert!(
+        err.contains("no --table given") && err.contains("l3 train"),
+        "{err}"
+    );
+    std::fs::create_dir_all(data.join("tables")).unwrap();
+    std::fs::copy(&table, data.join("tables/t1.safetensors")).unwrap();
+    let (ok, out, err) = no_table("data.png");
+    assert!(
+        ok,
+        "render with the data directory's table failed: {out}{err}"
+    );
+    assert!(out.contains("t1.safetensors"), "{out}");
+    assert_eq!(
+        std::fs::read(d.join("data.png")).unwrap(),
+        std::fs::read(d.join("out.png")).unwrap()
+    );
+    std::fs::copy(&table, data.join("tables/t2.safetensors")).unwrap();
+    let (ok, _, err) = no_table("two.png");
+    assert!(!ok);
+    assert!(
+        err.contains("2 tables") && err.contains("t2.safetensors"),
+        "{err}"
+    );
+
     let report = d.join("report.json");
     let (ok, out, err) = l3(
         &[
@@ -515,4 +560,57 @@ fn train_in_shards_gives_the_same_table_file() {
     // more shards than batches is a clear error
     let (ok, _, err) = l3(&["train", "--shards", "6", "--scenes", "5"], d);
     assert!(!ok && err.contains("6 shards for 5 batches"), "{err}");
+}
+
+/// `l3 serve --bind ADDR --data-dir DIR` listens where the flags say and keeps its database
+/// in that directory, over the configuration's defaults.
+#[test]
+fn serve_takes_bind_and_data_dir_flags() {
+    use std::io::{Read, Write};
+    let tmp = tempfile::tempdir().unwrap();
+    let data = tmp.path().join("served");
+    let port = std::net::TcpListener::bind("127.0.0.1:0")
+        .unwrap()
+        .local_addr()
+        .unwrap()
+        .port();
+    let bind = format!("127.0.0.1:{port}");
+    let mut child = Command::new(env!("CARGO_BIN_EXE_l3"))
+        .args(["serve", "--bind", &bind, "--data-dir"])
+        .arg(&data)
+        .env("L3_AUTO_TRAIN", "false")
+        .env("L3_ISET_DIR", tmp.path().join("no-iset"))
+        .current_dir(tmp.path())
+        .stdout(std::process::Stdio::null())
+        .stderr(std::process::Stdio::null())
+        .spawn()
+        .expect("spawn l3 serve");
+    let deadline = std::time::Instant::now() + std::time::Duration::from_secs(30);
+    let answer = loop {
+        let got = std::net::TcpStream::connect(&bind).and_then(|mut s| {
+            s.write_all(b"GET /healthz HTTP/1.1\r\nHost: x\r\nConnection: close\r\n\r\n")?;
+            let mut text = String::new();
+            s.read_to_string(&mut text)?;
+            Ok(text)
+        });
+        match got {
+            Ok(text) => break text,
+            Err(_) if std::time::Instant::now() < deadline => {
+                std::thread::sleep(std::time::Duration::from_millis(50))
+            }
+            Err(e) => {
+                let _ = child.kill();
+                panic!("l3 serve did not answer on {bind}: {e}");
+            }
+        }
+    };
+    let db = data.join("l3.sqlite").exists();
+    let _ = child.kill();
+    let _ = child.wait();
+    assert!(answer.starts_with("HTTP/1.1 200"), "{answer}");
+    assert!(db, "no database in --data-dir");
+    assert!(
+        !tmp.path().join("data").exists(),
+        "the default data dir was used"
+    );
 }

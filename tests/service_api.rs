@@ -141,20 +141,64 @@ async fn render_of_a_tungsten_frame_equals_l3_render_bit_for_bit() {
         .unwrap();
     assert_eq!(r.status(), 200);
     assert!(r.bytes().await.unwrap()[..] == std::fs::read(d.join("cli.tiff")).unwrap()[..]);
-    // PNG output: same pixels as the CLI's PNG (compression level differs)
-    let r = c
-        .post(url(&server, &q))
-        .header("content-type", "application/octet-stream")
-        .body(raw.clone())
-        .send()
-        .await
-        .unwrap();
+    // PNG output: the same bytes as the CLI's PNG, with the default compression of both
+    // and with each named compression
+    let post_png = |q: String| {
+        c.post(url(&server, &q))
+            .header("content-type", "application/octet-stream")
+            .body(raw.clone())
+            .send()
+    };
+    let r = post_png(q.clone()).await.unwrap();
     assert_eq!(r.status(), 200);
     assert_eq!(r.headers()["content-type"], "image/png");
-    let ours = decode_png(&r.bytes().await.unwrap());
-    let cli = decode_png(&std::fs::read(d.join("cli.png")).unwrap());
+    let body = r.bytes().await.unwrap();
+    let cli_png = std::fs::read(d.join("cli.png")).unwrap();
+    assert!(
+        body[..] == cli_png[..],
+        "PNG bytes differ from l3 render's ({} vs {} bytes)",
+        body.len(),
+        cli_png.len()
+    );
+    let ours = decode_png(&body);
     assert_eq!(ours.dimensions(), (w as u32, h as u32));
-    assert!(ours == cli, "PNG pixels differ from l3 render");
+    let mut sizes = Vec::new();
+    for level in ["fast", "default", "best"] {
+        let out = format!("cli-{level}.png");
+        l3_cli(
+            &[
+                "render",
+                "--table",
+                "table.safetensors",
+                "--in",
+                "sim/mosaic.raw",
+                "--illuminant",
+                "Tungsten",
+                "--png-compression",
+                level,
+                "--out",
+                &out,
+            ],
+            d,
+        );
+        let r = post_png(format!("{q}&png_compression={level}"))
+            .await
+            .unwrap();
+        assert_eq!(r.status(), 200, "{level}");
+        let body = r.bytes().await.unwrap();
+        let cli = std::fs::read(d.join(&out)).unwrap();
+        assert!(
+            body[..] == cli[..],
+            "{level}: PNG bytes differ from l3 render's"
+        );
+        assert!(decode_png(&body) == ours, "{level}: PNG pixels differ");
+        sizes.push(body.len());
+    }
+    // the setting reaches the encoder (fdeflate's fast PNGs are not always larger)
+    assert_ne!(sizes[0], sizes[1], "fast and default PNGs: {sizes:?}");
+    let r = post_png(format!("{q}&png_compression=tiny")).await.unwrap();
+    let detail = problem(r, 400, "bad_request").await;
+    assert!(detail.contains("fast, default or best"), "{detail}");
     // and the PPM holds the same pixels as the PNG
     let ppm = std::fs::read(d.join("cli.ppm")).unwrap();
     let ppm = image::load_from_memory_with_format(&ppm, image::ImageFormat::Pnm)
@@ -1130,6 +1174,49 @@ async fn readyz_is_503_until_a_table_is_active() {
     .await;
     assert_eq!(v["cct"], 3300.0);
     assert_eq!(v["user_defined"], true);
+    server.shutdown().await.unwrap();
+}
+
+/// A panic inside a render (injected through the `fault-injection` feature, which only the
+/// crate's own tests enable) is a 500 `internal` answer; its render slot is given back and
+/// the next render succeeds.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn an_injected_panic_inside_a_render_is_a_500_and_the_next_render_succeeds() {
+    let data = tempfile::tempdir().unwrap();
+    let cfg = test_config(data.path());
+    let slots = cfg.server.render_concurrency;
+    let (server, _) = server_with_table(data.path(), Some(cfg)).await;
+    let c = client();
+    let (w, h) = (64, 48);
+    let post = |fault: Option<&'static str>| {
+        let mut r = c
+            .post(url(&server, &format!("/v1/render?width={w}&height={h}")))
+            .header("content-type", "application/octet-stream")
+            .body(gradient_raw(w, h));
+        if let Some(f) = fault {
+            r = r.header(l3::service::fault_injection::FAULT_HEADER, f);
+        }
+        r.send()
+    };
+    // more panics than there are render slots: each must give its slot back
+    for _ in 0..slots + 2 {
+        let r = post(Some(l3::service::fault_injection::RENDER_PANIC))
+            .await
+            .unwrap();
+        assert!(r.headers().contains_key("x-request-id"));
+        let detail = problem(r, 500, "internal").await;
+        assert!(detail.contains("render"), "{detail}");
+    }
+    // an unknown fault name is no fault
+    let r = post(Some("nothing")).await.unwrap();
+    assert_eq!(r.status(), 200);
+    let r = post(None).await.unwrap();
+    assert_eq!(r.status(), 200);
+    assert_eq!(r.headers()["content-type"], "image/png");
+    let img = decode_png(&r.bytes().await.unwrap());
+    assert_eq!(img.dimensions(), (w as u32, h as u32));
+    let r = c.get(url(&server, "/healthz")).send().await.unwrap();
+    assert_eq!(r.status(), 200);
     server.shutdown().await.unwrap();
 }
 

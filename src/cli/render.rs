@@ -19,9 +19,13 @@ use crate::render_pipeline::{
 
 #[derive(Args, Debug)]
 pub struct RenderArgs {
-    /// The L3 table (safetensors).
+    /// The L3 table (safetensors). Default: the one table file in the service's data
+    /// directory (`--data-dir`), if it holds exactly one.
     #[arg(long)]
-    pub table: PathBuf,
+    pub table: Option<PathBuf>,
+    /// The service's data directory, searched for a table when `--table` is not given.
+    #[arg(long, value_name = "DIR", default_value = "./data")]
+    pub data_dir: PathBuf,
     /// Acquisition illuminant: a registry name (D65, D50, A, F2, F11, Tungsten,
     /// Fluorescent), cct:K, xy:x,y (a chromaticity), or any illuminant spec. Default: the sidecar's `illuminant`, else
     /// a DNG's AsShotNeutral (matched to a colour temperature through the table's sensor),
@@ -50,6 +54,10 @@ pub struct RenderArgs {
     /// tested against). Both put every pixel in the same class.
     #[arg(long, default_value = "fast")]
     pub renderer: String,
+    /// PNG compression: `fast`, `default` or `best`. The service's default (config
+    /// `png_compression`) is the same, so both write the same PNG bytes.
+    #[arg(long, default_value_t = RenderOptions::default().png)]
+    pub png_compression: PngCompression,
 }
 
 /// A mosaic in volts with what its file says about the capture.
@@ -147,7 +155,8 @@ pub fn load_mosaic(path: &Path, swing: f64) -> Result<MosaicInput, CliError> {
 
 pub fn run(cli: &Cli, a: &RenderArgs) -> Result<(), CliError> {
     let iset = iset(&cli.iset_dir)?;
-    let table = L3Table::load(&a.table)?;
+    let table_path = table_path(a)?;
+    let table = L3Table::load(&table_path)?;
     let white: WhiteLevel = a.white_level.parse()?;
     let input = load_mosaic(&a.input, table.meta.voltage_swing)?;
     input.check_dng_cfa(&table, &a.input)?;
@@ -205,7 +214,7 @@ pub fn run(cli: &Cli, a: &RenderArgs) -> Result<(), CliError> {
             .transpose()
             .map_err(usage)?,
         preview: check_preview(a.preview).map_err(usage)?,
-        png: PngCompression::Default,
+        png: a.png_compression,
     };
     let started = std::time::Instant::now();
     let frame = Mosaic::Volts(&volts);
@@ -231,9 +240,7 @@ pub fn run(cli: &Cli, a: &RenderArgs) -> Result<(), CliError> {
                 render_reference(&table, &kernels_for(&table, &entry), &volts, w, h)?;
             let wy = || white_y(&xyz, w, h, white);
             let bytes = match format {
-                OutputFormat::Png => {
-                    encode_png_rgb8(w, h, &xyz_to_srgb8(&xyz, wy()), PngCompression::Default)?
-                }
+                OutputFormat::Png => encode_png_rgb8(w, h, &xyz_to_srgb8(&xyz, wy()), opts.png)?,
                 OutputFormat::Ppm => encode_ppm_rgb8(w, h, &xyz_to_srgb8(&xyz, wy()))?,
                 OutputFormat::TiffXyz => encode_tiff_f32_rgb(w, h, &xyz)?,
                 OutputFormat::TiffSrgb16 => encode_tiff_rgb16(w, h, &xyz_to_srgb16(&xyz, wy()))?,
@@ -249,14 +256,57 @@ pub fn run(cli: &Cli, a: &RenderArgs) -> Result<(), CliError> {
     };
     let ms = started.elapsed().as_secs_f64() * 1e3;
     write_file(&a.out, &bytes)?;
-    report(a, &illuminant, ow, oh, ms, &stats);
+    report(a, &table_path, &illuminant, ow, oh, ms, &stats);
     Ok(())
 }
 
-fn report(a: &RenderArgs, illuminant: &str, w: usize, h: usize, ms: f64, stats: &RenderStats) {
+/// `--table`, else the one table file in `--data-dir`/tables; with none or several, an error
+/// that says how to get or choose one.
+fn table_path(a: &RenderArgs) -> Result<PathBuf, CliError> {
+    if let Some(t) = &a.table {
+        return Ok(t.clone());
+    }
+    let dir = a.data_dir.join("tables");
+    let mut found: Vec<PathBuf> = std::fs::read_dir(&dir)
+        .map(|entries| {
+            entries
+                .filter_map(|e| e.ok().map(|e| e.path()))
+                .filter(|p| p.extension().is_some_and(|x| x == "safetensors"))
+                .collect()
+        })
+        .unwrap_or_default();
+    found.sort();
+    let how = "train one with `l3 train --out FILE`, or start `l3 serve` (it trains a default table), or download the service's active table (its id is `active_table_id` in GET /v1/tables) from /v1/tables/{id}/download";
+    match found.len() {
+        1 => Ok(found.remove(0)),
+        0 => Err(CliError::Usage(format!(
+            "no --table given and {} holds no table; pass --table FILE: {how}",
+            dir.display()
+        ))),
+        n => Err(CliError::Usage(format!(
+            "no --table given and {} holds {n} tables ({}); pass --table with the one to use (the service's active one is `active_table_id` in GET /v1/tables)",
+            dir.display(),
+            found
+                .iter()
+                .filter_map(|p| p.file_name().map(|n| n.to_string_lossy().into_owned()))
+                .collect::<Vec<_>>()
+                .join(", ")
+        ))),
+    }
+}
+
+fn report(
+    a: &RenderArgs,
+    table: &Path,
+    illuminant: &str,
+    w: usize,
+    h: usize,
+    ms: f64,
+    stats: &RenderStats,
+) {
     println!(
         "rendered {w}×{h} with {} under {illuminant} ({} renderer) in {ms:.1} ms ({:.1} Mpix/s): {} saturated, {} texture pixels; wrote {}",
-        a.table.display(),
+        table.display(),
         a.renderer,
         (w * h) as f64 / ms / 1e3,
         stats.saturated,

@@ -10,6 +10,12 @@ pub struct ServeArgs {
     /// Configuration file (TOML) over config/default.toml; L3_* variables override both.
     #[arg(long)]
     pub config: Option<PathBuf>,
+    /// Address to listen on, over the config file's `bind` and `L3_BIND`.
+    #[arg(long, value_name = "ADDR")]
+    pub bind: Option<std::net::SocketAddr>,
+    /// Data directory (database and tables), over the config file's `dir` and `L3_DATA_DIR`.
+    #[arg(long, value_name = "DIR")]
+    pub data_dir: Option<PathBuf>,
 }
 
 async fn shutdown_signal() {
@@ -39,6 +45,12 @@ pub fn run(cli: &Cli, a: &ServeArgs) -> Result<(), CliError> {
         ServiceConfig::load(a.config.as_deref()).map_err(|e| CliError::Usage(e.to_string()))?;
     if let Some(d) = &cli.iset_dir {
         cfg.data.iset_dir = Some(d.clone());
+    }
+    if let Some(bind) = a.bind {
+        cfg.server.bind = bind;
+    }
+    if let Some(d) = &a.data_dir {
+        cfg.data.dir = d.clone();
     }
     let filter = tracing_subscriber::EnvFilter::try_from_env("L3_LOG")
         .unwrap_or_else(|_| tracing_subscriber::EnvFilter::new("info,sqlx=warn"));

@@ -27,8 +27,8 @@ pub use mosaic::{
     decode_mosaic_with_meta, detect_format, read_mosaic,
 };
 pub use png_format::{
-    PngCompression, decode_png_rgb8, encode_png_gray16, encode_png_rgb8, write_png_gray16,
-    write_png_rgb8,
+    PngCompression, UnknownPngCompression, decode_png_rgb8, encode_png_gray16, encode_png_rgb8,
+    write_png_gray16, write_png_rgb8,
 };
 pub use ppm::{encode_ppm_rgb8, ppm_header};
 pub use raw::{

@@ -31,12 +31,55 @@ pub enum PngCompression {
 }
 
 impl PngCompression {
+    /// The names [`FromStr`](std::str::FromStr) takes, in order of effort.
+    pub const NAMES: [&'static str; 3] = ["fast", "default", "best"];
+
+    /// `fast`, `default` or `best`.
+    pub fn name(self) -> &'static str {
+        match self {
+            PngCompression::Fast => "fast",
+            PngCompression::Default => "default",
+            PngCompression::Best => "best",
+        }
+    }
+
     fn to_png(self) -> png::Compression {
         match self {
             PngCompression::Fast => png::Compression::Fast,
             PngCompression::Default => png::Compression::Balanced,
             PngCompression::Best => png::Compression::High,
         }
+    }
+}
+
+impl std::fmt::Display for PngCompression {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(self.name())
+    }
+}
+
+/// A PNG compression name that is none of `fast`, `default` and `best`.
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+#[error("PNG compression '{0}': expected fast, default or best")]
+pub struct UnknownPngCompression(pub String);
+
+impl std::str::FromStr for PngCompression {
+    type Err = UnknownPngCompression;
+
+    fn from_str(s: &str) -> Result<Self, UnknownPngCompression> {
+        match s.trim().to_ascii_lowercase().as_str() {
+            "fast" => Ok(PngCompression::Fast),
+            "default" => Ok(PngCompression::Default),
+            "best" => Ok(PngCompression::Best),
+            _ => Err(UnknownPngCompression(s.to_string())),
+        }
+    }
+}
+
+impl<'de> serde::Deserialize<'de> for PngCompression {
+    fn deserialize<D: serde::Deserializer<'de>>(d: D) -> Result<Self, D::Error> {
+        let s = String::deserialize(d)?;
+        s.parse().map_err(serde::de::Error::custom)
     }
 }
 

@@ -7,6 +7,8 @@ use std::path::{Path, PathBuf};
 use serde::Deserialize;
 
 use super::ServiceError;
+use crate::io::PngCompression;
+use crate::render_pipeline::RenderOptions;
 
 /// The embedded defaults (the committed `config/default.toml`).
 pub const DEFAULT_CONFIG_TOML: &str = include_str!("../../config/default.toml");
@@ -55,6 +57,14 @@ pub struct ServerConfig {
     pub bearer_token: String,
     #[serde(default = "default_log_format")]
     pub log_format: String,
+    /// PNG compression of render answers unless a request names one (`l3 render` has the
+    /// same default, so both give the same bytes).
+    #[serde(default = "default_png_compression")]
+    pub png_compression: PngCompression,
+}
+
+fn default_png_compression() -> PngCompression {
+    RenderOptions::default().png
 }
 
 fn default_render_queue_depth() -> usize {
@@ -194,6 +204,11 @@ impl ServiceConfig {
             "L3_REQUEST_TIMEOUT_S" => self.server.request_timeout_s = num(key, value)?,
             "L3_BEARER_TOKEN" => self.server.bearer_token = value.to_string(),
             "L3_LOG_FORMAT" => self.server.log_format = value.to_string(),
+            "L3_PNG_COMPRESSION" => {
+                self.server.png_compression = value
+                    .parse()
+                    .map_err(|e| bad(format!("L3_PNG_COMPRESSION: {e}")))?
+            }
             "L3_AUTO_TRAIN" => {
                 self.training.auto_train_default = match value.trim() {
                     "1" | "true" | "yes" => true,
@@ -274,12 +289,14 @@ mod tests {
         assert_eq!(c.server.bind.to_string(), "127.0.0.1:8080");
         assert_eq!(c.data.dir, PathBuf::from("./data"));
         assert!(c.training.auto_train_default);
+        assert_eq!(c.server.png_compression, RenderOptions::default().png);
         let dir = tempfile::tempdir().unwrap();
         let f = dir.path().join("c.toml");
         std::fs::write(&f, "[server]\nmax_pixels = 1000\n[data]\ndir = \"/x\"\n").unwrap();
         let env = vec![
             ("L3_BIND".to_string(), "0.0.0.0:9000".to_string()),
             ("L3_AUTO_TRAIN".to_string(), "false".to_string()),
+            ("L3_PNG_COMPRESSION".to_string(), "best".to_string()),
         ];
         let c = ServiceConfig::load_with_env(Some(&f), &env).unwrap();
         assert_eq!(c.server.max_pixels, 1000);
@@ -287,6 +304,7 @@ mod tests {
         assert_eq!(c.data.dir, PathBuf::from("/x"));
         assert_eq!(c.server.bind.to_string(), "0.0.0.0:9000");
         assert!(!c.training.auto_train_default);
+        assert_eq!(c.server.png_compression, PngCompression::Best);
     }
 
     #[test]

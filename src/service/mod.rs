@@ -9,6 +9,8 @@ mod cpu;
 mod debug_hooks;
 mod error;
 mod evaluations;
+#[cfg(feature = "fault-injection")]
+pub mod fault_injection;
 mod illuminants;
 mod jobs;
 mod metrics;

@@ -25,7 +25,7 @@ use tokio::sync::OwnedSemaphorePermit;
 use super::ServiceError;
 use super::state::AppState;
 use crate::io::{
-    DecodedMosaic, Limits, PngCompression, decode_mosaic_with_meta, decode_raw_u16_le,
+    DecodedMosaic, Limits, UnknownPngCompression, decode_mosaic_with_meta, decode_raw_u16_le,
 };
 use crate::l3::{FrameMetadata, Mosaic, WhiteLevel};
 use crate::render_pipeline::{
@@ -55,6 +55,8 @@ pub struct RenderQuery {
     pub region: Option<String>,
     /// Integer preview downscale (box average), 1–16.
     pub preview: Option<usize>,
+    /// PNG compression (`fast`, `default`, `best`; default: the config's).
+    pub png_compression: Option<String>,
 }
 
 /// Output formats a client can ask for.
@@ -297,7 +299,12 @@ pub async fn render(
         white,
         region: q.region.as_deref().map(parse_region).transpose()?,
         preview: check_preview(q.preview.unwrap_or(1))?,
-        png: PngCompression::Fast,
+        png: match q.png_compression.as_deref() {
+            None => state.config.server.png_compression,
+            Some(s) => s
+                .parse()
+                .map_err(|e: UnknownPngCompression| ServiceError::BadRequest(e.to_string()))?,
+        },
     };
     if raw && (q.width.is_none() || q.height.is_none()) {
         return Err(ServiceError::BadRequest(
@@ -350,11 +357,17 @@ pub async fn render(
     let table_id = active.id.clone();
     let cancel = Arc::new(AtomicBool::new(false));
     let mut cancel_on_drop = CancelOnDrop(cancel.clone(), false);
+    #[cfg(feature = "fault-injection")]
+    let inject_panic = super::fault_injection::render_panic_requested(&headers);
     let r = super::cpu::run(&state.pools.render, "the render", move || {
         let run = || -> Result<Rendered, ServiceError> {
             if cancel.load(Ordering::Relaxed) {
                 // abandoned while it waited for a thread
                 return Err(PipelineError::Render(crate::l3::L3Error::RenderCanceled).into());
+            }
+            #[cfg(feature = "fault-injection")]
+            if inject_panic {
+                panic!("injected fault: {}", super::fault_injection::RENDER_PANIC);
             }
             let t0 = Instant::now();
             let mut black = q.black_level.unwrap_or(0);
