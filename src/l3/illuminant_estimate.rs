@@ -69,23 +69,30 @@ pub fn frame_neutral(
     swing: f64,
     statistic: NeutralStatistic,
 ) -> Result<(Vec<(String, f64)>, usize), L3Error> {
-    let tiles = tile_channel_means(mosaic, width, height, cfa, swing)?;
     let nc = cfa.n_channels();
-    let chosen: Vec<&Vec<f64>> = match statistic {
-        NeutralStatistic::GreyWorld => tiles.iter().collect(),
+    let tiles = tile_channel_means(mosaic, width, height, cfa, swing)?;
+    let n_tiles = tiles.len() / nc;
+    let tile = |i: usize| &tiles[i * nc..(i + 1) * nc];
+    let chosen: Vec<usize> = match statistic {
+        NeutralStatistic::GreyWorld => (0..n_tiles).collect(),
         NeutralStatistic::BrightTiles => {
-            let mut by_lum: Vec<(f64, &Vec<f64>)> = tiles
-                .iter()
-                .map(|t| (t.iter().sum::<f64>() / nc as f64, t))
-                .collect();
-            by_lum.sort_by(|a, b| b.0.total_cmp(&a.0));
-            let n = ((tiles.len() as f64 * BRIGHT_FRACTION).ceil() as usize).max(MIN_TILES);
-            by_lum.into_iter().take(n).map(|(_, t)| t).collect()
+            let n = ((n_tiles as f64 * BRIGHT_FRACTION).ceil() as usize)
+                .max(MIN_TILES)
+                .min(n_tiles);
+            let lum: Vec<f64> = (0..n_tiles).map(|i| tile(i).iter().sum()).collect();
+            let mut order: Vec<usize> = (0..n_tiles).collect();
+            // the n brightest first (ties by position), in no particular order among themselves
+            if n < n_tiles {
+                order.select_nth_unstable_by(n, |&a, &b| lum[b].total_cmp(&lum[a]).then(a.cmp(&b)));
+            }
+            order.truncate(n);
+            order.sort_unstable();
+            order
         }
     };
     let mut sums = vec![0.0f64; nc];
-    for t in &chosen {
-        for (s, v) in sums.iter_mut().zip(t.iter()) {
+    for &i in &chosen {
+        for (s, v) in sums.iter_mut().zip(tile(i)) {
             *s += v;
         }
     }
@@ -104,14 +111,15 @@ pub fn frame_neutral(
     Ok((neutral, chosen.len()))
 }
 
-/// Per whole CFA tile without a clipped value: the mean of each channel's positions, in volts.
+/// Per whole CFA tile without a clipped value: the mean of each channel's positions, in volts,
+/// `n_channels` values per tile, one tile after another.
 fn tile_channel_means(
     mosaic: &Mosaic,
     width: usize,
     height: usize,
     cfa: &Cfa,
     swing: f64,
-) -> Result<Vec<Vec<f64>>, L3Error> {
+) -> Result<Vec<f64>, L3Error> {
     let n = width
         .checked_mul(height)
         .ok_or_else(|| L3Error::InvalidInput("the frame size overflows".into()))?;
@@ -138,10 +146,11 @@ fn tile_channel_means(
     for &c in &cfa.pattern {
         counts[c] += 1;
     }
-    let mut out = Vec::new();
+    let mut out = Vec::with_capacity((height / cfa.rows) * (width / cfa.cols) * nc);
+    let mut means = vec![0.0f64; nc];
     for ty in 0..height / cfa.rows {
         'tile: for tx in 0..width / cfa.cols {
-            let mut means = vec![0.0f64; nc];
+            means.iter_mut().for_each(|m| *m = 0.0);
             for r in 0..cfa.rows {
                 for c in 0..cfa.cols {
                     let v = volts_at((ty * cfa.rows + r) * width + tx * cfa.cols + c);
@@ -152,13 +161,13 @@ fn tile_channel_means(
                     means[ch] += f64::from(v.max(0.0)) / counts[ch] as f64;
                 }
             }
-            out.push(means);
+            out.extend_from_slice(&means);
         }
     }
-    if out.len() < MIN_TILES {
+    if out.len() < MIN_TILES * nc {
         return Err(L3Error::InvalidInput(format!(
             "the frame has {} unclipped CFA tiles; at least {MIN_TILES} are needed to estimate the light (name the illuminant)",
-            out.len()
+            out.len() / nc
         )));
     }
     Ok(out)
