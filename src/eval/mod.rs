@@ -43,4 +43,6 @@ pub enum EvalError {
     Colour(#[from] crate::colour::ColourError),
     #[error(transparent)]
     Scene(#[from] crate::scene::SceneError),
+    #[error(transparent)]
+    Train(#[from] crate::training::TrainError),
 }

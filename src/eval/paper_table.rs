@@ -1,6 +1,8 @@
 //! The paper's Table 1: I_Tun, SI_Tun+T, SI_D65+T, SI_Ens+T and the
 //! conventional baseline on the Natural-100 chart, under tungsten and again
-//! under fluorescent, beside the published figures.
+//! under fluorescent, beside the published figures; and the SI tables again
+//! with the camera-aware correction C in place of T (`+C` rows, see
+//! `crate::l3::camera_correction`).
 
 use std::collections::BTreeMap;
 use std::sync::atomic::AtomicBool;
@@ -13,9 +15,9 @@ use super::workflow::{
 };
 use super::{DeltaEReport, EvalError};
 use crate::camera::{Camera, SensorDesign};
-use crate::l3::{IlluminantRegistry, L3Table, TableKind};
+use crate::l3::{IlluminantEntry, IlluminantRegistry, L3Table, TableKind};
 use crate::spectral::{IsetData, WavelengthGrid};
-use crate::training::{TrainingSpec, train_table};
+use crate::training::{TrainingSpec, camera_corrected, train_table};
 
 /// The paper's Table 1 (tungsten acquisition): mean, std, p90 of ΔE2000.
 pub const PAPER_TABLE1: [(&str, f64, f64, f64); 4] = [
@@ -102,7 +104,9 @@ pub struct PaperRow {
 pub enum BaselineFamily {
     /// The white-balanced matrix fitted under the acquisition light
     /// (`Baseline_<acq>` and `Baseline_<acq> all`): for cross tables and for
-    /// SI tables trained under the acquisition light alone.
+    /// SI tables trained under the acquisition light alone, and for SI
+    /// tables followed by the camera-aware correction C (like this matrix,
+    /// fitted for this light and this camera).
     AcquisitionFit,
     /// The matrix fitted under D65, then T (`Baseline+T` and `Baseline+T
     /// all`): for SI tables trained under D65 or an ensemble of lights, which
@@ -380,31 +384,30 @@ pub fn run_paper_table(
         let si_acq = train(TableKind::SameIlluminant, &[acq])?;
         cross_bytes += cross.kernel_bytes();
         let corr = registry.resolve(acq, iset)?;
-        let mut methods: Vec<(String, Method, Option<f64>)> = vec![
-            (
-                format!("I_{tag}"),
-                Method::Table(&cross),
-                Some(cross.meta.training_seconds),
-            ),
-            (
-                format!("SI_{tag}+T"),
-                Method::Table(&si_acq),
-                Some(si_acq.meta.training_seconds),
-            ),
-            (
-                "SI_D65+T".into(),
-                Method::Table(&si_d65),
-                Some(si_d65.meta.training_seconds),
-            ),
-            (
-                "SI_Ens+T".into(),
-                Method::Table(&si_ens),
-                Some(si_ens.meta.training_seconds),
-            ),
+        let mut si_rows: Vec<(String, &L3Table)> = vec![
+            (format!("SI_{tag}"), &si_acq),
+            ("SI_D65".into(), &si_d65),
+            ("SI_Ens".into(), &si_ens),
         ];
         if let Some(t) = &si_all {
+            si_rows.push((format!("SI_Ens{}", all_ens.len()), t));
+        }
+        let mut methods: Vec<(String, Method, Option<f64>)> = vec![(
+            format!("I_{tag}"),
+            Method::Table(&cross),
+            Some(cross.meta.training_seconds),
+        )];
+        for (name, t) in &si_rows {
             methods.push((
-                format!("SI_Ens{}+T", all_ens.len()),
+                format!("{name}+T"),
+                Method::Table(t),
+                Some(t.meta.training_seconds),
+            ));
+        }
+        // the same SI tables with the camera-aware correction C in place of T
+        for (name, t) in si_rows.iter().skip(1) {
+            methods.push((
+                format!("{name}+C"),
                 Method::Table(t),
                 Some(t.meta.training_seconds),
             ));
@@ -437,17 +440,32 @@ pub fn run_paper_table(
         for (name, method, secs) in methods {
             progress(&format!("evaluating {name} under {acq}"));
             let is_acq_baseline = name.starts_with("Baseline_");
-            let c = if is_acq_baseline { &identity } else { &corr };
+            let camera_aware = name.ends_with("+C");
+            let own: IlluminantEntry = match method {
+                Method::Table(t) if camera_aware => {
+                    camera_corrected(&camera, &t.colour_map()?, &corr, iset)?
+                }
+                _ if is_acq_baseline => identity.clone(),
+                _ => corr.clone(),
+            };
+            let c = &own;
             let rep = evaluate_capture(&camera, &cap, &method, &name, c, &opts.chart)?;
             let (linear_mean, baseline) = match method {
                 Method::Table(t) => {
-                    let lt = linear_table(t, &matching_linear_map(&camera, t, iset)?)?;
+                    let map = matching_linear_map(&camera, t, iset)?;
+                    // the linear map gets its own C, as the table does
+                    let lin_corr = if camera_aware {
+                        camera_corrected(&camera, &map, &corr, iset)?
+                    } else {
+                        corr.clone()
+                    };
+                    let lt = linear_table(t, &map)?;
                     let lin = evaluate_capture(
                         &camera,
                         &cap,
                         &Method::Table(&lt),
                         &format!("linear {name}"),
-                        &corr,
+                        &lin_corr,
                         &opts.chart,
                     )?;
                     // like with like: a table for this light alone against
@@ -455,11 +473,12 @@ pub fn run_paper_table(
                     // lights (then T) against one matrix (then T)
                     let only_acq = matches!(t.meta.train_illuminants.as_slice(),
                         [i] if i.eq_ignore_ascii_case(acq));
-                    let family = if only_acq || t.meta.kind == TableKind::CrossIlluminant {
-                        BaselineFamily::AcquisitionFit
-                    } else {
-                        BaselineFamily::D65FitThenT
-                    };
+                    let family =
+                        if only_acq || camera_aware || t.meta.kind == TableKind::CrossIlluminant {
+                            BaselineFamily::AcquisitionFit
+                        } else {
+                            BaselineFamily::D65FitThenT
+                        };
                     (Some(lin.summary.mean), Some(family))
                 }
                 Method::Baseline(_) => (None, None),

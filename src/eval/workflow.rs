@@ -7,7 +7,9 @@ use serde::{Deserialize, Serialize};
 
 use super::{ChartTruth, DeltaEReport, EvalError, evaluate_chart};
 use crate::camera::{Camera, Exposure, NoiseSwitches, simulate};
-use crate::l3::{ColourMatrix, IlluminantEntry, L3Table, Mosaic, TableKind, render_baseline};
+use crate::l3::{
+    ColourMatrix, ColourSamples, IlluminantEntry, L3Table, Mosaic, TableKind, render_baseline,
+};
 use crate::scene::{Scene, SceneOptions, natural100_chart};
 use crate::spectral::{Extrapolation, IlluminantSpec, IsetData, Spectrum, cie_illuminant};
 use crate::training::colour_samples;
@@ -368,19 +370,21 @@ pub struct ColourFit<'a> {
     pub preserve_white: bool,
 }
 
-/// [`fit_baseline_matrix`]'s general form: see [`ColourFit`].
-pub fn fit_colour_matrix(
+/// The training reflectances' colour samples under `illuminants` (see
+/// [`crate::training::colour_samples`]), with the white's own samples
+/// (`whites`: the perfect white under each light, same normalisation).
+fn training_samples(
     camera: &Camera,
-    fit: &ColourFit,
+    illuminants: &[String],
+    kind: TableKind,
     iset: Option<&IsetData>,
-) -> Result<ColourMatrix, EvalError> {
+) -> Result<(ColourSamples, ColourSamples), EvalError> {
     let grid = *camera.grid();
     let refl: Vec<Spectrum> = crate::scene::training_reflectances(&grid, iset)?
         .into_iter()
         .map(|(_, s)| s)
         .collect();
-    let spds = fit
-        .illuminants
+    let spds = illuminants
         .iter()
         .map(|spec| {
             Ok(IlluminantSpec::parse(spec)?
@@ -392,8 +396,19 @@ pub fn fit_colour_matrix(
     let d65 = cie_illuminant("D65")
         .ok_or_else(|| EvalError::Invalid("D65 missing".into()))?
         .resample(&grid, Extrapolation::Zero);
-    let samples = colour_samples(camera, &spds, fit.kind, &d65, &refl)
-        .map_err(|e| EvalError::Invalid(e.to_string()))?;
+    let samples = |r: &[Spectrum]| {
+        colour_samples(camera, &spds, kind, &d65, r).map_err(|e| EvalError::Invalid(e.to_string()))
+    };
+    Ok((samples(&refl)?, samples(&[Spectrum::constant(grid, 1.0)])?))
+}
+
+/// [`fit_baseline_matrix`]'s general form: see [`ColourFit`].
+pub fn fit_colour_matrix(
+    camera: &Camera,
+    fit: &ColourFit,
+    iset: Option<&IsetData>,
+) -> Result<ColourMatrix, EvalError> {
+    let (samples, whites) = training_samples(camera, fit.illuminants, fit.kind, iset)?;
     let cfa = camera.cfa();
     let rgb: Option<Vec<usize>> = ["R", "G", "B"]
         .iter()
@@ -407,10 +422,12 @@ pub fn fit_colour_matrix(
     let chans: Vec<Vec<f64>> = samples.channels.iter().map(|c| pick(c)).collect();
     let mut sub = if fit.preserve_white {
         // the white under the first illuminant: its channels and target XYZ
-        let white = Spectrum::constant(grid, 1.0);
-        let w = colour_samples(camera, &spds[..1], fit.kind, &d65, &[white])
-            .map_err(|e| EvalError::Invalid(e.to_string()))?;
-        fit_preserving(&chans, &samples.xyz, &pick(&w.channels[0]), w.xyz[0])?
+        let (wc, wx) = whites
+            .channels
+            .first()
+            .zip(whites.xyz.first())
+            .ok_or_else(|| EvalError::Invalid("a colour fit needs an illuminant".into()))?;
+        fit_preserving(&chans, &samples.xyz, &pick(wc), *wx)?
     } else {
         ColourMatrix::fit(&chans, &samples.xyz)?
     };

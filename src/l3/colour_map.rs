@@ -162,7 +162,7 @@ pub fn level_maps(
 }
 
 /// `∂(L*, a*, b*)/∂(X, Y, Z)` at `xyz` for reference white `white`.
-fn lab_jacobian(xyz: [f64; 3], white: [f64; 3]) -> [[f64; 3]; 3] {
+pub(super) fn lab_jacobian(xyz: [f64; 3], white: [f64; 3]) -> [[f64; 3]; 3] {
     // d f(t)/dt of the CIELAB function, kept finite at t → 0
     let df = |t: f64| {
         if t > 216.0 / 24389.0 {

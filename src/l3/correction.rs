@@ -132,6 +132,11 @@ pub struct IlluminantEntry {
     pub white_xy: Option<[f64; 2]>,
     pub cct: Option<f64>,
     pub source: CorrectionSource,
+    /// The light's spectrum on the registry's grid, when it is known (not for
+    /// a correction given as a matrix): what a camera-aware correction is
+    /// fitted on (`crate::training::camera_corrected`).
+    #[serde(skip)]
+    pub spd: Option<Spectrum>,
 }
 
 /// The registry: illuminant name → T. D65 is always present (identity).
@@ -169,6 +174,7 @@ impl IlluminantRegistry {
                 white_xy: white,
                 cct: white.and_then(|w| cct_from_xy(w).ok()),
                 source: CorrectionSource::Builtin,
+                spd: Some(r.d65.clone()),
             },
         );
         Ok(r)
@@ -290,6 +296,7 @@ impl IlluminantRegistry {
             white_xy: white,
             cct: cct.or_else(|| white.and_then(|w| cct_from_xy(w).ok())),
             source,
+            spd: Some(spd.clone()),
         })
     }
 
@@ -328,6 +335,7 @@ impl IlluminantRegistry {
             white_xy: None,
             cct: None,
             source: CorrectionSource::Matrix,
+            spd: None,
         })
     }
 

@@ -3,6 +3,7 @@
 //! affine kernel to its patch (DESIGN.md §2, §5).
 
 mod baseline;
+mod camera_correction;
 mod classify;
 mod colour_map;
 mod correction;
@@ -18,6 +19,7 @@ mod table;
 mod trainer;
 
 pub use baseline::{ColourMatrix, bilinear_demosaic, render_baseline};
+pub use camera_correction::camera_correction;
 pub use classify::{MAX_CHANNELS, PatchGeometry, PatchStats, mirror, sat_case_index};
 pub use colour_map::{
     ColourMapFit, ColourSamples, DEFAULT_AVERAGING_PX, least_squares_map, level_maps,

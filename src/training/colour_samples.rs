@@ -5,8 +5,8 @@
 //! baseline's colour matrix, so every comparison is fitted on one set.
 
 use crate::camera::Camera;
-use crate::l3::{ColourSamples, TableKind};
-use crate::spectral::Spectrum;
+use crate::l3::{ColourMatrix, ColourSamples, IlluminantEntry, TableKind, camera_correction};
+use crate::spectral::{Extrapolation, IsetData, Spectrum, cie_illuminant};
 
 use super::TrainError;
 
@@ -55,4 +55,43 @@ pub fn colour_samples(
         }
     }
     Ok(out)
+}
+
+/// `entry` with its T replaced by the camera-aware correction C of a
+/// same-illuminant table whose colour map is `map` (see
+/// `crate::l3::camera_correction`), fitted on the training reflectances under
+/// the entry's light. An entry with no spectrum (a correction given as a
+/// matrix) is refused.
+pub fn camera_corrected(
+    camera: &Camera,
+    map: &ColourMatrix,
+    entry: &IlluminantEntry,
+    iset: Option<&IsetData>,
+) -> Result<IlluminantEntry, TrainError> {
+    let spd = entry.spd.as_ref().ok_or_else(|| {
+        TrainError::Invalid(format!(
+            "illuminant '{}' has no spectrum to fit a camera-aware correction on",
+            entry.name
+        ))
+    })?;
+    let grid = *camera.grid();
+    let refl: Vec<Spectrum> = crate::scene::training_reflectances(&grid, iset)
+        .map_err(|e| TrainError::Invalid(e.to_string()))?
+        .into_iter()
+        .map(|(_, s)| s)
+        .collect();
+    let d65 = cie_illuminant("D65")
+        .ok_or_else(|| TrainError::Invalid("D65 missing from the built-in data".into()))?
+        .resample(&grid, Extrapolation::Zero);
+    let samples = colour_samples(
+        camera,
+        std::slice::from_ref(spd),
+        TableKind::CrossIlluminant,
+        &d65,
+        &refl,
+    )?;
+    Ok(IlluminantEntry {
+        t: camera_correction(map, &samples)?,
+        ..entry.clone()
+    })
 }

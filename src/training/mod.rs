@@ -32,7 +32,7 @@ use crate::spectral::{
 };
 
 pub use crate::scene::training_reflectances;
-pub use colour_samples::colour_samples;
+pub use colour_samples::{camera_corrected, colour_samples};
 pub use scenes::TrainingScenes;
 
 /// Errors of a training run.
