@@ -2,7 +2,8 @@
 //! service's `POST /v1/render` and the evaluation:
 //!
 //! - kernel selection for a (table, illuminant): a same-illuminant table's kernels fused
-//!   with the illuminant's correction matrix, a cross-illuminant table's own kernels;
+//!   with the illuminant's correction matrix (the camera-aware C by default, the paper's T
+//!   on request: [`correction_for`]), a cross-illuminant table's own kernels;
 //! - the options: output white, region (`x,y,width,height`), preview downscale (1–16);
 //! - rendering (straight to 8-bit sRGB where the output allows it), downscaling and
 //!   encoding (PNG, PPM, float XYZ or 16-bit sRGB TIFF, raw f32 XYZ).
@@ -11,6 +12,7 @@ use std::str::FromStr;
 use std::sync::atomic::AtomicBool;
 use std::time::Instant;
 
+use crate::camera::Camera;
 use crate::io::{
     IoError, PngCompression, encode_png_rgb8, encode_ppm_rgb8, encode_tiff_f32_rgb,
     encode_tiff_rgb16, ppm_header,
@@ -19,6 +21,8 @@ use crate::l3::{
     FastRenderer, Frame, IlluminantEntry, L3Error, L3Table, Mosaic, Region, RenderStats, TableKind,
     WhiteLevel, fuse_kernels, xyz_to_srgb8, xyz_to_srgb16,
 };
+use crate::spectral::{IsetData, WavelengthGrid};
+use crate::training::{TrainError, camera_corrected};
 
 /// Largest preview downscale factor.
 pub const MAX_PREVIEW: usize = 16;
@@ -32,6 +36,9 @@ pub enum PipelineError {
     Options(String),
     #[error(transparent)]
     Render(#[from] L3Error),
+    /// The camera-aware correction could not be fitted for the table's sensor.
+    #[error("camera-aware correction: {0}")]
+    Correction(#[from] TrainError),
     #[error(transparent)]
     Encode(#[from] IoError),
 }
@@ -178,6 +185,68 @@ pub fn downscale(xyz: &[f32], w: usize, h: usize, k: usize) -> (Vec<f32>, usize,
 /// correction.
 pub fn uses_own_kernels(table: &L3Table) -> bool {
     table.meta.kind == TableKind::CrossIlluminant
+}
+
+/// How a same-illuminant table's output is taken from the acquisition light to D65.
+#[derive(
+    Debug, Clone, Copy, PartialEq, Eq, Hash, Default, serde::Serialize, serde::Deserialize,
+)]
+#[serde(rename_all = "snake_case")]
+pub enum CorrectionMode {
+    /// The registry's T: XYZ under the light → XYZ under D65, from colorimetry alone (the
+    /// paper's method).
+    #[serde(alias = "t")]
+    Colorimetric,
+    /// C, fitted on the table's own colour map and its sensor's response under the light
+    /// (`crate::l3::camera_correction`), wherever the light's spectrum is known; T for a
+    /// correction given only as a matrix.
+    #[default]
+    Camera,
+}
+
+impl CorrectionMode {
+    pub fn as_str(self) -> &'static str {
+        match self {
+            Self::Colorimetric => "colorimetric",
+            Self::Camera => "camera",
+        }
+    }
+}
+
+impl FromStr for CorrectionMode {
+    type Err = PipelineError;
+    fn from_str(s: &str) -> Result<Self, PipelineError> {
+        match s.to_ascii_lowercase().as_str() {
+            "camera" => Ok(Self::Camera),
+            "colorimetric" | "t" => Ok(Self::Colorimetric),
+            _ => Err(PipelineError::Options(format!(
+                "correction '{s}': expected camera or colorimetric (t)"
+            ))),
+        }
+    }
+}
+
+/// The correction `table` renders with under `entry` in `mode`: `entry` itself, or, for a
+/// same-illuminant table in [`CorrectionMode::Camera`] under a light whose spectrum is
+/// known, `entry` with C in place of T (fitted on the table's sensor, built-in curves or
+/// `iset`'s).
+pub fn correction_for(
+    table: &L3Table,
+    entry: &IlluminantEntry,
+    mode: CorrectionMode,
+    iset: Option<&IsetData>,
+) -> Result<IlluminantEntry, PipelineError> {
+    if mode == CorrectionMode::Colorimetric || uses_own_kernels(table) || entry.spd.is_none() {
+        return Ok(entry.clone());
+    }
+    let camera = Camera::new(&table.sensor_design()?, WavelengthGrid::default(), iset)
+        .map_err(TrainError::from)?;
+    Ok(camera_corrected(
+        &camera,
+        &table.colour_map()?,
+        entry,
+        iset,
+    )?)
 }
 
 /// The XYZ kernels `table` renders with under `entry`.

@@ -9,6 +9,7 @@ use crate::eval::{
     noise_split, paper_summary, run_paper_table,
 };
 use crate::l3::{IlluminantRegistry, L3Table};
+use crate::render_pipeline::{CorrectionMode, correction_for, uses_own_kernels};
 use crate::spectral::WavelengthGrid;
 
 #[derive(Args, Debug)]
@@ -69,6 +70,12 @@ pub struct EvalArgs {
     /// for each.
     #[arg(long, conflicts_with_all = ["paper_table", "captures"])]
     pub estimate_illuminant: bool,
+    /// The correction an SI table's output gets under the acquisition light:
+    /// `colorimetric` (or `t`: the paper's T, from colorimetry alone) or
+    /// `camera` (C, fitted on the table's colour map and the sensor under that
+    /// light; what `l3 render` and the service use by default).
+    #[arg(long, default_value = "colorimetric")]
+    pub correction: CorrectionMode,
     /// Training scenes per table (with --paper-table).
     #[arg(long, default_value_t = 48)]
     pub scenes: usize,
@@ -141,10 +148,15 @@ pub fn run(cli: &Cli, a: &EvalArgs) -> Result<(), CliError> {
             } else {
                 &camera
             };
+            let corr = correction_for(&table, &corr, a.correction, iset.as_ref())?;
             let name = format!(
-                "L3 {} ({})",
+                "L3 {} ({}){}",
                 table.meta.kind,
-                table.meta.train_illuminants.join("+")
+                table.meta.train_illuminants.join("+"),
+                match a.correction {
+                    CorrectionMode::Camera if !uses_own_kernels(&table) => " + camera-aware C",
+                    _ => "",
+                }
             );
             evaluate_and_explain(
                 a,

@@ -72,6 +72,18 @@ pub enum CliError {
     },
 }
 
+impl From<crate::render_pipeline::PipelineError> for CliError {
+    fn from(e: crate::render_pipeline::PipelineError) -> Self {
+        use crate::render_pipeline::PipelineError;
+        match e {
+            PipelineError::Options(m) => CliError::Usage(m),
+            PipelineError::Render(e) => e.into(),
+            PipelineError::Encode(e) => e.into(),
+            PipelineError::Correction(e) => e.into(),
+        }
+    }
+}
+
 /// The ISET data directory: `--iset-dir`, else a located one; `None` means
 /// the built-in spectral data.
 pub(crate) fn iset(dir: &Option<PathBuf>) -> Result<Option<IsetData>, CliError> {

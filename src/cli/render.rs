@@ -13,8 +13,8 @@ use crate::l3::{
     white_y, xyz_to_srgb8, xyz_to_srgb16,
 };
 use crate::render_pipeline::{
-    OutputFormat, PipelineError, RenderOptions, RenderPipeline, check_preview, kernels_for,
-    parse_region,
+    CorrectionMode, OutputFormat, PipelineError, RenderOptions, RenderPipeline, check_preview,
+    correction_for, kernels_for, parse_region,
 };
 
 #[derive(Args, Debug)]
@@ -58,6 +58,11 @@ pub struct RenderArgs {
     /// `png_compression`) is the same, so both write the same PNG bytes.
     #[arg(long, default_value_t = RenderOptions::default().png)]
     pub png_compression: PngCompression,
+    /// How an SI table's output is taken to D65: `camera` (C, fitted on the table's
+    /// colour map and sensor under the light; the service's default too) or
+    /// `colorimetric` (the paper's T).
+    #[arg(long, default_value = "camera")]
+    pub correction: CorrectionMode,
 }
 
 /// A mosaic in volts with what its file says about the capture.
@@ -163,7 +168,12 @@ pub fn run(cli: &Cli, a: &RenderArgs) -> Result<(), CliError> {
     let (spec, source) = input.light(&table, a.illuminant.as_deref(), iset.as_ref())?;
     let (volts, w, h) = (input.volts, input.width, input.height);
     let mut registry = IlluminantRegistry::with_defaults(table.meta.grid, iset.as_ref())?;
-    let entry = registry.resolve(&spec, iset.as_ref())?;
+    let entry = correction_for(
+        &table,
+        &registry.resolve(&spec, iset.as_ref())?,
+        a.correction,
+        iset.as_ref(),
+    )?;
     let illuminant = format!("{} (from {source})", entry.name);
     if table.meta.kind == TableKind::CrossIlluminant
         && !table
@@ -221,13 +231,7 @@ pub fn run(cli: &Cli, a: &RenderArgs) -> Result<(), CliError> {
     let (bytes, ow, oh, stats) = match a.renderer.as_str() {
         "fast" => {
             let pipeline = RenderPipeline::new(&table, &entry)?;
-            let r = pipeline
-                .render(frame, w, h, format, &opts, &AtomicBool::new(false))
-                .map_err(|e| match e {
-                    PipelineError::Options(m) => CliError::Usage(m),
-                    PipelineError::Render(e) => e.into(),
-                    PipelineError::Encode(e) => e.into(),
-                })?;
+            let r = pipeline.render(frame, w, h, format, &opts, &AtomicBool::new(false))?;
             (r.output.into_vec(), r.width, r.height, r.stats)
         }
         "reference" => {

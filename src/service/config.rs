@@ -8,7 +8,7 @@ use serde::Deserialize;
 
 use super::ServiceError;
 use crate::io::PngCompression;
-use crate::render_pipeline::RenderOptions;
+use crate::render_pipeline::{CorrectionMode, RenderOptions};
 
 /// The embedded defaults (the committed `config/default.toml`).
 pub const DEFAULT_CONFIG_TOML: &str = include_str!("../../config/default.toml");
@@ -61,6 +61,11 @@ pub struct ServerConfig {
     /// same default, so both give the same bytes).
     #[serde(default = "default_png_compression")]
     pub png_compression: PngCompression,
+    /// How the active SI table's output is taken to D65 unless a request names one:
+    /// `camera` (C, fitted on the table's colour map and sensor under the light) or
+    /// `colorimetric` (the registry's T). `l3 render --correction` has the same default.
+    #[serde(default)]
+    pub correction: CorrectionMode,
 }
 
 fn default_png_compression() -> PngCompression {
@@ -208,6 +213,11 @@ impl ServiceConfig {
                 self.server.png_compression = value
                     .parse()
                     .map_err(|e| bad(format!("L3_PNG_COMPRESSION: {e}")))?
+            }
+            "L3_CORRECTION" => {
+                self.server.correction = value
+                    .parse()
+                    .map_err(|e| bad(format!("L3_CORRECTION: {e}")))?
             }
             "L3_AUTO_TRAIN" => {
                 self.training.auto_train_default = match value.trim() {

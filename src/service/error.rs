@@ -205,6 +205,7 @@ impl From<crate::render_pipeline::PipelineError> for ServiceError {
         use crate::render_pipeline::PipelineError;
         match e {
             PipelineError::Options(m) => ServiceError::BadRequest(m),
+            PipelineError::Correction(e) => ServiceError::Internal(e.to_string()),
             PipelineError::Encode(e) => e.into(),
             PipelineError::Render(e) => match e {
                 L3Error::InvalidInput(_) | L3Error::InvalidParams(_) => {

@@ -29,8 +29,8 @@ use crate::io::{
 };
 use crate::l3::{FrameMetadata, Mosaic, WhiteLevel};
 use crate::render_pipeline::{
-    Encoded, OutputFormat as PipelineFormat, PipelineError, RenderOptions, check_preview,
-    parse_region,
+    CorrectionMode, Encoded, OutputFormat as PipelineFormat, PipelineError, RenderOptions,
+    check_preview, parse_region,
 };
 
 /// Query parameters of a render.
@@ -57,6 +57,8 @@ pub struct RenderQuery {
     pub preview: Option<usize>,
     /// PNG compression (`fast`, `default`, `best`; default: the config's).
     pub png_compression: Option<String>,
+    /// `camera` or `colorimetric` (default: the config's `correction`).
+    pub correction: Option<String>,
 }
 
 /// Output formats a client can ask for.
@@ -306,6 +308,10 @@ pub async fn render(
                 .map_err(|e: UnknownPngCompression| ServiceError::BadRequest(e.to_string()))?,
         },
     };
+    let correction = match q.correction.as_deref() {
+        None => state.config.server.correction,
+        Some(s) => s.parse::<CorrectionMode>()?,
+    };
     if raw && (q.width.is_none() || q.height.is_none()) {
         return Err(ServiceError::BadRequest(
             "a raw application/octet-stream body needs the width and height query parameters"
@@ -449,7 +455,7 @@ pub async fn render(
                 }
             };
             let decode_ms = t0.elapsed().as_secs_f64() * 1e3;
-            let pipeline = st.renderer_for(&active, &entry)?;
+            let pipeline = st.renderer_for(&active, &entry, correction)?;
             let out = pipeline.render(mosaic, w, h, pipeline_format, &opts, &cancel)?;
             Ok(Rendered {
                 illuminant: entry.name.clone(),
@@ -495,6 +501,7 @@ pub async fn render(
     put("x-l3-table", table_id);
     put("x-l3-illuminant", r.illuminant.clone());
     put("x-l3-illuminant-source", r.illuminant_source.to_string());
+    put("x-l3-correction", correction.as_str().to_string());
     put("x-l3-width", out.width.to_string());
     put("x-l3-height", out.height.to_string());
     put("x-l3-input-pixels", (r.in_width * r.in_height).to_string());

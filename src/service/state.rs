@@ -16,7 +16,7 @@ use super::config::ServiceConfig;
 use super::metrics::Metrics;
 use super::store::{IlluminantRow, Store};
 use crate::l3::{IlluminantEntry, IlluminantRegistry, L3Table};
-use crate::render_pipeline::{RenderPipeline, uses_own_kernels};
+use crate::render_pipeline::{CorrectionMode, RenderPipeline, correction_for, uses_own_kernels};
 use crate::spectral::IsetData;
 
 /// The table renders use, with its id. Renders hold an `Arc` of it, so an activation never
@@ -29,7 +29,7 @@ pub struct ActiveTable {
 }
 
 /// Render pipelines (fused kernels) by (table id, lower-case illuminant name).
-pub type KernelCache = HashMap<(String, String), Arc<RenderPipeline>>;
+pub type KernelCache = HashMap<(String, String, CorrectionMode), Arc<RenderPipeline>>;
 
 /// Everything the handlers share (cheap to clone).
 #[derive(Clone)]
@@ -121,11 +121,20 @@ impl Inner {
         &self,
         active: &ActiveTable,
         entry: &IlluminantEntry,
+        correction: CorrectionMode,
     ) -> Result<Arc<RenderPipeline>, ServiceError> {
         let key = if uses_own_kernels(&active.table) {
-            (active.id.clone(), String::from("\0own"))
+            (
+                active.id.clone(),
+                String::from("\0own"),
+                CorrectionMode::Colorimetric,
+            )
         } else {
-            (active.id.clone(), entry.name.to_ascii_lowercase())
+            (
+                active.id.clone(),
+                entry.name.to_ascii_lowercase(),
+                correction,
+            )
         };
         if let Some(k) = self
             .kernel_cache
@@ -136,8 +145,11 @@ impl Inner {
             return Ok(k.clone());
         }
         let r = Arc::new(
-            RenderPipeline::new(&active.table, entry)
-                .map_err(|e| ServiceError::Internal(format!("table {}: {e}", active.id)))?,
+            RenderPipeline::new(
+                &active.table,
+                &correction_for(&active.table, entry, correction, self.iset.as_ref())?,
+            )
+            .map_err(|e| ServiceError::Internal(format!("table {}: {e}", active.id)))?,
         );
         let mut cache = self.kernel_cache.lock().unwrap_or_else(|p| p.into_inner());
         if cache.len() >= KERNEL_CACHE_ENTRIES {
@@ -153,7 +165,7 @@ impl Inner {
         self.kernel_cache
             .lock()
             .unwrap_or_else(|p| p.into_inner())
-            .retain(|(_, ill), _| *ill != n);
+            .retain(|(_, ill, _), _| *ill != n);
     }
 }
 
