@@ -837,12 +837,15 @@ impl Store {
         })
     }
 
-    /// Stores a shard's partial sums (bytes and SHA-256); a part already stored (the same
-    /// bytes: a shard retried after its lease expired) is left alone.
+    /// Stores a shard's partial sums (bytes and SHA-256) while its job is queued or running;
+    /// a part already stored (the same bytes: a shard retried after its lease expired) is left
+    /// alone.
     pub async fn store_partial(&self, part: &NewPartial<'_>) -> Result<(), ServiceError> {
         on_pool!(self, p => sqlx::query(
             "INSERT INTO training_partials (job_id, stage, shard_index, content, sha256, size_bytes, replica, created_at)
-             VALUES ($1, $2, $3, $4, $5, $6, $7, $8) ON CONFLICT DO NOTHING",
+             SELECT $1, $2, $3, $4, $5, $6, $7, $8
+             WHERE EXISTS (SELECT 1 FROM training_jobs WHERE id = $1 AND status IN ($9, $10))
+             ON CONFLICT DO NOTHING",
         )
         .bind(part.job_id)
         .bind(part.stage)
@@ -852,6 +855,8 @@ impl Store {
         .bind(part.content.len() as i64)
         .bind(part.replica)
         .bind(part.created_at)
+        .bind(JobStatus::Queued.as_str())
+        .bind(JobStatus::Running.as_str())
         .execute(p)
         .await?
         .rows_affected());
