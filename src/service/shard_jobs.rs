@@ -119,6 +119,11 @@ pub async fn run_shard(state: &AppState, row: JobRow) {
     }
     let result = steps(state, &row, &job, &lease).await;
     let lease_lost = lease.end().await;
+    if !matches!(result, Ok(Step::Done)) {
+        // the job is over here (merged, ended, failed) or the shard stops: the prepared run
+        // is not needed any more
+        forget_run(state, &job);
+    }
     let recorded = match result {
         _ if lease_lost => Ok(()),
         Ok(Step::Done) => Ok(()),
@@ -188,6 +193,14 @@ async fn training_run(
     *state.training_run.lock().unwrap_or_else(|p| p.into_inner()) =
         Some((job.to_string(), run.clone()));
     Ok(run)
+}
+
+/// Drops the prepared run of job `job`, if it is the one kept.
+fn forget_run(state: &AppState, job: &str) {
+    let mut kept = state.training_run.lock().unwrap_or_else(|p| p.into_inner());
+    if kept.as_ref().is_some_and(|(id, _)| id == job) {
+        *kept = None;
+    }
 }
 
 /// The stored partials of `stage`, every shard's, checked against their SHA-256.
