@@ -596,6 +596,7 @@ pub(super) struct Lease {
     id: String,
     cancel: Arc<AtomicBool>,
     lost: Arc<AtomicBool>,
+    ending: Arc<AtomicBool>,
     progress: Arc<Mutex<Option<(String, f64)>>>,
     stop: Option<tokio::sync::oneshot::Sender<()>>,
     task: Option<tokio::task::JoinHandle<()>>,
@@ -611,6 +612,7 @@ impl Lease {
             .unwrap_or_else(|p| p.into_inner())
             .insert(id.to_string(), cancel.clone());
         let lost = Arc::new(AtomicBool::new(false));
+        let ending = Arc::new(AtomicBool::new(false));
         let progress = Arc::new(Mutex::new(None));
         let (stop, stopped) = tokio::sync::oneshot::channel();
         let task = tokio::spawn(beat(
@@ -618,6 +620,7 @@ impl Lease {
             id.to_string(),
             cancel.clone(),
             lost.clone(),
+            ending.clone(),
             progress.clone(),
             stopped,
         ));
@@ -626,6 +629,7 @@ impl Lease {
             id: id.to_string(),
             cancel,
             lost,
+            ending,
             progress,
             stop: Some(stop),
             task: Some(task),
@@ -648,6 +652,12 @@ impl Lease {
             let mut g = p.lock().unwrap_or_else(|e| e.into_inner());
             *g = Some((stage.to_string(), f));
         }
+    }
+
+    /// Says that the job is about to end its own lease (a shard's end recorded in the
+    /// database): a heartbeat that finds the lease gone from then on is expected, not logged.
+    pub(super) fn ending(&self) {
+        self.ending.store(true, Ordering::SeqCst);
     }
 
     /// Stops the heartbeat; returns whether the lease was lost.
@@ -682,6 +692,7 @@ async fn beat(
     id: String,
     cancel: Arc<AtomicBool>,
     lost: Arc<AtomicBool>,
+    ending: Arc<AtomicBool>,
     progress: Arc<Mutex<Option<(String, f64)>>>,
     mut stop: tokio::sync::oneshot::Receiver<()>,
 ) {
@@ -718,10 +729,12 @@ async fn beat(
                 }
             }
             Ok(None) => {
-                tracing::warn!(
-                    job = id,
-                    "the job's lease was lost (it expired or the job was re-queued); stopping it here"
-                );
+                if !ending.load(Ordering::SeqCst) {
+                    tracing::warn!(
+                        job = id,
+                        "the job's lease was lost (it expired or the job was re-queued); stopping it here"
+                    );
+                }
                 lost.store(true, Ordering::SeqCst);
                 cancel.store(true, Ordering::SeqCst);
                 return;

@@ -131,7 +131,8 @@ pub async fn run_shard(state: &AppState, row: JobRow) {
             tracing::warn!(shard = %id, "the shard's lease was lost before it ended; another attempt records it");
             Ok(())
         }
-        Ok(Step::Merged) => finish(state, &id, JobStatus::Succeeded, None, None).await,
+        // the merge ended the shard with its job
+        Ok(Step::Merged) => Ok(()),
         Ok(Step::JobEnded) => {
             tracing::info!(job = %job, shard = %id, "training shard stopped: its job has ended");
             finish(state, &id, JobStatus::Canceled, None, None).await
@@ -307,6 +308,7 @@ async fn steps(
         shard.index + 1,
         shard.count
     );
+    lease.ending();
     let completion = state
         .store
         .complete_shard(row, &state.replica_id, now_ms(), compute_ms)
@@ -421,7 +423,14 @@ async fn merge(
     let merge_ms = (total_s * 1e3) as i64;
     if !state
         .store
-        .finish_sharded(shard.job, &stored.id, merge_ms, &state.replica_id, now_ms())
+        .finish_sharded(
+            shard.job,
+            &shard.row.id,
+            &stored.id,
+            merge_ms,
+            &state.replica_id,
+            now_ms(),
+        )
         .await?
     {
         return Ok(Step::JobEnded);

@@ -983,11 +983,13 @@ impl Store {
         Ok(done)
     }
 
-    /// Ends a running sharded job succeeded with its table and merge time, and deletes its
-    /// partial sums; false when it had ended meanwhile (canceled).
+    /// Ends a running sharded job succeeded with its table and merge time, together with its
+    /// last shard (`by`'s, which merged), and deletes its partial sums; false when the job had
+    /// ended meanwhile (canceled).
     pub async fn finish_sharded(
         &self,
         parent: &str,
+        shard: &str,
         table_id: &str,
         merge_ms: i64,
         by: &str,
@@ -1010,6 +1012,20 @@ impl Store {
             .execute(&mut *tx)
             .await?
             .rows_affected();
+            if n == 1 {
+                sqlx::query(
+                    "UPDATE training_jobs SET status = $1, stage = $1, progress = 1, finished_at = $2,
+                     finished_by = $3, lease_owner = NULL, lease_expires_at = NULL
+                     WHERE id = $4 AND lease_owner = $3 AND status = $5",
+                )
+                .bind(JobStatus::Succeeded.as_str())
+                .bind(now)
+                .bind(by)
+                .bind(shard)
+                .bind(JobStatus::Running.as_str())
+                .execute(&mut *tx)
+                .await?;
+            }
             sqlx::query("DELETE FROM training_partials WHERE job_id = $1")
                 .bind(parent)
                 .execute(&mut *tx)
@@ -1372,7 +1388,15 @@ mod tests {
         s.store_partial(&part).await.unwrap();
         s.store_partial(&part).await.unwrap();
         assert_eq!(s.partials("p", "accumulate", None).await.unwrap().len(), 1);
-        assert!(s.finish_sharded("p", "tbl", 3, "r1", 16).await.unwrap());
+        assert!(
+            s.finish_sharded("p", &c.id, "tbl", 3, "r1", 16)
+                .await
+                .unwrap()
+        );
+        assert_eq!(
+            s.job(&c.id).await.unwrap().unwrap().status,
+            JobStatus::Succeeded
+        );
         assert!(
             s.partials("p", "accumulate", None)
                 .await
