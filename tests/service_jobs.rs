@@ -357,3 +357,182 @@ async fn first_start_trains_and_activates_the_default_table() {
     );
     server.shutdown().await.unwrap();
 }
+
+/// Submits a job body; returns (status, job JSON).
+async fn submit(
+    server: &l3::service::Server,
+    body: &serde_json::Value,
+) -> (u16, serde_json::Value) {
+    let r = client()
+        .post(url(server, "/v1/training-jobs"))
+        .json(body)
+        .send()
+        .await
+        .unwrap();
+    let st = r.status().as_u16();
+    (st, json(r).await)
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_sharded_job_gives_the_unsharded_table_bytes() {
+    let data = tempfile::tempdir().unwrap();
+    let server = l3::service::start(test_config(data.path())).await.unwrap();
+    let c = client();
+    let mut body = tiny_job_json(&["D65"], 21);
+    body["reproducible"] = true.into();
+    // out of range: a clear 400
+    for (n, needle) in [(0, "shards 0: 1 to 4"), (5, "shards 5: 1 to 4")] {
+        let mut b = body.clone();
+        b["shards"] = n.into();
+        let r = c
+            .post(url(&server, "/v1/training-jobs"))
+            .json(&b)
+            .send()
+            .await
+            .unwrap();
+        let d = problem(r, 400, "bad_request").await;
+        assert!(d.contains(needle), "{d}");
+    }
+    let mut ids = Vec::new();
+    for shards in [None, Some(1), Some(3)] {
+        let mut b = body.clone();
+        if let Some(n) = shards {
+            b["shards"] = n.into();
+        }
+        let (st, j) = submit(&server, &b).await;
+        assert_eq!(st, 202, "{j}");
+        if let Some(n) = shards {
+            assert_eq!(j["shards"]["count"], n, "{j}");
+            assert_eq!(j["shards"]["total"], 2 * n, "{j}");
+            assert!(j["shards"]["fraction"].as_f64().unwrap() < 1.0, "{j}");
+        } else {
+            assert!(j.get("shards").is_none(), "{j}");
+        }
+        ids.push(j["id"].as_str().unwrap().to_string());
+    }
+    let mut tables = Vec::new();
+    for id in &ids {
+        let j = wait_job(&server, id, 120.0, |j| {
+            !["queued", "running"].contains(&j["status"].as_str().unwrap())
+        })
+        .await;
+        assert_eq!(j["status"], "succeeded", "{j}");
+        assert_eq!(j["progress"], 1.0, "{j}");
+        tables.push(j["table_id"].as_str().unwrap().to_string());
+        if let Some(s) = j.get("shards") {
+            let n = s["count"].as_i64().unwrap();
+            assert_eq!(s["done"], 2 * n, "{j}");
+            assert_eq!(s["fraction"], 1.0, "{j}");
+            assert!(s["merge_ms"].as_i64().unwrap() >= 0, "{j}");
+            let items = s["items"].as_array().unwrap();
+            assert_eq!(items.len() as i64, 2 * n, "{j}");
+            for (k, it) in items.iter().enumerate() {
+                let stage = if (k as i64) < n {
+                    "survey"
+                } else {
+                    "accumulate"
+                };
+                assert_eq!(it["stage"], stage, "{j}");
+                assert_eq!(it["shard"], k as i64 % n + 1, "{j}");
+                assert_eq!(it["status"], "succeeded", "{j}");
+                assert_eq!(it["attempts"], 1, "{j}");
+                assert!(it["compute_ms"].as_i64().unwrap() >= 0, "{j}");
+                assert!(it["replica"].is_string(), "{j}");
+            }
+            // a shard names its job and is canceled through it
+            let sid = items[0]["id"].as_str().unwrap();
+            let sj = json(
+                c.get(url(&server, &format!("/v1/training-jobs/{sid}")))
+                    .send()
+                    .await
+                    .unwrap(),
+            )
+            .await;
+            assert_eq!(sj["parent_id"], id.as_str(), "{sj}");
+            let r = c
+                .post(url(&server, &format!("/v1/training-jobs/{sid}/cancel")))
+                .send()
+                .await
+                .unwrap();
+            problem(r, 409, "conflict").await;
+        }
+    }
+    // the table's bytes (named by their SHA-256) are the same in one piece, 1 shard, 3 shards
+    assert_eq!(tables[1], tables[0]);
+    assert_eq!(tables[2], tables[0]);
+    let t = json(
+        c.get(url(&server, &format!("/v1/tables/{}", tables[0])))
+            .send()
+            .await
+            .unwrap(),
+    )
+    .await;
+    let bytes = c
+        .get(url(&server, &format!("/v1/tables/{}/download", tables[0])))
+        .send()
+        .await
+        .unwrap()
+        .bytes()
+        .await
+        .unwrap();
+    assert_eq!(
+        l3::service::sha256_hex(&bytes),
+        t["sha256"].as_str().unwrap()
+    );
+    // the list has the jobs, not their shards
+    let v = json(
+        c.get(url(&server, "/v1/training-jobs"))
+            .send()
+            .await
+            .unwrap(),
+    )
+    .await;
+    assert_eq!(v["items"].as_array().unwrap().len(), 3, "{v}");
+    server.shutdown().await.unwrap();
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_sharded_job_is_canceled_with_its_shards() {
+    let data = tempfile::tempdir().unwrap();
+    let server = l3::service::start(test_config(data.path())).await.unwrap();
+    let c = client();
+    let mut long = tiny_job_json(&["D65"], 3);
+    long["scenes"] = 2000.into();
+    long["scene_size"] = 96.into();
+    long["shards"] = 2.into();
+    let (st, j) = submit(&server, &long).await;
+    assert_eq!(st, 202, "{j}");
+    let id = j["id"].as_str().unwrap().to_string();
+    let j = wait_job(&server, &id, 30.0, |j| {
+        j["status"] == "running"
+            && j["shards"]["items"]
+                .as_array()
+                .is_some_and(|i| i.iter().any(|s| s["status"] == "running"))
+    })
+    .await;
+    assert_eq!(j["status"], "running", "{j}");
+    let t0 = std::time::Instant::now();
+    let j = json(
+        c.post(url(&server, &format!("/v1/training-jobs/{id}/cancel")))
+            .send()
+            .await
+            .unwrap(),
+    )
+    .await;
+    let waited = t0.elapsed().as_secs_f64();
+    assert_eq!(j["status"], "canceled", "{j}");
+    println!("sharded job canceled in {waited:.3} s");
+    for s in j["shards"]["items"].as_array().unwrap() {
+        assert_eq!(s["status"], "canceled", "after {waited:.2} s: {j}");
+    }
+    // canceled again: 409
+    let r = c
+        .post(url(&server, &format!("/v1/training-jobs/{id}/cancel")))
+        .send()
+        .await
+        .unwrap();
+    problem(r, 409, "conflict").await;
+    let v = json(c.get(url(&server, "/v1/tables")).send().await.unwrap()).await;
+    assert!(v["items"].as_array().unwrap().is_empty());
+    server.shutdown().await.unwrap();
+}

@@ -40,6 +40,17 @@ impl Replica {
     /// Starts `l3 serve` on `db` with its own data directory (its table cache) and waits
     /// until it answers /healthz. Built-in spectral data, one background thread.
     async fn start(name: &'static str, db: &str, data: &Path, config: Option<&Path>) -> Replica {
+        Replica::start_with(name, db, data, config, &[]).await
+    }
+
+    /// [`Replica::start`] with more environment variables (over the ones it sets).
+    async fn start_with(
+        name: &'static str,
+        db: &str,
+        data: &Path,
+        config: Option<&Path>,
+        envs: &[(&str, String)],
+    ) -> Replica {
         let port = free_port();
         let mut cmd = Command::new(env!("CARGO_BIN_EXE_l3"));
         cmd.arg("serve");
@@ -62,6 +73,9 @@ impl Replica {
             .env("L3_ISET_DIR", data.join("no-iset"))
             .stdout(Stdio::piped())
             .stderr(Stdio::piped());
+        for (k, v) in envs {
+            cmd.env(k, v);
+        }
         let mut child = cmd.spawn().expect("spawn l3 serve");
         let log = Arc::new(Mutex::new(Vec::new()));
         for pipe in [
@@ -511,4 +525,228 @@ async fn the_default_table_is_trained_once_per_cluster() {
     assert_eq!(r.bytes().await.unwrap().as_ref(), cached.as_slice());
     let (_, meta) = c.get(&format!("/v1/tables/{t}")).await;
     assert_eq!(meta["status"], "ok", "{meta}");
+}
+
+/// Shards of a sharded job (its `shards.items`) and the replica each ran on, checking that
+/// every shard started exactly once across `replicas`.
+fn shards_ran_once(job: &Value, replicas: &[&Replica]) -> Vec<(String, &'static str)> {
+    let items = job["shards"]["items"].as_array().expect("shards");
+    items
+        .iter()
+        .map(|s| {
+            let id = s["id"].as_str().unwrap();
+            let on: Vec<&Replica> = replicas
+                .iter()
+                .copied()
+                .filter(|r| r.log_count(&["training shard started", &format!("shard={id}")]) > 0)
+                .collect();
+            let runs: usize = replicas
+                .iter()
+                .map(|r| r.log_count(&["training shard started", &format!("shard={id}")]))
+                .sum();
+            assert_eq!(runs, 1, "shard {id} started {runs} times: {job}");
+            assert_eq!(s["attempts"], 1, "{job}");
+            assert_eq!(s["status"], "succeeded", "{job}");
+            (id.to_string(), on[0].name)
+        })
+        .collect()
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_job_in_two_shards_runs_on_both_replicas_and_gives_the_one_shard_table() {
+    let Some((_pg, _data, a, b)) =
+        cluster("a_job_in_two_shards_runs_on_both_replicas_and_gives_the_one_shard_table").await
+    else {
+        return;
+    };
+    let mut body = job_body(9, 8, false);
+    body["reproducible"] = true.into();
+    body["shards"] = 2.into();
+    let sharded = a.submit(body.clone()).await;
+    let done = |j: &Value| j["status"] != "queued" && j["status"] != "running";
+    let j = b.wait_job(&[&a], &sharded, 120, done).await;
+    assert_eq!(j["status"], "succeeded", "{j}");
+    assert_eq!(j["shards"]["done"], 4, "{j}");
+    assert_eq!(j["shards"]["fraction"], 1.0, "{j}");
+    let ran = shards_ran_once(&j, &[&a, &b]);
+    println!(
+        "shards: {}; merge {} ms",
+        ran.iter()
+            .map(|(id, r)| format!("{id} on {r}"))
+            .collect::<Vec<_>>()
+            .join(", "),
+        j["shards"]["merge_ms"]
+    );
+    // the same job in one shard, on either replica
+    body["shards"] = 1.into();
+    let one = b.submit(body).await;
+    let j1 = a.wait_job(&[&b], &one, 120, done).await;
+    assert_eq!(j1["status"], "succeeded", "{j1}");
+    shards_ran_once(&j1, &[&a, &b]);
+    assert_eq!(j1["table_id"], j["table_id"], "{j1}\n{j}");
+    let t = j["table_id"].as_str().unwrap();
+    let (_, meta) = a.get(&format!("/v1/tables/{t}")).await;
+    let bytes = reqwest::get(b.url(&format!("/v1/tables/{t}/download")))
+        .await
+        .unwrap()
+        .bytes()
+        .await
+        .unwrap();
+    assert_eq!(
+        l3::service::sha256_hex(&bytes),
+        meta["sha256"].as_str().unwrap()
+    );
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn kill9_of_a_replica_running_a_shard_and_the_other_retries_it() {
+    let Some((_pg, _data, a, b)) =
+        cluster("kill9_of_a_replica_running_a_shard_and_the_other_retries_it").await
+    else {
+        return;
+    };
+    let mut body = job_body(10, 40, false);
+    body["reproducible"] = true.into();
+    body["shards"] = 2.into();
+    let id = a.submit(body.clone()).await;
+    let running_on_a = |j: &Value| {
+        j["shards"]["items"].as_array().is_some_and(|items| {
+            items.iter().any(|s| {
+                s["status"] == "running" && s["stage"] == "accumulate" && {
+                    let sid = s["id"].as_str().unwrap_or_default();
+                    a.log_count(&["training shard started", &format!("shard={sid}")]) == 1
+                }
+            })
+        })
+    };
+    let j = b.wait_job(&[&a], &id, 120, running_on_a).await;
+    let victim: Vec<String> = j["shards"]["items"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .filter(|s| s["status"] == "running" && s["stage"] == "accumulate")
+        .map(|s| s["id"].as_str().unwrap().to_string())
+        .filter(|sid| a.log_count(&["training shard started", &format!("shard={sid}")]) == 1)
+        .collect();
+    println!("replica A runs {victim:?}; kill -9");
+    a.kill9();
+    let done = |j: &Value| j["status"] != "queued" && j["status"] != "running";
+    let j = b.wait_job(&[], &id, 120, done).await;
+    assert_eq!(j["status"], "succeeded", "{j}");
+    for s in j["shards"]["items"].as_array().unwrap() {
+        let retried = victim.iter().any(|v| s["id"] == v.as_str());
+        assert_eq!(s["attempts"], if retried { 2 } else { 1 }, "{j}");
+        assert_eq!(s["status"], "succeeded", "{j}");
+    }
+    // the same table as the job in one piece
+    body.as_object_mut().unwrap().remove("shards");
+    let whole = b.submit(body).await;
+    let j1 = b.wait_job(&[], &whole, 120, done).await;
+    assert_eq!(j1["status"], "succeeded", "{j1}");
+    assert_eq!(j1["table_id"], j["table_id"]);
+}
+
+/// The figures of the README: one moderately sized job (`L3_SHARD_BENCH_SCENES`, 48 by default,
+/// otherwise the default table's spec) unsharded on one replica, in 2 shards on one replica,
+/// and in 2 shards on two replicas, `L3_SHARD_BENCH_ROUNDS` times (3) in turn; every replica
+/// has a background pool of every core (so two replicas share them). `cargo test --test service_replicas -- --ignored
+/// --nocapture sharding_figures`.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+#[ignore = "a measurement, about a minute or more"]
+async fn sharding_figures() {
+    let Some(pg) = PgServer::start("sharding_figures") else {
+        return;
+    };
+    let env = |k: &str, d: u64| {
+        std::env::var(k)
+            .ok()
+            .and_then(|v| v.parse().ok())
+            .unwrap_or(d)
+    };
+    let (scenes, rounds) = (
+        env("L3_SHARD_BENCH_SCENES", 48),
+        env("L3_SHARD_BENCH_ROUNDS", 3),
+    );
+    let data = tempfile::tempdir().unwrap();
+    let cores = std::thread::available_parallelism().map_or(1, |n| n.get());
+    let envs = [
+        ("L3_BACKGROUND_THREADS", cores.to_string()),
+        ("L3_JOB_LEASE_S", "30".to_string()),
+    ];
+    let start = |name: &'static str| {
+        let (url, dir, envs) = (pg.url(), data.path().join(name), envs.clone());
+        async move { Replica::start_with(name, &url, &dir, None, &envs).await }
+    };
+    let body = |shards: Option<u64>| {
+        let mut b = json!({ "scenes": scenes, "reproducible": true });
+        if let Some(n) = shards {
+            b["shards"] = n.into();
+        }
+        b
+    };
+    let a = start("a").await;
+    let done = |j: &Value| j["status"] != "queued" && j["status"] != "running";
+    let seconds = |j: &Value| {
+        (j["finished_at_ms"].as_i64().unwrap() - j["created_at_ms"].as_i64().unwrap()) as f64 / 1e3
+    };
+    let mut table = None;
+    let mut rows = Vec::new();
+    let configs = [
+        ("one piece, 1 replica", None, false),
+        ("2 shards, 1 replica", Some(2), false),
+        ("2 shards, 2 replicas", Some(2), true),
+    ];
+    for round in 0..rounds {
+        // each round starts with the next configuration, so that none is always first
+        for k in 0..configs.len() {
+            let (what, shards, two) = configs[(k + round as usize) % configs.len()];
+            let b = if two { Some(start("b").await) } else { None };
+            let id = a.submit(body(shards)).await;
+            let j = a.wait_job(&[], &id, 1800, done).await;
+            assert_eq!(j["status"], "succeeded", "{j}");
+            let t = j["table_id"].as_str().unwrap().to_string();
+            assert_eq!(table.get_or_insert_with(|| t.clone()), &t, "{j}");
+            let mut line = format!("round {} | {what} | {:.2} s", round + 1, seconds(&j));
+            if let Some(s) = j.get("shards") {
+                for it in s["items"].as_array().unwrap() {
+                    let on = if it["replica"] == j["shards"]["items"][0]["replica"] {
+                        "r1"
+                    } else {
+                        "r2"
+                    };
+                    line.push_str(&format!(
+                        " | {} {}: {:.2} s on {on}",
+                        it["stage"].as_str().unwrap(),
+                        it["shard"],
+                        it["compute_ms"].as_f64().unwrap() / 1e3
+                    ));
+                }
+                line.push_str(&format!(
+                    " | merge {:.2} s",
+                    s["merge_ms"].as_f64().unwrap() / 1e3
+                ));
+            }
+            println!("{line}");
+            rows.push((what, seconds(&j)));
+            drop(b);
+        }
+    }
+    for what in [
+        "one piece, 1 replica",
+        "2 shards, 1 replica",
+        "2 shards, 2 replicas",
+    ] {
+        let v: Vec<f64> = rows.iter().filter(|r| r.0 == what).map(|r| r.1).collect();
+        let mean = v.iter().sum::<f64>() / v.len() as f64;
+        let base: Vec<f64> = rows
+            .iter()
+            .filter(|r| r.0 == "one piece, 1 replica")
+            .map(|r| r.1)
+            .collect();
+        let base = base.iter().sum::<f64>() / base.len() as f64;
+        println!(
+            "{what}: mean {mean:.2} s ({:+.1} % against one piece)",
+            (mean / base - 1.0) * 100.0
+        );
+    }
 }

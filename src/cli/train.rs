@@ -274,22 +274,9 @@ impl Sharded<'_> {
             .map(|k| Ok(GramPartial::from_bytes(&read_file(&self.path("sums", k))?)?))
             .collect::<Result<Vec<_>, CliError>>()?;
         let read = t.elapsed().as_secs_f64();
-        // the solve starts when it reports its stage: the rest is the merge
-        let solve_at = std::sync::Mutex::new(None);
-        let mark = |stage: &str, _: f64| {
-            if stage == "solve"
-                && let Ok(mut at) = solve_at.lock()
-            {
-                at.get_or_insert_with(Instant::now);
-            }
-        };
-        let table = self.run.finish(classes, parts, &mark, self.cancel)?;
+        let (table, merging) = self.run.finish_timed(classes, parts, &quiet, self.cancel)?;
         let total = t.elapsed().as_secs_f64();
-        let merged = solve_at
-            .into_inner()
-            .ok()
-            .flatten()
-            .map_or(total, |at| at.duration_since(t).as_secs_f64());
+        let merged = read + merging;
         println!(
             "merge: {merged:.3} s (reading {read:.3} s); solve: {:.2} s",
             total - merged

@@ -3,17 +3,22 @@
 //! a lease it renews with a heartbeat; the heartbeat also carries the progress and brings
 //! back a cancel requested through any replica. A job whose replica died (its lease expired)
 //! goes back to the queue, as do the jobs a restarted replica had left running.
+//!
+//! A job that asks for `shards` is split into shard jobs that any replica claims the same way
+//! (`super::shard_jobs`); cancelling it cancels them, and its description counts them.
 
-use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::{Arc, Mutex};
 use std::time::{Duration, Instant};
 
 use super::ServiceError;
 use super::state::{AppState, new_id, now_ms, sha256_hex};
-use super::store::{JOB_KIND_TRAIN, JobEnd, JobRow, JobStatus, NewJob};
-use super::tables::{activate_table, insert_table, write_table_file_with_pause};
+use super::store::{
+    JOB_KIND_SHARDED, JOB_KIND_TRAIN, JobEnd, JobRow, JobStatus, NewJob, WORKER_KINDS, shard_stage,
+};
+use super::tables::{StoredTable, activate_table, insert_table, write_table_file_with_pause};
 use crate::camera::SensorDesign;
-use crate::l3::L3Error;
+use crate::l3::{L3Error, L3Table};
 use crate::training::{TrainError, TrainingSpec, train_table};
 use axum::Json;
 use axum::body::Bytes;
@@ -31,16 +36,38 @@ const HEARTBEAT: Duration = Duration::from_millis(250);
 /// The idempotency key of the default table's training job: one per cluster.
 pub const DEFAULT_TABLE_JOB_KEY: &str = "l3:default-table";
 
-/// A parsed job request: the training spec plus the sensor and whether to activate.
+/// The most shards a job may ask for (and at most one per batch, i.e. per training scene).
+pub const MAX_SHARDS: usize = 64;
+
+/// A parsed job request: the training spec plus the sensor, whether to activate, the shards
+/// and whether the table is written reproducibly.
 #[derive(Debug, Clone)]
 pub struct JobRequest {
     pub spec: TrainingSpec,
     pub sensor: SensorDesign,
     pub activate: bool,
+    /// Train in this many shards (shard jobs any replica claims); `None` trains in one piece.
+    /// Any number gives the same table bytes.
+    pub shards: Option<usize>,
+    /// Zero the creation time and training duration in the table (as `l3 train
+    /// --reproducible`), so that equal training gives equal table bytes (and id).
+    pub reproducible: bool,
+}
+
+/// A boolean field of a job request (absent: false).
+fn flag(map: &mut serde_json::Map<String, Value>, name: &str) -> Result<bool, ServiceError> {
+    match map.remove(name) {
+        None => Ok(false),
+        Some(Value::Bool(b)) => Ok(b),
+        Some(v) => Err(ServiceError::InvalidJson(format!(
+            "{name} is {v}; true or false expected"
+        ))),
+    }
 }
 
 /// Parses and validates a job's JSON: the [`TrainingSpec`] fields, plus `sensor` (absent or
-/// `"paper_default"`, or a sensor design object) and `activate` (bool).
+/// `"paper_default"`, or a sensor design object), `activate` (bool), `shards` (1 to
+/// [`MAX_SHARDS`], at most `scenes`) and `reproducible` (bool).
 pub fn parse_job_request(body: &[u8]) -> Result<(JobRequest, Value), ServiceError> {
     let bad = |m: String| ServiceError::InvalidJson(m);
     let mut value: Value = serde_json::from_slice(body)
@@ -51,10 +78,14 @@ pub fn parse_job_request(body: &[u8]) -> Result<(JobRequest, Value), ServiceErro
             "the body must be a JSON object with the training spec".into()
         ));
     };
-    let activate = match map.remove("activate") {
-        None => false,
-        Some(Value::Bool(b)) => b,
-        Some(v) => return Err(bad(format!("activate is {v}; true or false expected"))),
+    let activate = flag(&mut map, "activate")?;
+    let reproducible = flag(&mut map, "reproducible")?;
+    let shards = match map.remove("shards") {
+        None | Some(Value::Null) => None,
+        Some(v) => Some(
+            v.as_u64()
+                .ok_or_else(|| bad(format!("shards is {v}; a whole number from 1 expected")))?,
+        ),
     };
     let sensor = match map.remove("sensor") {
         None | Some(Value::Null) => SensorDesign::paper_default(),
@@ -77,11 +108,27 @@ pub fn parse_job_request(body: &[u8]) -> Result<(JobRequest, Value), ServiceErro
         .map_err(|e| bad(format!("training spec: {}: {}", e.path(), e.inner())))?;
     spec.validate()
         .map_err(|e| ServiceError::BadRequest(e.to_string()))?;
+    let shards = shards
+        .map(|n| {
+            let max = spec.n_batches().min(MAX_SHARDS);
+            usize::try_from(n)
+                .ok()
+                .filter(|n| (1..=max).contains(n))
+                .ok_or_else(|| {
+                    ServiceError::BadRequest(format!(
+                        "shards {n}: 1 to {max} (at most one per training scene, of which the job has {}, and at most {MAX_SHARDS})",
+                        spec.n_batches()
+                    ))
+                })
+        })
+        .transpose()?;
     Ok((
         JobRequest {
             spec,
             sensor,
             activate,
+            shards,
+            reproducible,
         },
         value,
     ))
@@ -106,16 +153,23 @@ pub(super) fn integral_floats_to_ints(v: &mut Value) {
     }
 }
 
-/// A new job's row for `request_json`.
+/// A new job's row for `request_json` (sharded when `shards` is given).
 fn new_job<'a>(
     id: &'a str,
     text: &'a str,
     sha: &'a str,
     activate: bool,
+    shards: Option<usize>,
     idempotency_key: Option<&'a str>,
 ) -> NewJob<'a> {
     NewJob {
         id,
+        kind: if shards.is_some() {
+            JOB_KIND_SHARDED
+        } else {
+            JOB_KIND_TRAIN
+        },
+        shard_count: shards.map(|n| n as i64),
         request_json: text,
         idempotency_key,
         request_sha256: sha,
@@ -124,27 +178,31 @@ fn new_job<'a>(
     }
 }
 
-fn wake_workers(state: &AppState) {
+pub(super) fn wake_workers(state: &AppState) {
     state.job_notify.notify_waiters();
     state.job_notify.notify_one();
 }
 
-/// Inserts a queued job; returns its id, or `None` when `idempotency_key` is already taken.
+/// Inserts a queued job (with its survey shards when it asks for shards); returns its id, or
+/// `None` when `idempotency_key` is already taken.
 pub async fn enqueue(
     state: &AppState,
     request_json: &Value,
-    activate: bool,
+    req: &JobRequest,
     idempotency_key: Option<&str>,
 ) -> Result<Option<String>, ServiceError> {
     let id = new_id("job");
     let text = request_json.to_string();
     let sha = sha256_hex(text.as_bytes());
-    let job = new_job(&id, &text, &sha, activate, idempotency_key);
+    let job = new_job(&id, &text, &sha, req.activate, req.shards, idempotency_key);
     if !state.store.insert_job(&job).await? {
         return Ok(None);
     }
     wake_workers(state);
-    tracing::info!(job = id, "training job queued");
+    match req.shards {
+        Some(n) => tracing::info!(job = id, shards = n, "training job queued in shards"),
+        None => tracing::info!(job = id, "training job queued"),
+    }
     Ok(Some(id))
 }
 
@@ -157,7 +215,7 @@ pub async fn enqueue_default(
     let id = new_id("job");
     let text = request_json.to_string();
     let sha = sha256_hex(text.as_bytes());
-    let job = new_job(&id, &text, &sha, true, Some(DEFAULT_TABLE_JOB_KEY));
+    let job = new_job(&id, &text, &sha, true, None, Some(DEFAULT_TABLE_JOB_KEY));
     let queued = state.store.queue_once(&job).await?;
     if queued.is_some() {
         wake_workers(state);
@@ -188,6 +246,71 @@ fn job_json(row: &JobRow) -> Value {
         "timings": { "queued_ms": queued_ms.max(0), "running_ms": running_ms.map(|v| v.max(0)) },
         "links": { "self": format!("/v1/training-jobs/{id}"), "cancel": format!("/v1/training-jobs/{id}/cancel") },
     })
+}
+
+/// A shard in its job's description.
+fn shard_json(s: &JobRow) -> Value {
+    let running_ms = s
+        .started_at
+        .map(|t| s.finished_at.unwrap_or_else(now_ms) - t);
+    json!({
+        "id": s.id,
+        "stage": shard_stage(&s.kind),
+        "shard": s.shard_index.map(|k| k + 1),
+        "status": s.status.as_str(),
+        "progress": s.progress,
+        "attempts": s.attempts,
+        "replica": s.lease_owner.as_ref().or(s.finished_by.as_ref()),
+        "compute_ms": s.compute_ms,
+        "running_ms": running_ms.map(|v| v.max(0)),
+    })
+}
+
+/// A job as the API describes it. A sharded job counts its shards (`shards`: done of total,
+/// the fraction, each shard, the merge time) and its progress is theirs; a shard names its job.
+async fn job_view(state: &AppState, row: &JobRow) -> Result<Value, ServiceError> {
+    let mut v = job_json(row);
+    if let Some(parent) = &row.parent_id {
+        v["parent_id"] = json!(parent);
+        v["shard"] = json!({
+            "stage": shard_stage(&row.kind),
+            "shard": row.shard_index.map(|k| k + 1),
+            "count": row.shard_count,
+        });
+        v["links"]["cancel"] = json!(format!("/v1/training-jobs/{parent}/cancel"));
+    }
+    if row.kind == JOB_KIND_SHARDED {
+        let shards = state.store.shards(&row.id).await?;
+        let count = row.shard_count.unwrap_or(0).max(0);
+        // a survey and an accumulation shard per shard
+        let total = (2 * count).max(1) as f64;
+        let done = shards
+            .iter()
+            .filter(|s| s.status == JobStatus::Succeeded)
+            .count();
+        let partly: f64 = shards
+            .iter()
+            .map(|s| match s.status {
+                JobStatus::Succeeded => 1.0,
+                JobStatus::Running => s.progress.clamp(0.0, 1.0),
+                _ => 0.0,
+            })
+            .sum();
+        v["progress"] = json!(if row.status == JobStatus::Succeeded {
+            1.0
+        } else {
+            (partly / total).min(1.0)
+        });
+        v["shards"] = json!({
+            "count": count,
+            "done": done,
+            "total": 2 * count,
+            "fraction": done as f64 / total,
+            "merge_ms": row.merge_ms,
+            "items": shards.iter().map(shard_json).collect::<Vec<_>>(),
+        });
+    }
+    Ok(v)
 }
 
 async fn job_row(state: &AppState, id: &str) -> Result<JobRow, ServiceError> {
@@ -231,9 +354,13 @@ pub async fn submit(
         }
     };
     // insert, or find the job the key already names (two replicas may race on one key)
-    if let Some(id) = enqueue(&state, &value, req.activate, key.as_deref()).await? {
+    if let Some(id) = enqueue(&state, &value, &req, key.as_deref()).await? {
         let row = job_row(&state, &id).await?;
-        return Ok(created(&id, job_json(&row), StatusCode::ACCEPTED));
+        return Ok(created(
+            &id,
+            job_view(&state, &row).await?,
+            StatusCode::ACCEPTED,
+        ));
     }
     let k = key.unwrap_or_default();
     let row = state.store.job_by_key(&k).await?.ok_or_else(|| {
@@ -246,7 +373,11 @@ pub async fn submit(
             "Idempotency-Key '{k}' was already used with a different request body"
         )));
     }
-    Ok(created(&row.id, job_json(&row), StatusCode::OK))
+    Ok(created(
+        &row.id,
+        job_view(&state, &row).await?,
+        StatusCode::OK,
+    ))
 }
 
 /// Query of `GET /v1/training-jobs`.
@@ -280,7 +411,10 @@ pub async fn list(
         })
         .transpose()?;
     let rows = state.store.list_jobs(status, limit).await?;
-    let items: Vec<Value> = rows.iter().map(job_json).collect();
+    let mut items = Vec::with_capacity(rows.len());
+    for row in &rows {
+        items.push(job_view(&state, row).await?);
+    }
     Ok(Json(json!({ "items": items })))
 }
 
@@ -289,17 +423,71 @@ pub async fn get(
     State(state): State<AppState>,
     UrlPath(id): UrlPath<String>,
 ) -> Result<Json<Value>, ServiceError> {
-    Ok(Json(job_json(&job_row(&state, &id).await?)))
+    let row = job_row(&state, &id).await?;
+    Ok(Json(job_view(&state, &row).await?))
+}
+
+/// Sets the local cancel flag of `id` if this replica runs it.
+fn signal_local(state: &AppState, id: &str) {
+    let flag = state
+        .running_jobs
+        .lock()
+        .unwrap_or_else(|p| p.into_inner())
+        .get(id)
+        .cloned();
+    if let Some(f) = flag {
+        f.store(true, Ordering::SeqCst);
+    }
+}
+
+/// Waits (up to 2 s) until none of `ids` is running.
+async fn wait_stopped(state: &AppState, ids: &[String]) -> Result<(), ServiceError> {
+    let deadline = Instant::now() + Duration::from_secs(2);
+    for id in ids {
+        while Instant::now() < deadline {
+            if job_row(state, id).await?.status != JobStatus::Running {
+                break;
+            }
+            tokio::time::sleep(Duration::from_millis(25)).await;
+        }
+    }
+    Ok(())
 }
 
 /// `POST /v1/training-jobs/{id}/cancel`: a queued job is canceled at once; a running one is
 /// signalled (through its row, whichever replica runs it) and the answer waits (up to 2 s)
-/// until it has stopped.
+/// until it has stopped. A sharded job is canceled at once with its queued shards, and its
+/// running shards are signalled like running jobs. A shard is canceled through its job.
 pub async fn cancel(
     State(state): State<AppState>,
     UrlPath(id): UrlPath<String>,
 ) -> Result<Json<Value>, ServiceError> {
-    let mut status = job_row(&state, &id).await?.status;
+    let row = job_row(&state, &id).await?;
+    if let Some(parent) = &row.parent_id {
+        return Err(ServiceError::Conflict(format!(
+            "job '{id}' is a shard of job '{parent}'; cancel that job"
+        )));
+    }
+    if row.kind == JOB_KIND_SHARDED {
+        let Some(stopping) = state
+            .store
+            .end_sharded(&id, JobStatus::Canceled, None, now_ms())
+            .await?
+        else {
+            let status = job_row(&state, &id).await?.status;
+            return Err(ServiceError::Conflict(format!(
+                "job '{id}' is {status}; only queued or running jobs can be canceled"
+            )));
+        };
+        tracing::info!(job = id, "sharded training job canceled");
+        for s in &stopping {
+            signal_local(&state, s);
+        }
+        wait_stopped(&state, &stopping).await?;
+        let row = job_row(&state, &id).await?;
+        return Ok(Json(job_view(&state, &row).await?));
+    }
+    let mut status = row.status;
     if status == JobStatus::Queued {
         if state.store.cancel_queued(&id, now_ms()).await? {
             return Ok(Json(job_json(&job_row(&state, &id).await?)));
@@ -310,22 +498,8 @@ pub async fn cancel(
     match status {
         JobStatus::Running => {
             state.store.request_cancel(&id).await?;
-            let flag = state
-                .running_jobs
-                .lock()
-                .unwrap_or_else(|p| p.into_inner())
-                .get(&id)
-                .cloned();
-            if let Some(f) = flag {
-                f.store(true, Ordering::SeqCst);
-            }
-            let deadline = Instant::now() + Duration::from_secs(2);
-            while Instant::now() < deadline {
-                if job_row(&state, &id).await?.status != JobStatus::Running {
-                    break;
-                }
-                tokio::time::sleep(Duration::from_millis(25)).await;
-            }
+            signal_local(&state, &id);
+            wait_stopped(&state, std::slice::from_ref(&id)).await?;
         }
         other => {
             return Err(ServiceError::Conflict(format!(
@@ -341,11 +515,11 @@ pub async fn requeue_interrupted(state: &AppState) -> Result<u64, ServiceError> 
     state.store.requeue_owned(&state.replica_id).await
 }
 
-fn lease(state: &AppState) -> Duration {
+pub(super) fn lease(state: &AppState) -> Duration {
     Duration::from_secs_f64(state.config.training.job_lease_s)
 }
 
-fn lease_until(state: &AppState) -> i64 {
+pub(super) fn lease_until(state: &AppState) -> i64 {
     now_ms() + lease(state).as_millis() as i64
 }
 
@@ -364,14 +538,17 @@ pub async fn worker(state: AppState) {
         let claimed = state
             .store
             .claim_job(
-                JOB_KIND_TRAIN,
+                WORKER_KINDS,
                 &state.replica_id,
                 now_ms(),
                 lease_until(&state),
             )
             .await;
         match claimed {
-            Ok(Some(job)) => run_job(&state, &job.id, &job.request_json).await,
+            Ok(Some(job)) if job.kind == JOB_KIND_TRAIN => {
+                run_job(&state, &job.id, &job.request_json).await
+            }
+            Ok(Some(job)) => super::shard_jobs::run_shard(&state, job).await,
             Ok(None) => {
                 tokio::select! {
                     _ = state.job_notify.notified() => {}
@@ -387,7 +564,7 @@ pub async fn worker(state: AppState) {
     }
 }
 
-async fn finish(
+pub(super) async fn finish(
     state: &AppState,
     id: &str,
     status: JobStatus,
@@ -399,6 +576,7 @@ async fn finish(
         error,
         table_id,
         finished_at: now_ms(),
+        compute_ms: None,
     };
     if !state.store.finish_job(id, &state.replica_id, &end).await? {
         tracing::warn!(
@@ -409,8 +587,225 @@ async fn finish(
     Ok(())
 }
 
+/// The lease of a job this replica runs, renewed by a heartbeat task until [`Lease::end`]:
+/// the heartbeat records the latest progress, brings back a cancel requested through any
+/// replica (and a shutdown) as the cancel flag, and notices a lease lost (the job expired and
+/// went back to the queue): then it stops beating and sets the flag.
+pub(super) struct Lease {
+    state: AppState,
+    id: String,
+    cancel: Arc<AtomicBool>,
+    lost: Arc<AtomicBool>,
+    ending: Arc<AtomicBool>,
+    progress: Arc<Mutex<Option<(String, f64)>>>,
+    stop: Option<tokio::sync::oneshot::Sender<()>>,
+    task: Option<tokio::task::JoinHandle<()>>,
+}
+
+impl Lease {
+    /// Starts beating for the claimed job `id` (and registers its cancel flag).
+    pub(super) fn start(state: &AppState, id: &str) -> Lease {
+        let cancel = Arc::new(AtomicBool::new(false));
+        state
+            .running_jobs
+            .lock()
+            .unwrap_or_else(|p| p.into_inner())
+            .insert(id.to_string(), cancel.clone());
+        let lost = Arc::new(AtomicBool::new(false));
+        let ending = Arc::new(AtomicBool::new(false));
+        let progress = Arc::new(Mutex::new(None));
+        let (stop, stopped) = tokio::sync::oneshot::channel();
+        let task = tokio::spawn(beat(
+            state.clone(),
+            id.to_string(),
+            cancel.clone(),
+            lost.clone(),
+            ending.clone(),
+            progress.clone(),
+            stopped,
+        ));
+        Lease {
+            state: state.clone(),
+            id: id.to_string(),
+            cancel,
+            lost,
+            ending,
+            progress,
+            stop: Some(stop),
+            task: Some(task),
+        }
+    }
+
+    /// The job's cancel flag (a cancel request, a shutdown, a lost lease).
+    pub(super) fn cancel_flag(&self) -> Arc<AtomicBool> {
+        self.cancel.clone()
+    }
+
+    pub(super) fn canceled(&self) -> bool {
+        self.cancel.load(Ordering::SeqCst)
+    }
+
+    /// The progress callback of the job's work (`stage`, fraction).
+    pub(super) fn reporter(&self) -> impl Fn(&str, f64) + Send + Sync + 'static {
+        let p = self.progress.clone();
+        move |stage: &str, f: f64| {
+            let mut g = p.lock().unwrap_or_else(|e| e.into_inner());
+            *g = Some((stage.to_string(), f));
+        }
+    }
+
+    /// Says that the job is about to end its own lease (a shard's end recorded in the
+    /// database): a heartbeat that finds the lease gone from then on is expected, not logged.
+    pub(super) fn ending(&self) {
+        self.ending.store(true, Ordering::SeqCst);
+    }
+
+    /// Stops the heartbeat; returns whether the lease was lost.
+    pub(super) async fn end(mut self) -> bool {
+        if let Some(stop) = self.stop.take() {
+            let _ = stop.send(());
+        }
+        if let Some(task) = self.task.take() {
+            let _ = task.await;
+        }
+        self.lost.load(Ordering::SeqCst)
+    }
+}
+
+impl Drop for Lease {
+    fn drop(&mut self) {
+        if let Some(stop) = self.stop.take() {
+            let _ = stop.send(());
+        }
+        self.state
+            .running_jobs
+            .lock()
+            .unwrap_or_else(|p| p.into_inner())
+            .remove(&self.id);
+    }
+}
+
+/// The heartbeat of [`Lease`]: renews the lease, records progress (at once on a new stage),
+/// looks for a cancel request.
+async fn beat(
+    state: AppState,
+    id: String,
+    cancel: Arc<AtomicBool>,
+    lost: Arc<AtomicBool>,
+    ending: Arc<AtomicBool>,
+    progress: Arc<Mutex<Option<(String, f64)>>>,
+    mut stop: tokio::sync::oneshot::Receiver<()>,
+) {
+    let every = HEARTBEAT.min(lease(&state) / 3);
+    let mut last_beat = Instant::now();
+    let mut last_stage = String::new();
+    loop {
+        tokio::select! {
+            _ = &mut stop => return,
+            _ = state.shutdown_notify.notified() => {
+                cancel.store(true, Ordering::SeqCst);
+            }
+            _ = tokio::time::sleep(Duration::from_millis(50)) => {}
+        }
+        if state.shutting_down.load(Ordering::SeqCst) {
+            cancel.store(true, Ordering::SeqCst);
+        }
+        let current = progress.lock().unwrap_or_else(|p| p.into_inner()).clone();
+        let new_stage = current.as_ref().is_some_and(|(s, _)| *s != last_stage);
+        if !(new_stage || last_beat.elapsed() >= every) {
+            continue;
+        }
+        let p = current
+            .as_ref()
+            .map(|(s, f)| (s.as_str(), f.clamp(0.0, 1.0)));
+        match state
+            .store
+            .heartbeat(&id, &state.replica_id, now_ms(), lease_until(&state), p)
+            .await
+        {
+            Ok(Some(cancel_requested)) => {
+                if cancel_requested {
+                    cancel.store(true, Ordering::SeqCst);
+                }
+            }
+            Ok(None) => {
+                if !ending.load(Ordering::SeqCst) {
+                    tracing::warn!(
+                        job = id,
+                        "the job's lease was lost (it expired or the job was re-queued); stopping it here"
+                    );
+                }
+                lost.store(true, Ordering::SeqCst);
+                cancel.store(true, Ordering::SeqCst);
+                return;
+            }
+            Err(e) => tracing::error!(job = id, "heartbeat: {e}"),
+        }
+        last_beat = Instant::now();
+        if let Some((stage, f)) = current
+            && stage != last_stage
+        {
+            tracing::info!(job = id, stage = %stage, progress = format!("{:.0} %", f * 100.0), "training");
+            last_stage = stage;
+        }
+    }
+}
+
+/// Runs `work` on the background pool and waits for it without blocking the runtime; a panic
+/// (logged) or a lost task is an `Err` with what to record.
+pub(super) async fn on_background<T, F>(state: &AppState, job: &str, work: F) -> Result<T, String>
+where
+    T: Send + 'static,
+    F: FnOnce() -> T + Send + 'static,
+{
+    let (tx, rx) = tokio::sync::oneshot::channel();
+    let job = job.to_string();
+    super::cpu::spawn_catching(&state.pools.background, work, move |r| {
+        let r = r.map_err(|msg| {
+            tracing::error!(job = %job, panic = %msg, "training panicked");
+            format!("training failed unexpectedly: {msg}")
+        });
+        let _ = tx.send(r);
+    });
+    rx.await
+        .unwrap_or_else(|_| Err("the training task was lost".into()))
+}
+
+/// Writes a trained table as a job's table file (blocking): its times zeroed when the job
+/// asked for a reproducible table, written atomically (with the fault-injection pause).
+pub(super) fn write_job_table(
+    state: &AppState,
+    mut table: L3Table,
+    reproducible: bool,
+) -> Result<(L3Table, StoredTable), ServiceError> {
+    if reproducible {
+        table.meta.created_unix_s = 0;
+        table.meta.training_seconds = 0.0;
+    }
+    let stored = write_table_file_with_pause(
+        &state.tables_dir,
+        &table,
+        super::debug_hooks::activation_pause_ms(),
+    )?;
+    Ok((table, stored))
+}
+
+/// Records a job's table in the database and activates it when job `job_id` asked for it.
+pub(super) async fn publish_table(
+    state: &AppState,
+    job_id: &str,
+    table: &L3Table,
+    stored: &StoredTable,
+) -> Result<(), ServiceError> {
+    insert_table(state, stored, table, Some(job_id)).await?;
+    if req_activate(state, job_id).await? {
+        activate_table(state, &stored.id).await?;
+    }
+    Ok(())
+}
+
 enum Outcome {
-    Done(Box<crate::l3::L3Table>, super::tables::StoredTable),
+    Done(Box<L3Table>, StoredTable),
     Canceled,
     Failed(String),
 }
@@ -425,127 +820,23 @@ async fn run_job(state: &AppState, id: &str, request: &str) {
         }
     };
     tracing::info!(job = id, "training job started");
-    let cancel = Arc::new(AtomicBool::new(false));
-    state
-        .running_jobs
-        .lock()
-        .unwrap_or_else(|p| p.into_inner())
-        .insert(id.to_string(), cancel.clone());
-    let (ptx, mut prx) = tokio::sync::mpsc::unbounded_channel::<(String, f64)>();
-    let (tx, mut rx) = tokio::sync::oneshot::channel::<Outcome>();
+    let lease = Lease::start(state, id);
+    let (progress, cancel) = (lease.reporter(), lease.cancel_flag());
     let st = state.clone();
-    let cancel2 = cancel.clone();
-    let pool_state = state.clone();
-    let train = move || {
-        let progress = move |stage: &str, f: f64| {
-            let _ = ptx.send((stage.to_string(), f));
-        };
-        match train_table(
-            &req.sensor,
-            &req.spec,
-            st.iset.as_ref(),
-            &progress,
-            &cancel2,
-        ) {
-            Ok(table) => match write_table_file_with_pause(
-                &st.tables_dir,
-                &table,
-                super::debug_hooks::activation_pause_ms(),
-            ) {
-                Ok(stored) => Outcome::Done(Box::new(table), stored),
+    let train =
+        move || match train_table(&req.sensor, &req.spec, st.iset.as_ref(), &progress, &cancel) {
+            Ok(table) => match write_job_table(&st, table, req.reproducible) {
+                Ok((table, stored)) => Outcome::Done(Box::new(table), stored),
                 Err(e) => Outcome::Failed(e.to_string()),
             },
             Err(TrainError::L3(L3Error::Canceled)) => Outcome::Canceled,
             Err(e) => Outcome::Failed(e.to_string()),
-        }
-    };
-    // a panic fails the job (logged) instead of aborting the process
-    let job = id.to_string();
-    super::cpu::spawn_catching(&pool_state.pools.background, train, move |r| {
-        let outcome = r.unwrap_or_else(|msg| {
-            tracing::error!(job = %job, panic = %msg, "training panicked");
-            Outcome::Failed(format!("training failed unexpectedly: {msg}"))
-        });
-        let _ = tx.send(outcome);
-    });
-    let beat = HEARTBEAT.min(lease(state) / 3);
-    let mut last_beat = Instant::now();
-    let mut last_stage = String::new();
-    let mut pending: Option<(String, f64)> = None;
-    let mut lease_lost = false;
-    let outcome = loop {
-        tokio::select! {
-            r = &mut rx => break r,
-            Some(p) = prx.recv() => {
-                pending = Some(p);
-            }
-            _ = state.shutdown_notify.notified() => {
-                cancel.store(true, Ordering::SeqCst);
-            }
-            _ = tokio::time::sleep(Duration::from_millis(100)) => {}
-        }
-        if state.shutting_down.load(Ordering::SeqCst) {
-            cancel.store(true, Ordering::SeqCst);
-        }
-        let new_stage = pending.as_ref().is_some_and(|(s, _)| *s != last_stage);
-        if lease_lost || !(new_stage || last_beat.elapsed() >= beat) {
-            continue;
-        }
-        // the heartbeat: renew the lease, record progress, look for a cancel request
-        let progress = pending
-            .as_ref()
-            .map(|(s, f)| (s.as_str(), f.clamp(0.0, 1.0)));
-        match state
-            .store
-            .heartbeat(
-                id,
-                &state.replica_id,
-                now_ms(),
-                lease_until(state),
-                progress,
-            )
-            .await
-        {
-            Ok(Some(cancel_requested)) => {
-                if cancel_requested {
-                    cancel.store(true, Ordering::SeqCst);
-                }
-            }
-            Ok(None) => {
-                tracing::warn!(
-                    job = id,
-                    "the job's lease was lost (it expired or the job was re-queued); stopping it here"
-                );
-                lease_lost = true;
-                cancel.store(true, Ordering::SeqCst);
-            }
-            Err(e) => tracing::error!(job = id, "heartbeat: {e}"),
-        }
-        last_beat = Instant::now();
-        if let Some((stage, f)) = pending.take()
-            && stage != last_stage
-        {
-            tracing::info!(job = id, stage = %stage, progress = format!("{:.0} %", f * 100.0), "training");
-            last_stage = stage;
-        }
-    };
-    state
-        .running_jobs
-        .lock()
-        .unwrap_or_else(|p| p.into_inner())
-        .remove(id);
+        };
+    let outcome = on_background(state, id, train).await;
+    let lease_lost = lease.end().await;
     let result = match outcome {
         _ if lease_lost => Ok(()),
-        Err(_) => {
-            finish(
-                state,
-                id,
-                JobStatus::Failed,
-                Some("the training task was lost"),
-                None,
-            )
-            .await
-        }
+        Err(msg) => finish(state, id, JobStatus::Failed, Some(&msg), None).await,
         Ok(Outcome::Canceled) if state.shutting_down.load(Ordering::SeqCst) => {
             tracing::info!(job = id, "training job interrupted by shutdown; re-queued");
             state
@@ -563,10 +854,7 @@ async fn run_job(state: &AppState, id: &str, request: &str) {
         }
         Ok(Outcome::Done(table, stored)) => {
             let r = async {
-                insert_table(state, &stored, &table, Some(id)).await?;
-                if req_activate(state, id).await? {
-                    activate_table(state, &stored.id).await?;
-                }
+                publish_table(state, id, &table, &stored).await?;
                 finish(state, id, JobStatus::Succeeded, None, Some(&stored.id)).await
             }
             .await;
@@ -603,6 +891,10 @@ mod tests {
         assert_eq!(r.spec.scenes, 4);
         let (r, _) = parse_job_request(br#"{"scenes":48.0,"levels":1e1}"#).unwrap();
         assert_eq!((r.spec.scenes, r.spec.levels), (48, 10));
+        assert_eq!((r.shards, r.reproducible), (None, false));
+        let (r, _) =
+            parse_job_request(br#"{"scenes":4,"shards":4.0,"reproducible":true}"#).unwrap();
+        assert_eq!((r.shards, r.reproducible), (Some(4), true));
         for (body, needle) in [
             (&b"{"[..], "not valid JSON"),
             (b"[1]", "JSON object"),
@@ -611,6 +903,12 @@ mod tests {
             (br#"{"activate":"yes"}"#, "activate"),
             (br#"{"sensor":"nikon"}"#, "nikon"),
             (br#"{"scenes":4.5}"#, "scenes"),
+            (br#"{"shards":0}"#, "shards 0: 1 to 48"),
+            (br#"{"scenes":3,"shards":4}"#, "shards 4: 1 to 3"),
+            (br#"{"scenes":100,"shards":65}"#, "at most 64"),
+            (br#"{"shards":-1}"#, "shards"),
+            (br#"{"shards":"2"}"#, "shards"),
+            (br#"{"reproducible":1}"#, "reproducible"),
         ] {
             let e = parse_job_request(body).unwrap_err();
             assert!(e.to_string().contains(needle), "{e}");

@@ -16,6 +16,7 @@ mod jobs;
 mod metrics;
 mod render;
 mod routes;
+mod shard_jobs;
 mod state;
 mod store;
 mod sync;
@@ -196,6 +197,7 @@ pub async fn start_with(
         tables_dir,
         job_notify: Notify::new(),
         running_jobs: Mutex::new(HashMap::new()),
+        training_run: Mutex::new(None),
         shutting_down: AtomicBool::new(false),
         shutdown_notify: Notify::new(),
     }));

@@ -77,6 +77,9 @@ pub struct Inner {
     pub job_notify: Notify,
     /// Cancel flags of the running jobs.
     pub running_jobs: Mutex<HashMap<String, Arc<AtomicBool>>>,
+    /// The training run this replica prepared last, by its sharded job's id: the shards of a
+    /// job that run here share it.
+    pub training_run: Mutex<Option<(String, Arc<crate::training::TrainingRun>)>>,
     pub shutting_down: AtomicBool,
     pub shutdown_notify: Notify,
 }

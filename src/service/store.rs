@@ -96,9 +96,55 @@ impl TryFrom<String> for JobStatus {
     }
 }
 
-/// The kind of a job row; only training today. Workers claim the kinds they run, so a later
-/// kind (e.g. training shards) is queued and claimed the same way.
+/// The kind of a job row. Workers claim the kinds they run ([`WORKER_KINDS`]).
+///
+/// A training job trained in one piece.
 pub const JOB_KIND_TRAIN: &str = "train";
+/// A training job split into shards: its shard rows are claimed, never the job itself.
+pub const JOB_KIND_SHARDED: &str = "train_sharded";
+/// The survey of one shard's batches (stage 1 of a sharded job).
+pub const JOB_KIND_SURVEY_SHARD: &str = "survey_shard";
+/// The normal equations of one shard's batches (stage 2); the last one to end also merges.
+pub const JOB_KIND_ACCUMULATE_SHARD: &str = "accumulate_shard";
+/// The kinds a job worker claims.
+pub const WORKER_KINDS: &[&str] = &[
+    JOB_KIND_TRAIN,
+    JOB_KIND_SURVEY_SHARD,
+    JOB_KIND_ACCUMULATE_SHARD,
+];
+
+/// The stage of a shard kind, as the partial sums are filed (`survey` or `accumulate`).
+pub fn shard_stage(kind: &str) -> Option<&'static str> {
+    match kind {
+        JOB_KIND_SURVEY_SHARD => Some("survey"),
+        JOB_KIND_ACCUMULATE_SHARD => Some("accumulate"),
+        _ => None,
+    }
+}
+
+/// The id of shard `index` (0-based) of `kind` of job `parent`: `<parent>-survey-1`, … (fixed,
+/// so that a stage's rows are inserted once however often it is tried).
+pub fn shard_id(parent: &str, kind: &str, index: i64) -> String {
+    format!(
+        "{parent}-{}-{}",
+        shard_stage(kind).unwrap_or(kind),
+        index + 1
+    )
+}
+
+/// How ending a shard's step went ([`Store::complete_shard`]).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum ShardCompletion {
+    /// The shard ended succeeded; other shards of its stage are still to end.
+    Done,
+    /// The last shard of its stage: after the survey the accumulation shards are queued (and
+    /// this one ended); after the accumulation this one merges, still under its lease.
+    Last,
+    /// The job of the shard ended meanwhile (canceled or failed): nothing was recorded.
+    ParentEnded,
+    /// The shard's lease is not its runner's any more: nothing was recorded.
+    LeaseLost,
+}
 
 /// A `training_jobs` row.
 #[derive(Debug, Clone, sqlx::FromRow)]
@@ -122,16 +168,43 @@ pub struct JobRow {
     pub lease_owner: Option<String>,
     pub lease_expires_at: Option<i64>,
     pub cancel_requested: i64,
+    /// The job a shard belongs to.
+    pub parent_id: Option<String>,
+    pub shard_index: Option<i64>,
+    /// A shard's and a sharded job's number of shards.
+    pub shard_count: Option<i64>,
+    pub compute_ms: Option<i64>,
+    pub merge_ms: Option<i64>,
+    pub finished_by: Option<String>,
 }
 
 /// A new job to insert.
 #[derive(Debug, Clone)]
 pub struct NewJob<'a> {
     pub id: &'a str,
+    /// [`JOB_KIND_TRAIN`] or [`JOB_KIND_SHARDED`] (then [`Store::insert_job`] also queues the
+    /// survey shards).
+    pub kind: &'a str,
+    /// Shards of a sharded job.
+    pub shard_count: Option<i64>,
     pub request_json: &'a str,
     pub idempotency_key: Option<&'a str>,
     pub request_sha256: &'a str,
     pub activate: bool,
+    pub created_at: i64,
+}
+
+/// A shard's partial sums to store.
+#[derive(Debug, Clone)]
+pub struct NewPartial<'a> {
+    /// The sharded job.
+    pub job_id: &'a str,
+    /// `survey` or `accumulate`.
+    pub stage: &'a str,
+    pub shard_index: i64,
+    pub content: &'a [u8],
+    pub sha256: &'a str,
+    pub replica: &'a str,
     pub created_at: i64,
 }
 
@@ -142,6 +215,8 @@ pub struct JobEnd<'a> {
     pub error: Option<&'a str>,
     pub table_id: Option<&'a str>,
     pub finished_at: i64,
+    /// A shard's own work, milliseconds.
+    pub compute_ms: Option<i64>,
 }
 
 /// An `l3_tables` row (without the bytes).
@@ -216,6 +291,42 @@ macro_rules! on_pool {
         match $store {
             Store::Sqlite($p) => $body,
             Store::Postgres($p) => $body,
+        }
+    };
+}
+
+/// The rows of a stage's shards, queued together.
+struct NewShards<'a> {
+    parent: &'a str,
+    kind: &'a str,
+    count: i64,
+    request_json: &'a str,
+    request_sha256: &'a str,
+    /// The job's creation time: shards are claimed in the order of their jobs.
+    created_at: i64,
+}
+
+/// Inserts the rows of [`NewShards`] in the transaction `$tx` (either backend; a row already
+/// there is left alone).
+macro_rules! insert_shards {
+    ($tx:ident, $s:expr) => {
+        for k in 0..$s.count {
+            sqlx::query(
+                "INSERT INTO training_jobs (id, kind, status, request_json, request_sha256, activate,
+                 progress, stage, created_at, parent_id, shard_index, shard_count)
+                 VALUES ($1, $2, $3, $4, $5, 0, 0, $3, $6, $7, $8, $9) ON CONFLICT DO NOTHING",
+            )
+            .bind(shard_id($s.parent, $s.kind, k))
+            .bind($s.kind)
+            .bind(JobStatus::Queued.as_str())
+            .bind($s.request_json)
+            .bind($s.request_sha256)
+            .bind($s.created_at)
+            .bind($s.parent)
+            .bind(k)
+            .bind($s.count)
+            .execute(&mut *$tx)
+            .await?;
         }
     };
 }
@@ -303,23 +414,42 @@ impl Store {
 
     // ---- jobs ----
 
-    /// Inserts a queued job; false when its idempotency key is already taken.
+    /// Inserts a queued job; false when its idempotency key is already taken. A sharded job's
+    /// survey shards are queued with it, in one transaction.
     pub async fn insert_job(&self, j: &NewJob<'_>) -> Result<bool, ServiceError> {
-        let n = on_pool!(self, p => sqlx::query(
-            "INSERT INTO training_jobs (id, kind, status, request_json, idempotency_key, request_sha256, activate, progress, stage, created_at)
-             VALUES ($1, $2, $3, $4, $5, $6, $7, 0, $3, $8) ON CONFLICT DO NOTHING",
-        )
-        .bind(j.id)
-        .bind(JOB_KIND_TRAIN)
-        .bind(JobStatus::Queued.as_str())
-        .bind(j.request_json)
-        .bind(j.idempotency_key)
-        .bind(j.request_sha256)
-        .bind(i64::from(j.activate))
-        .bind(j.created_at)
-        .execute(p)
-        .await?
-        .rows_affected());
+        let queued = JobStatus::Queued.as_str();
+        let n = on_pool!(self, p => {
+            let mut tx = p.begin().await?;
+            let n = sqlx::query(
+                "INSERT INTO training_jobs (id, kind, status, request_json, idempotency_key, request_sha256, activate, progress, stage, created_at, shard_count)
+                 VALUES ($1, $2, $3, $4, $5, $6, $7, 0, $3, $8, $9) ON CONFLICT DO NOTHING",
+            )
+            .bind(j.id)
+            .bind(j.kind)
+            .bind(queued)
+            .bind(j.request_json)
+            .bind(j.idempotency_key)
+            .bind(j.request_sha256)
+            .bind(i64::from(j.activate))
+            .bind(j.created_at)
+            .bind(j.shard_count)
+            .execute(&mut *tx)
+            .await?
+            .rows_affected();
+            if n == 1 && j.kind == JOB_KIND_SHARDED {
+                let shards = NewShards {
+                    parent: j.id,
+                    kind: JOB_KIND_SURVEY_SHARD,
+                    count: j.shard_count.unwrap_or(1),
+                    request_json: j.request_json,
+                    request_sha256: j.request_sha256,
+                    created_at: j.created_at,
+                };
+                insert_shards!(tx, shards);
+            }
+            tx.commit().await?;
+            n
+        });
         if n == 1 {
             self.notify(Change::Jobs).await?;
         }
@@ -351,7 +481,7 @@ impl Store {
         limit: i64,
     ) -> Result<Vec<JobRow>, ServiceError> {
         Ok(on_pool!(self, p => sqlx::query_as::<_, JobRow>(
-            "SELECT * FROM training_jobs WHERE ($1 IS NULL OR status = $1)
+            "SELECT * FROM training_jobs WHERE ($1 IS NULL OR status = $1) AND parent_id IS NULL
              ORDER BY created_at DESC, id LIMIT $2",
         )
         .bind(status.map(JobStatus::as_str))
@@ -389,55 +519,57 @@ impl Store {
         Ok(n == 1)
     }
 
-    /// Claims the oldest queued job of `kind` for `owner` under a lease until `lease_until`:
-    /// `SELECT … FOR UPDATE SKIP LOCKED` on PostgreSQL, one atomic UPDATE on SQLite (a single
-    /// writer).
+    /// Claims the oldest queued job of one of `kinds` for `owner` under a lease until
+    /// `lease_until`: `SELECT … FOR UPDATE SKIP LOCKED` on PostgreSQL, one atomic UPDATE on
+    /// SQLite (a single writer). Shards carry their job's creation time, so they come in the
+    /// order of their jobs, by index within one.
     pub async fn claim_job(
         &self,
-        kind: &str,
+        kinds: &[&str],
         owner: &str,
         now: i64,
         lease_until: i64,
     ) -> Result<Option<JobRow>, ServiceError> {
-        let row = match self {
-            Store::Postgres(p) => {
-                sqlx::query_as::<_, JobRow>(
-                    "UPDATE training_jobs SET status = $1, stage = 'starting', progress = 0,
-                     attempts = attempts + 1, started_at = $2, lease_owner = $3,
-                     lease_expires_at = $4, heartbeat_at = $2
-                     WHERE id = (SELECT id FROM training_jobs WHERE status = $5 AND kind = $6
-                                 ORDER BY created_at, id LIMIT 1 FOR UPDATE SKIP LOCKED)
-                     RETURNING *",
-                )
-                .bind(JobStatus::Running.as_str())
-                .bind(now)
-                .bind(owner)
-                .bind(lease_until)
-                .bind(JobStatus::Queued.as_str())
-                .bind(kind)
-                .fetch_optional(p)
-                .await?
-            }
-            Store::Sqlite(p) => {
-                sqlx::query_as::<_, JobRow>(
-                    "UPDATE training_jobs SET status = $1, stage = 'starting', progress = 0,
-                     attempts = attempts + 1, started_at = $2, lease_owner = $3,
-                     lease_expires_at = $4, heartbeat_at = $2
-                     WHERE status = $5 AND id = (SELECT id FROM training_jobs
-                                                 WHERE status = $5 AND kind = $6
-                                                 ORDER BY created_at, id LIMIT 1)
-                     RETURNING *",
-                )
-                .bind(JobStatus::Running.as_str())
-                .bind(now)
-                .bind(owner)
-                .bind(lease_until)
-                .bind(JobStatus::Queued.as_str())
-                .bind(kind)
-                .fetch_optional(p)
-                .await?
-            }
+        let kinds_sql = (0..kinds.len().max(1))
+            .map(|i| format!("${}", i + 6))
+            .collect::<Vec<_>>()
+            .join(", ");
+        let sql = match self {
+            Store::Postgres(_) => format!(
+                "UPDATE training_jobs SET status = $1, stage = 'starting', progress = 0,
+                 attempts = attempts + 1, started_at = $2, lease_owner = $3,
+                 lease_expires_at = $4, heartbeat_at = $2
+                 WHERE id = (SELECT id FROM training_jobs WHERE status = $5 AND kind IN ({kinds_sql})
+                             ORDER BY created_at, COALESCE(shard_index, 0), id
+                             LIMIT 1 FOR UPDATE SKIP LOCKED)
+                 RETURNING *"
+            ),
+            Store::Sqlite(_) => format!(
+                "UPDATE training_jobs SET status = $1, stage = 'starting', progress = 0,
+                 attempts = attempts + 1, started_at = $2, lease_owner = $3,
+                 lease_expires_at = $4, heartbeat_at = $2
+                 WHERE status = $5 AND id = (SELECT id FROM training_jobs
+                                             WHERE status = $5 AND kind IN ({kinds_sql})
+                                             ORDER BY created_at, COALESCE(shard_index, 0), id
+                                             LIMIT 1)
+                 RETURNING *"
+            ),
         };
+        let row = on_pool!(self, p => {
+            let mut q = sqlx::query_as::<_, JobRow>(&sql)
+                .bind(JobStatus::Running.as_str())
+                .bind(now)
+                .bind(owner)
+                .bind(lease_until)
+                .bind(JobStatus::Queued.as_str());
+            if kinds.is_empty() {
+                q = q.bind("");
+            }
+            for k in kinds {
+                q = q.bind(*k);
+            }
+            q.fetch_optional(p).await?
+        });
         Ok(row)
     }
 
@@ -486,7 +618,8 @@ impl Store {
         let n = on_pool!(self, p => sqlx::query(
             "UPDATE training_jobs SET status = $1, stage = $1, error = $2, table_id = $3,
              progress = CASE WHEN $4 >= 0 THEN $4 ELSE progress END, finished_at = $5,
-             lease_owner = NULL, lease_expires_at = NULL
+             lease_owner = NULL, lease_expires_at = NULL, finished_by = $7,
+             compute_ms = COALESCE($9, compute_ms)
              WHERE id = $6 AND lease_owner = $7 AND status = $8",
         )
         .bind(end.status.as_str())
@@ -497,6 +630,7 @@ impl Store {
         .bind(id)
         .bind(owner)
         .bind(JobStatus::Running.as_str())
+        .bind(end.compute_ms)
         .execute(p)
         .await?
         .rows_affected());
@@ -527,16 +661,18 @@ impl Store {
     }
 
     /// Re-queues the jobs left running by this replica's previous run (a crash or restart),
-    /// and those running without an owner (recorded before leases existed).
+    /// and training jobs running without an owner (recorded before leases existed; a running
+    /// sharded job has no owner, its shards do).
     pub async fn requeue_owned(&self, owner: &str) -> Result<u64, ServiceError> {
         Ok(on_pool!(self, p => sqlx::query(
             "UPDATE training_jobs SET status = $1, stage = 'requeued after restart', progress = 0,
              lease_owner = NULL, lease_expires_at = NULL
-             WHERE status = $2 AND (lease_owner = $3 OR lease_owner IS NULL)",
+             WHERE status = $2 AND (lease_owner = $3 OR (lease_owner IS NULL AND kind = $4))",
         )
         .bind(JobStatus::Queued.as_str())
         .bind(JobStatus::Running.as_str())
         .bind(owner)
+        .bind(JOB_KIND_TRAIN)
         .execute(p)
         .await?
         .rows_affected()))
@@ -601,13 +737,302 @@ impl Store {
         .await?))
     }
 
-    /// Job counts by state.
+    /// Job counts by state (jobs, not their shards).
     pub async fn job_counts(&self) -> Result<Vec<(String, i64)>, ServiceError> {
         Ok(on_pool!(self, p => sqlx::query_as::<_, (String, i64)>(
-            "SELECT status, COUNT(*) FROM training_jobs GROUP BY status",
+            "SELECT status, COUNT(*) FROM training_jobs WHERE parent_id IS NULL GROUP BY status",
         )
         .fetch_all(p)
         .await?))
+    }
+
+    // ---- shards ----
+
+    /// The shard rows of job `parent`, survey shards first, by index.
+    pub async fn shards(&self, parent: &str) -> Result<Vec<JobRow>, ServiceError> {
+        Ok(on_pool!(self, p => sqlx::query_as::<_, JobRow>(
+            "SELECT * FROM training_jobs WHERE parent_id = $1
+             ORDER BY CASE WHEN kind = $2 THEN 0 ELSE 1 END, shard_index",
+        )
+        .bind(parent)
+        .bind(JOB_KIND_SURVEY_SHARD)
+        .fetch_all(p)
+        .await?))
+    }
+
+    /// Marks a queued sharded job running when its first shard starts (the time it started).
+    pub async fn start_sharded(&self, parent: &str, now: i64) -> Result<(), ServiceError> {
+        on_pool!(self, p => sqlx::query(
+            "UPDATE training_jobs SET status = $1, stage = 'survey', started_at = $2,
+             attempts = attempts + 1
+             WHERE id = $3 AND status = $4",
+        )
+        .bind(JobStatus::Running.as_str())
+        .bind(now)
+        .bind(parent)
+        .bind(JobStatus::Queued.as_str())
+        .execute(p)
+        .await?
+        .rows_affected());
+        Ok(())
+    }
+
+    /// Ends a queued or running sharded job as `status` (canceled or failed, with `error`):
+    /// its queued shards end canceled, its running shards are asked to stop (their ids are
+    /// returned), its partial sums are deleted. `None` when the job had ended already.
+    pub async fn end_sharded(
+        &self,
+        parent: &str,
+        status: JobStatus,
+        error: Option<&str>,
+        now: i64,
+    ) -> Result<Option<Vec<String>>, ServiceError> {
+        let (queued, running, canceled) = (
+            JobStatus::Queued.as_str(),
+            JobStatus::Running.as_str(),
+            JobStatus::Canceled.as_str(),
+        );
+        on_pool!(self, p => {
+            let mut tx = p.begin().await?;
+            let n = sqlx::query(
+                "UPDATE training_jobs SET status = $1, stage = $1, error = $2, finished_at = $3
+                 WHERE id = $4 AND status IN ($5, $6)",
+            )
+            .bind(status.as_str())
+            .bind(error)
+            .bind(now)
+            .bind(parent)
+            .bind(queued)
+            .bind(running)
+            .execute(&mut *tx)
+            .await?
+            .rows_affected();
+            if n == 0 {
+                return Ok(None);
+            }
+            sqlx::query(
+                "UPDATE training_jobs SET status = $1, stage = $1, finished_at = $2
+                 WHERE parent_id = $3 AND status = $4",
+            )
+            .bind(canceled)
+            .bind(now)
+            .bind(parent)
+            .bind(queued)
+            .execute(&mut *tx)
+            .await?;
+            let stopping: Vec<String> = sqlx::query_scalar(
+                "UPDATE training_jobs SET cancel_requested = 1 WHERE parent_id = $1 AND status = $2
+                 RETURNING id",
+            )
+            .bind(parent)
+            .bind(running)
+            .fetch_all(&mut *tx)
+            .await?;
+            sqlx::query("DELETE FROM training_partials WHERE job_id = $1")
+                .bind(parent)
+                .execute(&mut *tx)
+                .await?;
+            tx.commit().await?;
+            Ok(Some(stopping))
+        })
+    }
+
+    /// Stores a shard's partial sums (bytes and SHA-256) while its job is queued or running;
+    /// a part already stored (the same bytes: a shard retried after its lease expired) is left
+    /// alone.
+    pub async fn store_partial(&self, part: &NewPartial<'_>) -> Result<(), ServiceError> {
+        on_pool!(self, p => sqlx::query(
+            "INSERT INTO training_partials (job_id, stage, shard_index, content, sha256, size_bytes, replica, created_at)
+             SELECT $1, $2, $3, $4, $5, $6, $7, $8
+             WHERE EXISTS (SELECT 1 FROM training_jobs WHERE id = $1 AND status IN ($9, $10))
+             ON CONFLICT DO NOTHING",
+        )
+        .bind(part.job_id)
+        .bind(part.stage)
+        .bind(part.shard_index)
+        .bind(part.content)
+        .bind(part.sha256)
+        .bind(part.content.len() as i64)
+        .bind(part.replica)
+        .bind(part.created_at)
+        .bind(JobStatus::Queued.as_str())
+        .bind(JobStatus::Running.as_str())
+        .execute(p)
+        .await?
+        .rows_affected());
+        Ok(())
+    }
+
+    /// The stored partial sums of `stage` of job `parent` as (shard index, bytes, recorded
+    /// SHA-256), by index; `only` picks one shard.
+    pub async fn partials(
+        &self,
+        parent: &str,
+        stage: &str,
+        only: Option<i64>,
+    ) -> Result<Vec<(i64, Vec<u8>, String)>, ServiceError> {
+        Ok(
+            on_pool!(self, p => sqlx::query_as::<_, (i64, Vec<u8>, String)>(
+            "SELECT shard_index, content, sha256 FROM training_partials
+             WHERE job_id = $1 AND stage = $2 AND ($3 IS NULL OR shard_index = $3)
+             ORDER BY shard_index",
+        )
+        .bind(parent)
+        .bind(stage)
+        .bind(only)
+        .fetch_all(p)
+        .await?),
+        )
+    }
+
+    /// Records the end of `owner`'s shard `shard`, whose partial sums are stored, under a lock
+    /// of its job's row (so that exactly one shard of a stage finds itself last, on either
+    /// backend). After the survey the last shard queues the accumulation shards; the last
+    /// accumulation shard stays running (it merges) and the job's stage becomes `merge`.
+    pub async fn complete_shard(
+        &self,
+        shard: &JobRow,
+        owner: &str,
+        now: i64,
+        compute_ms: i64,
+    ) -> Result<ShardCompletion, ServiceError> {
+        let Some(parent) = shard.parent_id.as_deref() else {
+            return Ok(ShardCompletion::ParentEnded);
+        };
+        let (running, succeeded) = (JobStatus::Running.as_str(), JobStatus::Succeeded.as_str());
+        let done = on_pool!(self, p => {
+            let mut tx = p.begin().await?;
+            // the lock: every shard of the job ends one after the other
+            let status: Option<String> = sqlx::query_scalar(
+                "UPDATE training_jobs SET stage = stage WHERE id = $1 RETURNING status",
+            )
+            .bind(parent)
+            .fetch_optional(&mut *tx)
+            .await?;
+            if status.as_deref() != Some(running) {
+                return Ok(ShardCompletion::ParentEnded);
+            }
+            let mine: i64 = sqlx::query_scalar(
+                "SELECT COUNT(*) FROM training_jobs WHERE id = $1 AND lease_owner = $2 AND status = $3",
+            )
+            .bind(&shard.id)
+            .bind(owner)
+            .bind(running)
+            .fetch_one(&mut *tx)
+            .await?;
+            if mine == 0 {
+                return Ok(ShardCompletion::LeaseLost);
+            }
+            let others: i64 = sqlx::query_scalar(
+                "SELECT COUNT(*) FROM training_jobs
+                 WHERE parent_id = $1 AND kind = $2 AND id <> $3 AND status <> $4",
+            )
+            .bind(parent)
+            .bind(&shard.kind)
+            .bind(&shard.id)
+            .bind(succeeded)
+            .fetch_one(&mut *tx)
+            .await?;
+            let last = others == 0;
+            if last && shard.kind == JOB_KIND_ACCUMULATE_SHARD {
+                sqlx::query("UPDATE training_jobs SET stage = 'merge' WHERE id = $1 OR id = $2")
+                    .bind(parent)
+                    .bind(&shard.id)
+                    .execute(&mut *tx)
+                    .await?;
+                sqlx::query("UPDATE training_jobs SET compute_ms = $1 WHERE id = $2")
+                    .bind(compute_ms)
+                    .bind(&shard.id)
+                    .execute(&mut *tx)
+                    .await?;
+            } else {
+                sqlx::query(
+                    "UPDATE training_jobs SET status = $1, stage = $1, progress = 1, finished_at = $2,
+                     compute_ms = $3, finished_by = $4, lease_owner = NULL, lease_expires_at = NULL
+                     WHERE id = $5",
+                )
+                .bind(succeeded)
+                .bind(now)
+                .bind(compute_ms)
+                .bind(owner)
+                .bind(&shard.id)
+                .execute(&mut *tx)
+                .await?;
+            }
+            if last && shard.kind == JOB_KIND_SURVEY_SHARD {
+                let next = NewShards {
+                    parent,
+                    kind: JOB_KIND_ACCUMULATE_SHARD,
+                    count: shard.shard_count.unwrap_or(1),
+                    request_json: &shard.request_json,
+                    request_sha256: &shard.request_sha256,
+                    created_at: shard.created_at,
+                };
+                insert_shards!(tx, next);
+                sqlx::query("UPDATE training_jobs SET stage = 'accumulate' WHERE id = $1")
+                    .bind(parent)
+                    .execute(&mut *tx)
+                    .await?;
+            }
+            tx.commit().await?;
+            if last { ShardCompletion::Last } else { ShardCompletion::Done }
+        });
+        if done == ShardCompletion::Last && shard.kind == JOB_KIND_SURVEY_SHARD {
+            self.notify(Change::Jobs).await?;
+        }
+        Ok(done)
+    }
+
+    /// Ends a running sharded job succeeded with its table and merge time, together with its
+    /// last shard (`by`'s, which merged), and deletes its partial sums; false when the job had
+    /// ended meanwhile (canceled).
+    pub async fn finish_sharded(
+        &self,
+        parent: &str,
+        shard: &str,
+        table_id: &str,
+        merge_ms: i64,
+        by: &str,
+        now: i64,
+    ) -> Result<bool, ServiceError> {
+        on_pool!(self, p => {
+            let mut tx = p.begin().await?;
+            let n = sqlx::query(
+                "UPDATE training_jobs SET status = $1, stage = $1, progress = 1, table_id = $2,
+                 merge_ms = $3, finished_by = $4, finished_at = $5
+                 WHERE id = $6 AND status = $7",
+            )
+            .bind(JobStatus::Succeeded.as_str())
+            .bind(table_id)
+            .bind(merge_ms)
+            .bind(by)
+            .bind(now)
+            .bind(parent)
+            .bind(JobStatus::Running.as_str())
+            .execute(&mut *tx)
+            .await?
+            .rows_affected();
+            if n == 1 {
+                sqlx::query(
+                    "UPDATE training_jobs SET status = $1, stage = $1, progress = 1, finished_at = $2,
+                     finished_by = $3, lease_owner = NULL, lease_expires_at = NULL
+                     WHERE id = $4 AND lease_owner = $3 AND status = $5",
+                )
+                .bind(JobStatus::Succeeded.as_str())
+                .bind(now)
+                .bind(by)
+                .bind(shard)
+                .bind(JobStatus::Running.as_str())
+                .execute(&mut *tx)
+                .await?;
+            }
+            sqlx::query("DELETE FROM training_partials WHERE job_id = $1")
+                .bind(parent)
+                .execute(&mut *tx)
+                .await?;
+            tx.commit().await?;
+            Ok(n == 1)
+        })
     }
 
     // ---- tables ----
@@ -834,6 +1259,8 @@ mod tests {
         let s = Store::connect("", dir.path()).await.unwrap();
         let job = |id: &'static str, key: Option<&'static str>| NewJob {
             id,
+            kind: JOB_KIND_TRAIN,
+            shard_count: None,
             request_json: "{}",
             idempotency_key: key,
             request_sha256: "x",
@@ -843,7 +1270,7 @@ mod tests {
         assert!(s.insert_job(&job("a", Some("k"))).await.unwrap());
         assert!(!s.insert_job(&job("b", Some("k"))).await.unwrap());
         let c = s
-            .claim_job(JOB_KIND_TRAIN, "r1", 10, 20)
+            .claim_job(&[JOB_KIND_TRAIN], "r1", 10, 20)
             .await
             .unwrap()
             .unwrap();
@@ -852,7 +1279,7 @@ mod tests {
             ("a", JobStatus::Running, 1)
         );
         assert!(
-            s.claim_job(JOB_KIND_TRAIN, "r2", 10, 20)
+            s.claim_job(&[JOB_KIND_TRAIN], "r2", 10, 20)
                 .await
                 .unwrap()
                 .is_none()
@@ -882,13 +1309,122 @@ mod tests {
         );
         assert_eq!(s.queue_once(&job("d", Some("k"))).await.unwrap(), None);
         let c = s
-            .claim_job(JOB_KIND_TRAIN, "r2", 40, 50)
+            .claim_job(&[JOB_KIND_TRAIN], "r2", 40, 50)
             .await
             .unwrap()
             .unwrap();
         assert_eq!((c.attempts, c.cancel_requested), (2, 0));
         assert_eq!(s.requeue_expired(51).await.unwrap(), 1);
         assert_eq!(s.job("a").await.unwrap().unwrap().status, JobStatus::Queued);
+        s.close().await;
+    }
+
+    #[tokio::test]
+    async fn sqlite_store_runs_shards_and_finds_the_last_one_once() {
+        let dir = tempfile::tempdir().unwrap();
+        let s = Store::connect("", dir.path()).await.unwrap();
+        let parent = NewJob {
+            id: "p",
+            kind: JOB_KIND_SHARDED,
+            shard_count: Some(2),
+            request_json: "{}",
+            idempotency_key: None,
+            request_sha256: "x",
+            activate: false,
+            created_at: 1,
+        };
+        assert!(s.insert_job(&parent).await.unwrap());
+        // the job itself is never claimed; its survey shards are, in order
+        let kinds = WORKER_KINDS;
+        let a = s.claim_job(kinds, "r1", 10, 100).await.unwrap().unwrap();
+        let b = s.claim_job(kinds, "r2", 10, 100).await.unwrap().unwrap();
+        assert_eq!((a.id.as_str(), b.id.as_str()), ("p-survey-1", "p-survey-2"));
+        assert!(s.claim_job(kinds, "r1", 10, 100).await.unwrap().is_none());
+        s.start_sharded("p", 10).await.unwrap();
+        assert_eq!(s.list_jobs(None, 10).await.unwrap().len(), 1);
+        // a shard whose lease is not its runner's records nothing
+        assert_eq!(
+            s.complete_shard(&a, "r2", 11, 5).await.unwrap(),
+            ShardCompletion::LeaseLost
+        );
+        assert_eq!(
+            s.complete_shard(&a, "r1", 11, 5).await.unwrap(),
+            ShardCompletion::Done
+        );
+        assert_eq!(
+            s.complete_shard(&b, "r2", 12, 6).await.unwrap(),
+            ShardCompletion::Last
+        );
+        // the accumulation shards are queued once the survey is complete
+        let c = s.claim_job(kinds, "r1", 13, 100).await.unwrap().unwrap();
+        let d = s.claim_job(kinds, "r2", 13, 100).await.unwrap().unwrap();
+        assert_eq!(c.id, "p-accumulate-1");
+        assert_eq!(
+            s.complete_shard(&d, "r2", 14, 7).await.unwrap(),
+            ShardCompletion::Done
+        );
+        assert_eq!(
+            s.complete_shard(&c, "r1", 15, 8).await.unwrap(),
+            ShardCompletion::Last
+        );
+        // the last one is still running (it merges); the job's stage says so
+        let (pj, cj) = (
+            s.job("p").await.unwrap().unwrap(),
+            s.job(&c.id).await.unwrap().unwrap(),
+        );
+        assert_eq!(
+            (pj.stage.as_deref(), cj.status),
+            (Some("merge"), JobStatus::Running)
+        );
+        let part = NewPartial {
+            job_id: "p",
+            stage: "accumulate",
+            shard_index: 0,
+            content: b"sums",
+            sha256: "h",
+            replica: "r1",
+            created_at: 15,
+        };
+        s.store_partial(&part).await.unwrap();
+        s.store_partial(&part).await.unwrap();
+        assert_eq!(s.partials("p", "accumulate", None).await.unwrap().len(), 1);
+        assert!(
+            s.finish_sharded("p", &c.id, "tbl", 3, "r1", 16)
+                .await
+                .unwrap()
+        );
+        assert_eq!(
+            s.job(&c.id).await.unwrap().unwrap().status,
+            JobStatus::Succeeded
+        );
+        assert!(
+            s.partials("p", "accumulate", None)
+                .await
+                .unwrap()
+                .is_empty()
+        );
+        assert_eq!(s.shards("p").await.unwrap().len(), 4);
+        // a job canceled while queued takes its shards with it
+        let q = NewJob { id: "q", ..parent };
+        assert!(s.insert_job(&q).await.unwrap());
+        let e = s.claim_job(kinds, "r1", 20, 100).await.unwrap().unwrap();
+        let stopping = s
+            .end_sharded("q", JobStatus::Canceled, None, 21)
+            .await
+            .unwrap()
+            .unwrap();
+        assert_eq!(stopping, vec![e.id.clone()]);
+        assert!(s.claim_job(kinds, "r1", 22, 100).await.unwrap().is_none());
+        assert_eq!(
+            s.complete_shard(&e, "r1", 23, 1).await.unwrap(),
+            ShardCompletion::ParentEnded
+        );
+        assert!(
+            s.end_sharded("q", JobStatus::Canceled, None, 24)
+                .await
+                .unwrap()
+                .is_none()
+        );
         s.close().await;
     }
 }

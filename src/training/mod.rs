@@ -177,6 +177,15 @@ impl TrainingSpec {
         Ok(())
     }
 
+    /// Batches of a run of this spec (one training scene each): what a run
+    /// can be split into ([`TrainingRun::plan`]).
+    pub fn n_batches(&self) -> usize {
+        // A fixed scene budget: scene s is lit by illuminant s mod n (an
+        // ensemble is a mixture of scenes, not every scene under every
+        // light), so an ensemble costs what a single-illuminant table costs.
+        self.scenes
+    }
+
     /// The L3 parameters this spec implies for a sensor with `swing` volts.
     pub fn params(&self, swing: f64) -> Result<L3Params, TrainError> {
         let p = L3Params {
@@ -302,10 +311,7 @@ impl TrainingRun {
 
     /// Batches of the run (one training scene each).
     pub fn n_batches(&self) -> usize {
-        // A fixed scene budget: scene s is lit by illuminant s mod n (an
-        // ensemble is a mixture of scenes, not every scene under every
-        // light), so an ensemble costs what a single-illuminant table costs.
-        self.spec.scenes
+        self.spec.n_batches()
     }
 
     /// SHA-256 (hex) of the sensor design and the spec: names the run in
@@ -416,13 +422,27 @@ impl TrainingRun {
         progress: &(dyn Fn(&str, f64) + Sync),
         cancel: &AtomicBool,
     ) -> Result<L3Table, TrainError> {
+        Ok(self.finish_timed(classes, parts, progress, cancel)?.0)
+    }
+
+    /// [`TrainingRun::finish`], also giving the seconds the merge of the
+    /// sums took (the rest is the solve and the packaging).
+    pub fn finish_timed(
+        &self,
+        classes: Classes,
+        parts: Vec<GramPartial>,
+        progress: &(dyn Fn(&str, f64) + Sync),
+        cancel: &AtomicBool,
+    ) -> Result<(L3Table, f64), TrainError> {
         let ctl = TrainControl { progress, cancel };
         if parts.iter().any(|p| p.run_key != self.run_key) {
             return Err(L3Error::PartialSums("sums of another training run".into()).into());
         }
+        let t = Instant::now();
         let grams = merge_partials(&classes, parts)?;
+        let merged = t.elapsed().as_secs_f64();
         let learned = solve_learned(&self.setup(), classes, grams, &ctl)?;
-        self.package(learned)
+        Ok((self.package(learned)?, merged))
     }
 
     /// Batch `b`: scene `b` under illuminant `b mod n`, at every level
