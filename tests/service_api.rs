@@ -199,6 +199,39 @@ async fn render_of_a_tungsten_frame_equals_l3_render_bit_for_bit() {
     let r = post_png(format!("{q}&png_compression=tiny")).await.unwrap();
     let detail = problem(r, 400, "bad_request").await;
     assert!(detail.contains("fast, default or best"), "{detail}");
+    // the correction: camera-aware C by default, the paper's T on request, on both sides
+    let r = post_png(q.clone()).await.unwrap();
+    assert_eq!(r.headers()["x-l3-correction"], "camera");
+    l3_cli(
+        &[
+            "render",
+            "--table",
+            "table.safetensors",
+            "--in",
+            "sim/mosaic.raw",
+            "--illuminant",
+            "Tungsten",
+            "--correction",
+            "colorimetric",
+            "--out",
+            "cli-t.png",
+        ],
+        d,
+    );
+    let r = post_png(format!("{q}&correction=colorimetric"))
+        .await
+        .unwrap();
+    assert_eq!(r.status(), 200);
+    assert_eq!(r.headers()["x-l3-correction"], "colorimetric");
+    let body_t = r.bytes().await.unwrap();
+    assert!(
+        body_t[..] == std::fs::read(d.join("cli-t.png")).unwrap()[..],
+        "colorimetric PNG bytes differ from l3 render --correction colorimetric"
+    );
+    assert!(decode_png(&body_t) != ours, "T and C render the same pixels");
+    let r = post_png(format!("{q}&correction=magic")).await.unwrap();
+    let detail = problem(r, 400, "bad_request").await;
+    assert!(detail.contains("camera or colorimetric"), "{detail}");
     // and the PPM holds the same pixels as the PNG
     let ppm = std::fs::read(d.join("cli.ppm")).unwrap();
     let ppm = image::load_from_memory_with_format(&ppm, image::ImageFormat::Pnm)
