@@ -11,7 +11,7 @@ use std::time::{Duration, Instant};
 use super::ServiceError;
 use super::state::{AppState, new_id, now_ms, sha256_hex};
 use super::store::{JOB_KIND_TRAIN, JobEnd, JobRow, JobStatus, NewJob};
-use super::tables::{activate_table, insert_table, write_table_file_with_pause};
+use super::tables::{activate_table, insert_table, write_table_file};
 use crate::camera::SensorDesign;
 use crate::l3::L3Error;
 use crate::training::{TrainError, TrainingSpec, train_table};
@@ -447,11 +447,7 @@ async fn run_job(state: &AppState, id: &str, request: &str) {
             &progress,
             &cancel2,
         ) {
-            Ok(table) => match write_table_file_with_pause(
-                &st.tables_dir,
-                &table,
-                super::debug_hooks::activation_pause_ms(),
-            ) {
+            Ok(table) => match write_table_file(&st.tables_dir, &table) {
                 Ok(stored) => Outcome::Done(Box::new(table), stored),
                 Err(e) => Outcome::Failed(e.to_string()),
             },
