@@ -9,6 +9,9 @@ use std::sync::{Arc, Mutex, OnceLock};
 
 use serde_json::Value;
 
+/// Statuses any route may answer, by the document's description.
+const ANY_ROUTE: [u16; 3] = [405, 500, 504];
+
 /// The document, as JSON.
 fn document() -> &'static Value {
     static DOC: OnceLock<Value> = OnceLock::new();
@@ -142,6 +145,17 @@ pub fn check_response(
         return validate(doc, schema, &value).map_err(|e| format!("{status} on {path}: {e}"));
     };
     let item = &doc["paths"][template];
+    // the statuses the document's description gives every route (405 to a method a route does
+    // not serve, 500, 504 past the request timeout) are problems wherever no operation lists them
+    if ANY_ROUTE.contains(&status)
+        && !["get", "put", "post", "delete", "patch"].iter().any(|m| {
+            item.get(*m)
+                .is_some_and(|op| op["responses"].get(status.to_string()).is_some())
+        })
+    {
+        let schema = json_schema_of(doc, &doc["components"]["responses"]["Problem"], &media)?;
+        return validate(doc, schema, &value).map_err(|e| format!("{status} on {path}: {e}"));
+    }
     let methods: Vec<String> = match method {
         Some(m) => vec![m.to_ascii_lowercase()],
         None => ["get", "put", "post", "delete", "patch"]
