@@ -1,5 +1,7 @@
 //! Fuzz target bodies, shared by the cargo-fuzz targets in `fuzz/` and by
 //! `tests/fuzz_regressions.rs` (which replays saved crashers under `cargo test`).
+//! Compiled only with the `test-support` feature (the fuzz crate and the crate's own
+//! tests turn it on; a release build of the library has no such module).
 //!
 //! Each body takes arbitrary bytes, runs one input decoder and what the
 //! service does with a decoded value next, and checks the invariants the
@@ -8,36 +10,16 @@
 //! non-finite correction matrix), which is what the fuzzer reports.
 
 use std::sync::OnceLock;
-use std::sync::atomic::AtomicBool;
 
 use crate::camera::Cfa;
 use crate::io::{
     DecodedMosaic, DngWriteInfo, Limits, MosaicFormat, RawMeta, decode_dng,
     decode_mosaic_with_info, decode_raw_u16_le, detect_format, encode_dng,
 };
-use crate::l3::IlluminantEntry;
-use crate::l3::{
-    IlluminantRegistry, L3Error, L3Params, L3Table, NoiseModel, PatchGeometry,
-    TABLE_FORMAT_VERSION, TableKind, TableMeta, TrainControl, TrainingFrame, WhiteLevel, learn,
-    package, render_reference, white_y, xyz_to_srgb8,
-};
-use crate::service::parse_job_request;
+use crate::l3::{IlluminantRegistry, L3Table, WhiteLevel, render_reference, white_y, xyz_to_srgb8};
+use crate::service::{IlluminantDefinition, RenderQuery, apply_illuminant, parse_job_request};
 use crate::spectral::{Extrapolation, WavelengthGrid, ces_reflectances};
-
-/// The render query parameters: the service's own type.
-pub use crate::service::RenderQuery as RawRenderQuery;
-/// An illuminant upload body (exactly one of a matrix, an SPD or a CCT): the service's own type.
-pub use crate::service::{IlluminantDefinition as IlluminantUpload, SpdSamples as UploadSpd};
-
-/// Apply an upload to a registry exactly as `PUT /v1/illuminants/{name}` does.
-pub fn apply_upload(
-    reg: &mut IlluminantRegistry,
-    name: &str,
-    def: &IlluminantUpload,
-) -> Result<IlluminantEntry, L3Error> {
-    crate::service::apply_illuminant(reg, name, def)
-        .map_err(|e| L3Error::InvalidInput(e.to_string()))
-}
+use crate::test_support::tiny_table;
 
 /// Names of the fuzz targets, as directories under `tests/fuzz_regressions/`
 /// and binaries under `fuzz/fuzz_targets/`.
@@ -73,149 +55,6 @@ const FUZZ_LIMITS: Limits = Limits {
 
 /// Frames up to this many pixels are also rendered.
 const RENDER_MAX_PIXELS: usize = 4096;
-
-/// Linear responses of the synthetic sensor's R, G, W, B channels to XYZ.
-const SYNTH_SENSOR: [[f32; 3]; 4] = [
-    [0.9, 0.1, -0.05],
-    [-0.3, 1.1, 0.1],
-    [0.5, 0.6, 0.4],
-    [0.0, -0.1, 0.9],
-];
-
-/// A small deterministic generator (SplitMix64) for the synthetic frames.
-struct SplitMix(u64);
-
-impl SplitMix {
-    fn next_f32(&mut self) -> f32 {
-        self.0 = self.0.wrapping_add(0x9E37_79B9_7F4A_7C15);
-        let mut z = self.0;
-        z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
-        z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
-        ((z ^ (z >> 31)) >> 40) as f32 / (1u64 << 24) as f32
-    }
-}
-
-/// A synthetic training frame: blocks of random colour seen by a linear
-/// `RG/WB` sensor ([`SYNTH_SENSOR`]) at exposure `scale`, with uniform noise of
-/// amplitude `noise` volts, the CFA shifted by `shift`.
-pub fn synthetic_frame(
-    seed: u64,
-    size: usize,
-    scale: f32,
-    noise: f32,
-    shift: (usize, usize),
-) -> TrainingFrame {
-    let mut rng = SplitMix(seed);
-    let block = 6;
-    let nb = size.div_ceil(block);
-    let colours: Vec<[f32; 3]> = (0..nb * nb)
-        .map(|_| {
-            let y = 0.05 + 0.95 * rng.next_f32();
-            [
-                y * (0.6 + 0.6 * rng.next_f32()),
-                y,
-                y * (0.5 + 0.8 * rng.next_f32()),
-            ]
-        })
-        .collect();
-    let pattern = [0usize, 1, 2, 3]; // R G / W B
-    let mut volts = vec![0f32; size * size];
-    let mut xyz = vec![0f32; size * size * 3];
-    for r in 0..size {
-        for c in 0..size {
-            let col = colours[(r / block) * nb + c / block].map(|v| v * scale);
-            let ch = pattern[((r + shift.0) % 2) * 2 + (c + shift.1) % 2];
-            let v: f32 = (0..3).map(|k| SYNTH_SENSOR[ch][k] * col[k]).sum();
-            let n = (2.0 * rng.next_f32() - 1.0) * noise;
-            volts[r * size + c] = (v + n).clamp(0.0, 1.8);
-            xyz[(r * size + c) * 3..(r * size + c) * 3 + 3].copy_from_slice(&col);
-        }
-    }
-    TrainingFrame {
-        width: size,
-        height: size,
-        volts,
-        xyz,
-        cfa_shift: shift,
-    }
-}
-
-/// Table metadata for a table learned from synthetic `RG/WB` frames.
-pub fn synthetic_meta(params: &L3Params) -> Result<TableMeta, L3Error> {
-    let cfa = Cfa::parse("RG/WB").map_err(|e| L3Error::InvalidParams(e.to_string()))?;
-    Ok(TableMeta {
-        format: "l3-table".into(),
-        version: TABLE_FORMAT_VERSION,
-        kind: TableKind::SameIlluminant,
-        train_illuminants: vec!["synthetic".into()],
-        target_illuminant: "same".into(),
-        sensor_name: "synthetic-rgbw".into(),
-        sensor: serde_json::Value::Null,
-        cfa,
-        grid: WavelengthGrid::default(),
-        params: params.clone(),
-        voltage_swing: 1.8,
-        saturation_threshold: 1.8 - params.saturation_margin_v,
-        sat_cases: vec![0],
-        xyz_scale_note: "synthetic linear sensor".into(),
-        seed: 0,
-        created_unix_s: 0,
-        training_seconds: 0.0,
-        summary: serde_json::Value::Null,
-    })
-}
-
-/// Learn a small table (3×3 patches, 4 levels) from synthetic frames: a
-/// fraction of a second, no spectral data needed.
-pub fn train_tiny_table() -> Result<L3Table, L3Error> {
-    let params = L3Params {
-        patch_size: 3,
-        levels: L3Params::levels_for(4, 1.8)?,
-        min_class_samples: 40,
-        ..L3Params::default()
-    };
-    let cfa = Cfa::parse("RG/WB").map_err(|e| L3Error::InvalidParams(e.to_string()))?;
-    let geo = PatchGeometry::new(3, &cfa, &params.levels, 1.8 - params.saturation_margin_v)?;
-    let cancel = AtomicBool::new(false);
-    let ctl = TrainControl {
-        progress: &|_, _| {},
-        cancel: &cancel,
-    };
-    let noise = NoiseModel {
-        conversion_gain_v: 2e-4,
-        read_noise_v: 1e-3,
-        dsnu_v: 0.0,
-        prnu_fraction: 0.0,
-    };
-    let learned = learn(
-        &geo,
-        &params,
-        noise,
-        16,
-        |i| {
-            let scale = [0.002f32, 0.02, 0.2, 1.0, 2.5][i % 5];
-            Ok(vec![synthetic_frame(
-                i as u64,
-                24,
-                scale,
-                0.002,
-                (i % 2, (i / 2) % 2),
-            )])
-        },
-        None,
-        &ctl,
-    )?;
-    package(synthetic_meta(&params)?, learned)
-}
-
-/// The tiny table of [`train_tiny_table`], trained once per process.
-pub fn tiny_table() -> &'static L3Table {
-    static T: OnceLock<Result<L3Table, String>> = OnceLock::new();
-    match T.get_or_init(|| train_tiny_table().map_err(|e| e.to_string())) {
-        Ok(t) => t,
-        Err(e) => panic!("the tiny synthetic table does not train: {e}"),
-    }
-}
 
 /// Render `volts` with the tiny table when the frame is small, and check the
 /// output is finite and encodes.
@@ -262,7 +101,7 @@ fn render_small(volts: &[f32], w: usize, h: usize, white: WhiteLevel) {
 /// `application/octet-stream` render path takes them.
 ///
 /// Input layout: if the first byte is `b'?'`, a query string up to the first
-/// `b'\n'` (parsed as [`RawRenderQuery`]) and then the body; otherwise a binary
+/// `b'\n'` (parsed as the service's [`RenderQuery`]) and then the body; otherwise a binary
 /// header `width u8, height u8, black u16 LE, white u16 LE` and then the body.
 pub fn fuzz_raw_query(data: &[u8]) {
     let (q, body) = if data.first() == Some(&b'?') {
@@ -272,7 +111,7 @@ pub fn fuzz_raw_query(data: &[u8]) {
             Ok(u) => u,
             Err(_) => return,
         };
-        let q = match axum::extract::Query::<RawRenderQuery>::try_from_uri(&uri) {
+        let q = match axum::extract::Query::<RenderQuery>::try_from_uri(&uri) {
             Ok(q) => q.0,
             Err(_) => return,
         };
@@ -281,12 +120,12 @@ pub fn fuzz_raw_query(data: &[u8]) {
         if data.len() < 6 {
             return;
         }
-        let q = RawRenderQuery {
+        let q = RenderQuery {
             width: Some(usize::from(data[0])),
             height: Some(usize::from(data[1])),
             black_level: Some(u16::from_le_bytes([data[2], data[3]])),
             white_level: Some(u16::from_le_bytes([data[4], data[5]])),
-            ..RawRenderQuery::default()
+            ..RenderQuery::default()
         };
         (q, &data[6..])
     };
@@ -553,18 +392,18 @@ fn fuzz_registry() -> &'static IlluminantRegistry {
 }
 
 /// An illuminant upload: a name up to the first `b'\n'`, then the JSON body
-/// ([`IlluminantUpload`]: a matrix, an SPD or a CCT), applied to a registry
-/// as the service's `PUT /v1/illuminants/{name}` does ([`apply_upload`]).
+/// ([`IlluminantDefinition`]: a matrix, an SPD or a CCT), applied to a registry
+/// as the service's `PUT /v1/illuminants/{name}` does ([`apply_illuminant`]).
 pub fn fuzz_illuminant_upload(data: &[u8]) {
     let end = data.iter().position(|&b| b == b'\n').unwrap_or(0);
     let name = String::from_utf8_lossy(&data[..end]).into_owned();
     let body = &data[(end + 1).min(data.len())..];
-    let def: IlluminantUpload = match serde_json::from_slice(body) {
+    let def: IlluminantDefinition = match serde_json::from_slice(body) {
         Ok(d) => d,
         Err(_) => return,
     };
     let mut reg = fuzz_registry().clone();
-    match apply_upload(&mut reg, &name, &def) {
+    match apply_illuminant(&mut reg, &name, &def) {
         Ok(entry) => {
             assert!(
                 entry.t.iter().flatten().all(|v| v.is_finite()),

@@ -13,6 +13,9 @@
 //!   service and the evaluation render through;
 //! - the command line in [`cli`], which only calls the core;
 //! - the HTTP render service in [`service`], which depends on the core (never the reverse).
+//!
+//! Test support (the synthetic-table fixture and the fuzz bodies) is compiled only for the
+//! crate's own tests and with the `test-support` feature, never into a release build.
 
 // Index loops read best in numeric kernels.
 #![allow(clippy::needless_range_loop)]
@@ -23,6 +26,7 @@ pub mod camera;
 pub mod cli;
 pub mod colour;
 pub mod eval;
+#[cfg(feature = "test-support")]
 pub mod fuzzing;
 pub mod io;
 pub mod l3;
@@ -30,4 +34,6 @@ pub mod render_pipeline;
 pub mod scene;
 pub mod service;
 pub mod spectral;
+#[cfg(any(test, feature = "test-support"))]
+pub mod test_support;
 pub mod training;

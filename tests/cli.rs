@@ -5,6 +5,26 @@
 use std::path::Path;
 use std::process::Command;
 
+/// Runs `f` on the state of a service started on `data` (no listener in use beyond a free
+/// local port, no default training), then stops the service.
+fn with_service<F, Fut, T>(data: &Path, f: F) -> T
+where
+    F: FnOnce(l3::service::AppState) -> Fut,
+    Fut: std::future::Future<Output = T>,
+{
+    let rt = tokio::runtime::Runtime::new().unwrap();
+    rt.block_on(async {
+        let mut cfg = l3::service::ServiceConfig::load_with_env(None, &[]).unwrap();
+        cfg.server.bind = "127.0.0.1:0".parse().unwrap();
+        cfg.data.dir = data.to_path_buf();
+        cfg.training.auto_train_default = false;
+        let server = l3::service::start(cfg).await.unwrap();
+        let out = f(server.state().clone()).await;
+        server.shutdown().await.unwrap();
+        out
+    })
+}
+
 fn l3(args: &[&str], dir: &Path) -> (bool, String, String) {
     let out = Command::new(env!("CARGO_BIN_EXE_l3"))
         .args(args)
@@ -214,7 +234,8 @@ fn simulate_train_render_eval() {
         assert!(err.contains(says), "{extra:?}: {err}");
     }
 
-    // without --table: the one table of the data directory, else an error that says what to do
+    // without --table: the data directory's active table (recorded in its database), else an
+    // error that says what to do
     let data = d.join("data");
     let input = sim.join("mosaic.raw");
     let no_table = |out: &str| {
@@ -239,25 +260,46 @@ fn simulate_train_render_eval() {
         err.contains("no --table given") && err.contains("l3 train"),
         "{err}"
     );
+    // a table file alone is not an active table
     std::fs::create_dir_all(data.join("tables")).unwrap();
     std::fs::copy(&table, data.join("tables/t1.safetensors")).unwrap();
+    let (ok, _, err) = no_table("none.png");
+    assert!(!ok && err.contains("no active table"), "{err}");
+    // a service on the directory stores the trained table and makes it active; then the
+    // tiny synthetic table, not active
+    let trained = l3::l3::L3Table::load(&table).unwrap();
+    let (active_id, other_id) = with_service(&data, |state| async move {
+        let a = l3::service::import_table(&state, &trained, true)
+            .await
+            .unwrap();
+        let b = l3::service::import_table(&state, l3::test_support::tiny_table(), false)
+            .await
+            .unwrap();
+        (a, b)
+    });
     let (ok, out, err) = no_table("data.png");
     assert!(
         ok,
         "render with the data directory's table failed: {out}{err}"
     );
-    assert!(out.contains("t1.safetensors"), "{out}");
+    assert!(err.contains(&format!("table: {active_id}")), "{err}");
+    assert!(out.contains(&format!("{active_id}.safetensors")), "{out}");
     assert_eq!(
         std::fs::read(d.join("data.png")).unwrap(),
         std::fs::read(d.join("out.png")).unwrap()
     );
-    std::fs::copy(&table, data.join("tables/t2.safetensors")).unwrap();
-    let (ok, _, err) = no_table("two.png");
-    assert!(!ok);
+    // the active table's file damaged: passed over (said) for the last good one, as a
+    // service start would
+    let active_file = data.join(format!("tables/{active_id}.safetensors"));
+    let good = std::fs::read(&active_file).unwrap();
+    std::fs::write(&active_file, b"damaged").unwrap();
+    let (ok, out, err) = no_table("fallback.png");
+    assert!(ok, "{out}{err}");
     assert!(
-        err.contains("2 tables") && err.contains("t2.safetensors"),
+        err.contains(&format!("table {active_id}")) && err.contains(&format!("table: {other_id}")),
         "{err}"
     );
+    std::fs::write(&active_file, good).unwrap();
 
     let report = d.join("report.json");
     let (ok, out, err) = l3(
@@ -613,4 +655,92 @@ fn serve_takes_bind_and_data_dir_flags() {
         !tmp.path().join("data").exists(),
         "the default data dir was used"
     );
+}
+
+/// Runs `l3 serve` with `env` until it exits (it must, within 60 s); returns its exit code
+/// and its standard error.
+fn serve_until_exit(dir: &Path, args: &[&str], env: &[(&str, &str)]) -> (Option<i32>, String) {
+    let mut cmd = Command::new(env!("CARGO_BIN_EXE_l3"));
+    cmd.arg("serve")
+        .args(args)
+        .env("L3_AUTO_TRAIN", "false")
+        .env("L3_ISET_DIR", dir.join("no-iset"))
+        .env("L3_LOG_FORMAT", "text")
+        .env("NO_COLOR", "1")
+        .current_dir(dir)
+        .stdout(std::process::Stdio::null())
+        .stderr(std::process::Stdio::piped());
+    for (k, v) in env {
+        cmd.env(k, v);
+    }
+    let mut child = cmd.spawn().expect("spawn l3 serve");
+    let deadline = std::time::Instant::now() + std::time::Duration::from_secs(60);
+    let status = loop {
+        match child.try_wait().expect("wait for l3 serve") {
+            Some(s) => break s,
+            None if std::time::Instant::now() < deadline => {
+                std::thread::sleep(std::time::Duration::from_millis(50))
+            }
+            None => {
+                let _ = child.kill();
+                let _ = child.wait();
+                panic!("l3 serve {args:?} did not exit");
+            }
+        }
+    };
+    let mut err = String::new();
+    if let Some(mut e) = child.stderr.take() {
+        use std::io::Read;
+        let _ = e.read_to_string(&mut err);
+    }
+    (status.code(), err)
+}
+
+/// A start that fails is no usage error: a busy address and a database that cannot be opened
+/// exit with code 1 (not 2) and say why, and a busy address leaves the data directory alone.
+#[test]
+fn serve_start_failures_exit_1_with_the_reason() {
+    let tmp = tempfile::tempdir().unwrap();
+    let d = tmp.path();
+    let taken = std::net::TcpListener::bind("127.0.0.1:0").unwrap();
+    let bind = taken.local_addr().unwrap().to_string();
+    let data = d.join("busy");
+    let (code, err) = serve_until_exit(
+        d,
+        &["--bind", &bind, "--data-dir", data.to_str().unwrap()],
+        &[],
+    );
+    assert_eq!(code, Some(1), "{err}");
+    assert!(
+        err.contains(&format!("cannot listen on {bind}")) && err.contains("--bind"),
+        "{err}"
+    );
+    assert!(
+        !data.exists(),
+        "a start that cannot listen created {data:?}"
+    );
+    drop(taken);
+
+    let free = std::net::TcpListener::bind("127.0.0.1:0")
+        .unwrap()
+        .local_addr()
+        .unwrap()
+        .to_string();
+    let data = d.join("db");
+    let data_arg = ["--bind", &free, "--data-dir", data.to_str().unwrap()];
+    // an unknown scheme
+    let (code, err) = serve_until_exit(d, &data_arg, &[("L3_DATABASE_URL", "mysql://db/l3")]);
+    assert_eq!(code, Some(1), "{err}");
+    assert!(
+        err.contains("database_url 'mysql://db/l3'") && err.contains("postgres://"),
+        "{err}"
+    );
+    // a SQLite file that cannot be created (its directory does not exist)
+    let (code, err) = serve_until_exit(
+        d,
+        &data_arg,
+        &[("L3_DATABASE_URL", "sqlite:///nonexistent-dir/l3/l3.sqlite")],
+    );
+    assert_eq!(code, Some(1), "{err}");
+    assert!(err.contains("database"), "{err}");
 }

@@ -6,12 +6,12 @@
 use std::path::{Path, PathBuf};
 use std::process::Command;
 
-use l3::fuzzing::tiny_table;
 use l3::io::{
     DecodedMosaic, Limits, MosaicFormat, PngCompression, decode_mosaic_with_meta, encode_png_rgb8,
     read_mosaic,
 };
 use l3::l3::{FastRenderer, Mosaic, WhiteLevel};
+use l3::test_support::tiny_table;
 
 fn fixtures() -> Vec<PathBuf> {
     let dir = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("tests/fixtures/dng");

@@ -8,11 +8,12 @@
 
 use std::path::{Path, PathBuf};
 
-use l3::fuzzing::{FUZZ_TARGETS, run_target, tiny_table};
+use l3::fuzzing::{FUZZ_TARGETS, run_target};
 use l3::io::{
     DngWriteInfo, RawFrame, RawMeta, encode_dng, encode_png_gray16, encode_tiff_gray_f32,
     encode_tiff_gray16,
 };
+use l3::test_support::tiny_table;
 
 fn root() -> PathBuf {
     PathBuf::from(env!("CARGO_MANIFEST_DIR"))

@@ -228,7 +228,10 @@ async fn render_of_a_tungsten_frame_equals_l3_render_bit_for_bit() {
         body_t[..] == std::fs::read(d.join("cli-t.png")).unwrap()[..],
         "colorimetric PNG bytes differ from l3 render --correction colorimetric"
     );
-    assert!(decode_png(&body_t) != ours, "T and C render the same pixels");
+    assert!(
+        decode_png(&body_t) != ours,
+        "T and C render the same pixels"
+    );
     let r = post_png(format!("{q}&correction=magic")).await.unwrap();
     let detail = problem(r, 400, "bad_request").await;
     assert!(detail.contains("camera or colorimetric"), "{detail}");

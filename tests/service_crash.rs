@@ -7,6 +7,8 @@
 //! `L3_DEBUG_PAUSE_ACTIVATION_MS`, which makes the service pause (and log) just before the
 //! rename of a new table file and just before recording a table switch.
 
+mod service_support;
+
 use std::io::{BufRead, BufReader};
 use std::path::{Path, PathBuf};
 use std::process::{Child, Command, Stdio};
@@ -14,6 +16,7 @@ use std::sync::{Arc, Mutex};
 use std::time::{Duration, Instant};
 
 use serde_json::{Value, json};
+use service_support::checked_json;
 
 /// A running `l3 serve` child with its captured log lines.
 struct Service {
@@ -119,12 +122,7 @@ impl Service {
 
     async fn get(&self, path: &str) -> (u16, Value) {
         let r = reqwest::get(self.url(path)).await.expect("GET");
-        let status = r.status().as_u16();
-        let bytes = r.bytes().await.unwrap();
-        (
-            status,
-            serde_json::from_slice(&bytes).unwrap_or(Value::Null),
-        )
+        checked_json("GET", r).await
     }
 
     async fn post(&self, path: &str, body: &Value) -> (u16, Value) {
@@ -134,12 +132,7 @@ impl Service {
             .send()
             .await
             .expect("POST");
-        let status = r.status().as_u16();
-        let bytes = r.bytes().await.unwrap();
-        (
-            status,
-            serde_json::from_slice(&bytes).unwrap_or(Value::Null),
-        )
+        checked_json("POST", r).await
     }
 
     /// Polls a job until `done(job)`; panics with the log after `secs`.

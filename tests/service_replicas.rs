@@ -15,6 +15,7 @@ use std::sync::{Arc, Mutex};
 use std::time::{Duration, Instant};
 
 use serde_json::{Value, json};
+use service_support::checked_json;
 use service_support::pg::PgServer;
 
 /// The lease of the test replicas (seconds): short, so a dead replica's job returns quickly.
@@ -140,27 +141,17 @@ impl Replica {
 
     async fn get(&self, path: &str) -> (u16, Value) {
         let r = reqwest::get(self.url(path)).await.expect("GET");
-        let status = r.status().as_u16();
-        let bytes = r.bytes().await.unwrap();
-        (
-            status,
-            serde_json::from_slice(&bytes).unwrap_or(Value::Null),
-        )
+        checked_json("GET", r).await
     }
 
     async fn send(&self, method: reqwest::Method, path: &str, body: &Value) -> (u16, Value) {
         let r = reqwest::Client::new()
-            .request(method, self.url(path))
+            .request(method.clone(), self.url(path))
             .json(body)
             .send()
             .await
             .expect("request");
-        let status = r.status().as_u16();
-        let bytes = r.bytes().await.unwrap();
-        (
-            status,
-            serde_json::from_slice(&bytes).unwrap_or(Value::Null),
-        )
+        checked_json(method.as_str(), r).await
     }
 
     async fn post(&self, path: &str, body: &Value) -> (u16, Value) {

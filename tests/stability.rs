@@ -22,7 +22,6 @@ use std::sync::atomic::AtomicBool;
 
 use l3::camera::{Camera, NoiseSwitches, SensorDesign, mosaic};
 use l3::colour::{Cmfs, D65_WHITE_XYZ, ciede2000, xyz_to_lab};
-use l3::fuzzing::{synthetic_frame, synthetic_meta, tiny_table};
 use l3::io::{Limits, RawMeta, decode_mosaic, decode_raw_u16_le};
 use l3::l3::{
     IDENTITY, L3Error, L3Params, L3Table, Learned, NoiseModel, PatchGeometry, RidgeChoice,
@@ -30,6 +29,9 @@ use l3::l3::{
     package, render_reference,
 };
 use l3::spectral::{Extrapolation, Spectrum, WavelengthGrid, cie_illuminant};
+use l3::test_support::{
+    synthetic_channel, synthetic_frame, synthetic_meta, synthetic_volts, tiny_table,
+};
 use l3::training::{TrainingScenes, TrainingSpec, train_table};
 use nalgebra::{DMatrix, DVector};
 
@@ -60,24 +62,12 @@ fn small_params() -> L3Params {
     }
 }
 
-/// Learn from synthetic `RG/WB` frames produced by `frames(i)`.
+/// Learn from synthetic `RG/WB` frames produced by `frames(i)` (the paper's noise).
 fn learn_synthetic<F>(params: &L3Params, n: usize, frames: F) -> Result<Learned, L3Error>
 where
     F: Fn(usize) -> Result<Vec<TrainingFrame>, L3Error> + Sync,
 {
-    let cfa = l3::camera::Cfa::parse("RG/WB").unwrap();
-    let geo = PatchGeometry::new(
-        params.patch_size,
-        &cfa,
-        &params.levels,
-        1.8 - params.saturation_margin_v,
-    )?;
-    let cancel = ctl_parts();
-    let ctl = TrainControl {
-        progress: &|_, _| {},
-        cancel: &cancel,
-    };
-    learn(&geo, params, noise_model(), n, frames, None, &ctl)
+    l3::test_support::learn_synthetic(params, noise_model(), n, frames)
 }
 
 /// Checks a table: finite kernels, bounded norms; prints norms and
@@ -139,22 +129,14 @@ fn flat_frame(
 ) -> TrainingFrame {
     let mut f = synthetic_frame(seed, size, 1.0, 0.0, shift);
     // rebuild the volts from one colour
-    let m = [
-        [0.9f32, 0.1, -0.05],
-        [-0.3, 1.1, 0.1],
-        [0.5, 0.6, 0.4],
-        [0.0, -0.1, 0.9],
-    ];
     let mut s = seed.wrapping_mul(0x9E37_79B9_7F4A_7C15) | 1;
     for r in 0..size {
         for c in 0..size {
-            let ch = [0, 1, 2, 3][((r + shift.0) % 2) * 2 + (c + shift.1) % 2];
-            let v: f32 = (0..3).map(|k| m[ch][k] * xyz[k]).sum();
             s ^= s << 13;
             s ^= s >> 7;
             s ^= s << 17;
             let n = ((s >> 40) as f32 / (1u64 << 24) as f32 * 2.0 - 1.0) * noise;
-            f.volts[r * size + c] = (v + n).clamp(0.0, 1.8);
+            f.volts[r * size + c] = synthetic_volts(synthetic_channel(r, c, shift), xyz, n);
             f.xyz[(r * size + c) * 3..(r * size + c) * 3 + 3].copy_from_slice(&xyz);
         }
     }
@@ -230,7 +212,7 @@ fn a_saturation_case_missing_at_one_position_still_trains() {
     // positions only; training then failed with "class (position 0, level 0,
     // case 1) has no samples at any level". Such classes now borrow the
     // samples of their fallback case with the case's channels zeroed.
-    let t = l3::fuzzing::train_tiny_table().unwrap();
+    let t = l3::test_support::train_tiny_table().unwrap();
     println!("tiny table saturation cases: {:?}", t.meta.sat_cases);
     assert!(t.n_sat_cases() > 1);
     check_table("tiny synthetic table", &t);

@@ -64,6 +64,10 @@ pub enum CliError {
     Train(#[from] crate::training::TrainError),
     #[error(transparent)]
     Bench(#[from] crate::bench::BenchError),
+    /// The service could not start (its address, its database, its data directory) or
+    /// stopped with an error: exit code 1, not a usage error.
+    #[error("the service: {0}")]
+    Service(#[from] crate::service::ServiceError),
     #[error("{path}: {source}")]
     File {
         path: String,
@@ -116,7 +120,8 @@ pub(crate) fn write_file(path: &std::path::Path, bytes: &[u8]) -> Result<(), Cli
     })
 }
 
-/// Run the CLI; errors are printed and turn into exit code 1 (2 for usage).
+/// Run the CLI; errors are printed and turn into exit code 1 (2 for usage: bad arguments or
+/// configuration).
 pub fn main() -> ExitCode {
     let cli = Cli::parse();
     let result = match &cli.command {

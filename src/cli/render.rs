@@ -16,16 +16,19 @@ use crate::render_pipeline::{
     CorrectionMode, OutputFormat, PipelineError, RenderOptions, RenderPipeline, check_preview,
     correction_for, kernels_for, parse_region,
 };
+use crate::service::{ServiceConfig, ServiceError};
 
 #[derive(Args, Debug)]
 pub struct RenderArgs {
-    /// The L3 table (safetensors). Default: the one table file in the service's data
-    /// directory (`--data-dir`), if it holds exactly one.
+    /// The L3 table (safetensors). Default: the active table of the service's data
+    /// directory (`--data-dir`), as recorded in its database.
     #[arg(long)]
     pub table: Option<PathBuf>,
-    /// The service's data directory, searched for a table when `--table` is not given.
-    #[arg(long, value_name = "DIR", default_value = "./data")]
-    pub data_dir: PathBuf,
+    /// The service's data directory, whose active table renders when `--table` is not given
+    /// (default: the service's, `L3_DATA_DIR` or ./data; its database: `L3_DATABASE_URL`, else
+    /// the directory's l3.sqlite).
+    #[arg(long, value_name = "DIR")]
+    pub data_dir: Option<PathBuf>,
     /// Acquisition illuminant: a registry name (D65, D50, A, F2, F11, Tungsten,
     /// Fluorescent), cct:K, xy:x,y (a chromaticity), or any illuminant spec. Default: the sidecar's `illuminant`, else
     /// a DNG's AsShotNeutral (matched to a colour temperature through the table's sensor),
@@ -160,8 +163,7 @@ pub fn load_mosaic(path: &Path, swing: f64) -> Result<MosaicInput, CliError> {
 
 pub fn run(cli: &Cli, a: &RenderArgs) -> Result<(), CliError> {
     let iset = iset(&cli.iset_dir)?;
-    let table_path = table_path(a)?;
-    let table = L3Table::load(&table_path)?;
+    let (table_path, table) = table_of(a)?;
     let white: WhiteLevel = a.white_level.parse()?;
     let input = load_mosaic(&a.input, table.meta.voltage_swing)?;
     input.check_dng_cfa(&table, &a.input)?;
@@ -264,39 +266,35 @@ pub fn run(cli: &Cli, a: &RenderArgs) -> Result<(), CliError> {
     Ok(())
 }
 
-/// `--table`, else the one table file in `--data-dir`/tables; with none or several, an error
-/// that says how to get or choose one.
-fn table_path(a: &RenderArgs) -> Result<PathBuf, CliError> {
+/// `--table`, else the active table of the service's data directory (the one a service
+/// started there renders with: [`crate::service::served_table`]); with none, an error that
+/// says how to get or choose one.
+fn table_of(a: &RenderArgs) -> Result<(PathBuf, L3Table), CliError> {
     if let Some(t) = &a.table {
-        return Ok(t.clone());
+        return Ok((t.clone(), L3Table::load(t)?));
     }
-    let dir = a.data_dir.join("tables");
-    let mut found: Vec<PathBuf> = std::fs::read_dir(&dir)
-        .map(|entries| {
-            entries
-                .filter_map(|e| e.ok().map(|e| e.path()))
-                .filter(|p| p.extension().is_some_and(|x| x == "safetensors"))
-                .collect()
-        })
-        .unwrap_or_default();
-    found.sort();
-    let how = "train one with `l3 train --out FILE`, or start `l3 serve` (it trains a default table), or download the service's active table (its id is `active_table_id` in GET /v1/tables) from /v1/tables/{id}/download";
-    match found.len() {
-        1 => Ok(found.remove(0)),
-        0 => Err(CliError::Usage(format!(
-            "no --table given and {} holds no table; pass --table FILE: {how}",
-            dir.display()
-        ))),
-        n => Err(CliError::Usage(format!(
-            "no --table given and {} holds {n} tables ({}); pass --table with the one to use (the service's active one is `active_table_id` in GET /v1/tables)",
-            dir.display(),
-            found
-                .iter()
-                .filter_map(|p| p.file_name().map(|n| n.to_string_lossy().into_owned()))
-                .collect::<Vec<_>>()
-                .join(", ")
-        ))),
+    let mut cfg = ServiceConfig::load(None).map_err(|e| CliError::Usage(e.to_string()))?;
+    if let Some(d) = &a.data_dir {
+        cfg.data.dir = d.clone();
     }
+    let rt = tokio::runtime::Builder::new_current_thread()
+        .enable_all()
+        .build()
+        .map_err(|e| ServiceError::Internal(format!("cannot start the async runtime: {e}")))?;
+    let served = rt.block_on(crate::service::served_table(&cfg))?;
+    let dir = cfg.data.dir.display();
+    let Some(served) = served else {
+        return Err(CliError::Usage(format!(
+            "no --table given and the data directory {dir} has no active table; pass --table FILE: \
+             train one with `l3 train --out FILE`, or start `l3 serve --data-dir {dir}` (it trains \
+             a default table), or activate a stored one (POST /v1/tables/{{id}}/activate)"
+        )));
+    };
+    for why in &served.passed_over {
+        eprintln!("warning: the data directory's table {why}; passed over");
+    }
+    eprintln!("table: {} (active in {dir})", served.id);
+    Ok((served.path, served.table))
 }
 
 fn report(

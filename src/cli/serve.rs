@@ -3,7 +3,7 @@ use std::path::PathBuf;
 use clap::Args;
 
 use super::{Cli, CliError};
-use crate::service::{ServiceConfig, start_with};
+use crate::service::{ServiceConfig, ServiceError, start_with};
 
 #[derive(Args, Debug)]
 pub struct ServeArgs {
@@ -63,14 +63,11 @@ pub fn run(cli: &Cli, a: &ServeArgs) -> Result<(), CliError> {
     let rt = tokio::runtime::Builder::new_multi_thread()
         .enable_all()
         .build()
-        .map_err(|e| CliError::Usage(format!("cannot start the async runtime: {e}")))?;
+        .map_err(|e| ServiceError::Internal(format!("cannot start the async runtime: {e}")))?;
+    // a start that fails (the address is taken, the database cannot be opened) is no usage
+    // error: exit code 1 with the reason
     rt.block_on(async move {
-        let server = start_with(cfg, shutdown_signal())
-            .await
-            .map_err(|e| CliError::Usage(e.to_string()))?;
-        server
-            .wait()
-            .await
-            .map_err(|e| CliError::Usage(e.to_string()))
+        let server = start_with(cfg, shutdown_signal()).await?;
+        Ok(server.wait().await?)
     })
 }

@@ -1,4 +1,7 @@
-//! Atomic file writes: write a temporary file in the target's directory, then rename it.
+//! Atomic file writes, the one routine every writer of the crate uses (outputs, sidecars,
+//! tables, the service's table store): write a temporary file in the target's directory,
+//! fsync it, rename it over the target, then fsync the directory so that the rename itself
+//! survives a crash.
 
 use std::fs::{self, File, OpenOptions};
 use std::io::{BufWriter, Write};
@@ -9,6 +12,9 @@ use super::error::{IoError, IoResult};
 
 static COUNTER: AtomicU64 = AtomicU64::new(0);
 
+/// The ending of every temporary file [`write_atomic`] writes (`.<name>.<pid>-<n>.tmp`).
+pub(crate) const TEMP_SUFFIX: &str = ".tmp";
+
 /// A temporary sibling path of `path` that no other writer in this process uses.
 fn temp_path(path: &Path) -> PathBuf {
     let name = path
@@ -16,15 +22,34 @@ fn temp_path(path: &Path) -> PathBuf {
         .map(|n| n.to_string_lossy().into_owned())
         .unwrap_or_else(|| "out".to_string());
     let n = COUNTER.fetch_add(1, Ordering::Relaxed);
-    path.with_file_name(format!(".{name}.tmp-{}-{n}", std::process::id()))
+    path.with_file_name(format!(".{name}.{}-{n}{TEMP_SUFFIX}", std::process::id()))
+}
+
+/// Whether `file_name` is a temporary file [`write_atomic`] writes for a target named
+/// `<anything><target_suffix>`: one a crash between write and rename leaves behind.
+pub(crate) fn is_temp_of(file_name: &str, target_suffix: &str) -> bool {
+    file_name.starts_with('.')
+        && file_name.ends_with(TEMP_SUFFIX)
+        && file_name.contains(&format!("{target_suffix}."))
 }
 
 /// Writes `path` atomically: `fill` writes the content into a buffered temporary file in the
-/// same directory, which is flushed, synced and renamed over `path`. On any error the temporary
-/// file is removed and `path` is left untouched.
+/// same directory, which is flushed, synced and renamed over `path`; the directory is synced
+/// after the rename. On any error before the rename the temporary file is removed and `path`
+/// is left untouched.
 pub(crate) fn write_atomic<F>(path: &Path, fill: F) -> IoResult<()>
 where
     F: FnOnce(&mut BufWriter<File>) -> IoResult<()>,
+{
+    write_atomic_then(path, fill, || {})
+}
+
+/// [`write_atomic`], running `before_rename` once the temporary file is synced and before it
+/// is renamed into place.
+pub(crate) fn write_atomic_then<F, B>(path: &Path, fill: F, before_rename: B) -> IoResult<()>
+where
+    F: FnOnce(&mut BufWriter<File>) -> IoResult<()>,
+    B: FnOnce(),
 {
     let tmp = temp_path(path);
     let result = (|| {
@@ -42,20 +67,41 @@ where
         file.sync_all()
             .map_err(|e| IoError::file("sync", &tmp, e))?;
         drop(file);
+        before_rename();
         fs::rename(&tmp, path).map_err(|e| IoError::file("rename into", path, e))
     })();
     if result.is_err() {
         let _ = fs::remove_file(&tmp);
     }
-    result
+    result?;
+    let dir = match path.parent() {
+        Some(d) if !d.as_os_str().is_empty() => d,
+        _ => Path::new("."),
+    };
+    File::open(dir)
+        .and_then(|d| d.sync_all())
+        .map_err(|e| IoError::file("sync the directory of", path, e))
 }
 
 /// Writes `bytes` to `path` atomically.
 pub(crate) fn write_bytes_atomic(path: &Path, bytes: &[u8]) -> IoResult<()> {
-    write_atomic(path, |w| {
-        w.write_all(bytes)
-            .map_err(|e| IoError::file("write", path, e))
-    })
+    write_bytes_atomic_then(path, bytes, || {})
+}
+
+/// [`write_bytes_atomic`] with [`write_atomic_then`]'s `before_rename`.
+pub(crate) fn write_bytes_atomic_then(
+    path: &Path,
+    bytes: &[u8],
+    before_rename: impl FnOnce(),
+) -> IoResult<()> {
+    write_atomic_then(
+        path,
+        |w| {
+            w.write_all(bytes)
+                .map_err(|e| IoError::file("write", path, e))
+        },
+        before_rename,
+    )
 }
 
 /// Reads a whole file, refusing files larger than `max_bytes` before reading them.
@@ -92,6 +138,16 @@ mod tests {
         assert_eq!(fs::read(&p).unwrap(), b"old");
         let names: Vec<_> = fs::read_dir(dir.path()).unwrap().collect();
         assert_eq!(names.len(), 1, "temporary file left behind");
+    }
+
+    #[test]
+    fn temporary_files_are_recognised_by_their_target() {
+        let dir = tempfile::tempdir().unwrap();
+        let tmp = temp_path(&dir.path().join("tbl_1.safetensors"));
+        let name = tmp.file_name().unwrap().to_string_lossy().into_owned();
+        assert!(is_temp_of(&name, ".safetensors"), "{name}");
+        assert!(!is_temp_of("tbl_1.safetensors", ".safetensors"));
+        assert!(!is_temp_of(&name, ".png"));
     }
 
     #[test]

@@ -3,8 +3,9 @@
 //!
 //! Every decoder treats its input as hostile: it checks the declared size against a caller's
 //! [`Limits`] before allocating pixel memory, never panics, and reports what was wrong in an
-//! [`IoError`]. Writers write atomically (a temporary file in the same directory, then a
-//! rename); the `encode_*` functions return in-memory files for HTTP responses.
+//! [`IoError`]. Writers write atomically (a temporary file in the same directory, fsynced,
+//! then a rename and an fsync of the directory); the `encode_*` functions return in-memory
+//! files for HTTP responses.
 
 mod atomic;
 mod dng;
@@ -17,6 +18,7 @@ mod ppm;
 mod raw;
 mod tiff_format;
 
+pub(crate) use atomic::{is_temp_of, write_bytes_atomic, write_bytes_atomic_then};
 pub use dng::{
     DngImage, DngInfo, DngWriteInfo, decode_dng, encode_dng, exif_light_source, is_dng, write_dng,
 };

@@ -262,11 +262,8 @@ impl IlluminantRegistry {
         if let Some(k) = existing {
             self.entries.remove(&k);
         }
-        let name = e.name.clone();
-        self.entries.insert(name.clone(), e);
-        self.entries
-            .get(&name)
-            .ok_or_else(|| L3Error::InvalidInput("registry insert failed".into()))
+        // (any entry under the name was removed just above)
+        Ok(self.entries.entry(e.name.clone()).or_insert(e))
     }
 
     /// The correction entry of an SPD already on the registry's grid.

@@ -403,9 +403,10 @@ impl FastRenderer {
     /// by [`fuse_kernels`](super::fuse_kernels)).
     pub fn new(table: &L3Table, kernels: &[f32]) -> Result<Self, L3Error> {
         if kernels.len() != table.kernels.len() {
-            return Err(L3Error::InvalidInput(
-                "kernel set does not match the table".into(),
-            ));
+            return Err(L3Error::KernelMismatch {
+                got: kernels.len(),
+                expected: table.kernels.len(),
+            });
         }
         if kernels.iter().any(|v| !v.is_finite()) {
             return Err(L3Error::Table("a kernel weight is not finite".into()));
@@ -578,12 +579,12 @@ impl FastRenderer {
         let reg = check_region(region, width, height)?;
         let need = reg.width * reg.height * 3;
         if out.len() != need {
-            return Err(L3Error::InvalidInput(format!(
-                "output buffer holds {} bytes; the {}×{} region needs {need}",
-                out.len(),
-                reg.width,
-                reg.height
-            )));
+            return Err(L3Error::OutputBuffer {
+                got: out.len(),
+                need,
+                width: reg.width,
+                height: reg.height,
+            });
         }
         let (src, clamped) = self.source(mosaic, width, height)?;
         let wy = self.white_of(&src, white);

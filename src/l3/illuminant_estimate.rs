@@ -201,7 +201,7 @@ impl L3Table {
                     .map_err(|e| L3Error::Table(format!("the table's sensor: {e}")))?;
                 camera
                     .cct_from_surface(&neutral, &mean_natural_surface(&grid, iset)?)
-                    .map_err(|e| L3Error::InvalidInput(format!("the frame's neutral: {e}")))?
+                    .map_err(|e| L3Error::Neutral(e.to_string()))?
             }
         };
         Ok(IlluminantEstimate {

@@ -62,12 +62,8 @@ pub enum L3Error {
     BadTable { path: String, msg: String },
     #[error("table is not usable: {0}")]
     Table(String),
-    #[error("cannot write {path}: {source}")]
-    Write {
-        path: String,
-        #[source]
-        source: std::io::Error,
-    },
+    #[error("cannot save the table: {0}")]
+    Write(#[source] Box<crate::io::IoError>),
     #[error("training was canceled")]
     Canceled,
     /// Partial sums of a sharded training run that cannot be read or merged.
@@ -75,6 +71,23 @@ pub enum L3Error {
     PartialSums(String),
     #[error("the render was canceled")]
     RenderCanceled,
+    /// A kernel set whose length is not the table's (the caller's fault, never the input's).
+    #[error("a kernel set of {got} weights does not match the table's {expected}")]
+    KernelMismatch { got: usize, expected: usize },
+    /// An output buffer of the wrong size (the caller's fault, never the input's).
+    #[error("the output buffer holds {got} bytes; the {width}×{height} region needs {need}")]
+    OutputBuffer {
+        got: usize,
+        need: usize,
+        width: usize,
+        height: usize,
+    },
+    /// The table carries no sensor description, so no neutral can be matched through it.
+    #[error("the table has no sensor description to match the frame's neutral with")]
+    NoSensor,
+    /// A frame's neutral (e.g. a DNG's AsShotNeutral) that matches no light.
+    #[error("the frame's neutral: {0}")]
+    Neutral(String),
     #[error(transparent)]
     Spectral(#[from] crate::spectral::SpectralError),
 }

@@ -88,9 +88,10 @@ pub fn render_reference(
         )));
     }
     if kernels.len() != table.kernels.len() {
-        return Err(L3Error::InvalidInput(
-            "kernel set does not match the table".into(),
-        ));
+        return Err(L3Error::KernelMismatch {
+            got: kernels.len(),
+            expected: table.kernels.len(),
+        });
     }
     if let Some(i) = volts.iter().position(|v| !v.is_finite()) {
         return Err(L3Error::InvalidInput(format!(

@@ -153,6 +153,9 @@ impl L3Table {
     /// The sensor design the table was trained for (stored in its metadata),
     /// checked as a design file is.
     pub fn sensor_design(&self) -> Result<crate::camera::SensorDesign, L3Error> {
+        if self.meta.sensor.is_null() {
+            return Err(L3Error::NoSensor);
+        }
         let d: crate::camera::SensorDesign = serde_json::from_value(self.meta.sensor.clone())
             .map_err(|e| {
                 L3Error::Table(format!("the table's sensor description is unreadable: {e}"))
@@ -176,7 +179,7 @@ impl L3Table {
             .map_err(|e| L3Error::Table(format!("the table's sensor: {e}")))?;
         camera
             .cct_from_neutral(neutral)
-            .map_err(|e| L3Error::InvalidInput(format!("the frame's neutral: {e}")))
+            .map_err(|e| L3Error::Neutral(e.to_string()))
     }
 
     pub fn n_positions(&self) -> usize {
@@ -214,6 +217,8 @@ impl L3Table {
     }
 
     /// Patch geometry for classification with this table.
+    /// A table whose parameters make no geometry is not usable ([`L3Error::Table`]): its
+    /// parameters are the table's, not a caller's.
     pub fn geometry(&self) -> Result<PatchGeometry, L3Error> {
         PatchGeometry::new(
             self.meta.params.patch_size,
@@ -221,6 +226,7 @@ impl L3Table {
             &self.meta.params.levels,
             self.meta.saturation_threshold,
         )
+        .map_err(|e| L3Error::Table(e.to_string()))
     }
 
     /// Bytes of the kernel data (what a per-illuminant table costs).
@@ -231,7 +237,10 @@ impl L3Table {
     /// Check shapes and finiteness.
     pub fn validate(&self) -> Result<(), L3Error> {
         let bad = |m: String| Err(L3Error::Table(m));
-        self.meta.params.validate()?;
+        self.meta
+            .params
+            .validate()
+            .map_err(|e| L3Error::Table(e.to_string()))?;
         if self.meta.format != FORMAT_NAME {
             return bad(format!(
                 "format '{}', expected '{FORMAT_NAME}'",
@@ -446,20 +455,16 @@ impl L3Table {
         Ok(t)
     }
 
-    /// Write atomically: a temporary file beside the target, then rename.
+    /// Write atomically ([`crate::io`]'s one routine: a temporary file beside the target,
+    /// fsynced, renamed, the directory fsynced), creating the directory.
     pub fn save(&self, path: &Path) -> Result<(), L3Error> {
         let bytes = self.to_bytes()?;
-        let werr = |source| L3Error::Write {
-            path: path.display().to_string(),
-            source,
-        };
         let dir = path.parent().filter(|p| !p.as_os_str().is_empty());
         if let Some(d) = dir {
-            std::fs::create_dir_all(d).map_err(werr)?;
+            std::fs::create_dir_all(d)
+                .map_err(|e| L3Error::Write(Box::new(crate::io::IoError::file("create", d, e))))?;
         }
-        let tmp = path.with_extension(format!("tmp{}", std::process::id()));
-        std::fs::write(&tmp, &bytes).map_err(werr)?;
-        std::fs::rename(&tmp, path).map_err(werr)
+        crate::io::write_bytes_atomic(path, &bytes).map_err(|e| L3Error::Write(Box::new(e)))
     }
 
     pub fn load(path: &Path) -> Result<Self, L3Error> {

@@ -3,85 +3,11 @@
 
 use std::sync::atomic::AtomicBool;
 
-use rand::{RngExt, SeedableRng};
-use rand_chacha::ChaCha8Rng;
-
 use super::*;
-use crate::camera::Cfa;
-use crate::spectral::WavelengthGrid;
+use crate::test_support::{synthetic_frame_with_blocks, train_synthetic_table};
 
-/// Sensor channel responses R, G, B, W to XYZ.
-const M: [[f32; 3]; 4] = [
-    [0.9, 0.1, -0.05],
-    [-0.3, 1.1, 0.1],
-    [0.0, -0.1, 0.9],
-    [0.5, 0.6, 0.4],
-];
-
-fn synth_frame(
-    seed: u64,
-    size: usize,
-    scale: f32,
-    noise: f32,
-    shift: (usize, usize),
-) -> TrainingFrame {
-    let cfa = Cfa::parse("RG/WB").unwrap();
-    let mut rng = ChaCha8Rng::seed_from_u64(seed);
-    let block = 12;
-    let nb = size.div_ceil(block);
-    let colours: Vec<[f32; 3]> = (0..nb * nb)
-        .map(|_| {
-            let y = rng.random_range(0.05f32..1.0);
-            [
-                y * rng.random_range(0.6f32..1.2),
-                y,
-                y * rng.random_range(0.5f32..1.3),
-            ]
-        })
-        .collect();
-    let mut volts = vec![0f32; size * size];
-    let mut xyz = vec![0f32; size * size * 3];
-    for r in 0..size {
-        for c in 0..size {
-            let col = colours[(r / block) * nb + c / block].map(|v| v * scale);
-            let ch = cfa.channel_at(r + shift.0, c + shift.1);
-            let v: f32 = (0..3).map(|k| M[ch][k] * col[k]).sum();
-            let n: f32 = rng.random_range(-1.0f32..1.0) * noise;
-            volts[r * size + c] = (v + n).clamp(0.0, 1.8);
-            xyz[(r * size + c) * 3..(r * size + c) * 3 + 3].copy_from_slice(&col);
-        }
-    }
-    TrainingFrame {
-        width: size,
-        height: size,
-        volts,
-        xyz,
-        cfa_shift: shift,
-    }
-}
-
-fn meta(params: &L3Params) -> TableMeta {
-    TableMeta {
-        format: "l3-table".into(),
-        version: TABLE_FORMAT_VERSION,
-        kind: TableKind::SameIlluminant,
-        train_illuminants: vec!["synthetic".into()],
-        target_illuminant: "same".into(),
-        sensor_name: "synthetic".into(),
-        sensor: serde_json::Value::Null,
-        cfa: Cfa::parse("RG/WB").unwrap(),
-        grid: WavelengthGrid::default(),
-        params: params.clone(),
-        voltage_swing: 1.8,
-        saturation_threshold: 1.799,
-        sat_cases: vec![0],
-        xyz_scale_note: "synthetic".into(),
-        seed: 1,
-        created_unix_s: 0,
-        training_seconds: 0.0,
-        summary: serde_json::Value::Null,
-    }
-}
+/// Block size of the synthetic scenes (the crate's one fixture, [`crate::test_support`]).
+const BLOCK: usize = 12;
 
 fn train_synthetic(noise: f32) -> L3Table {
     let params = L3Params {
@@ -89,44 +15,20 @@ fn train_synthetic(noise: f32) -> L3Table {
         min_class_samples: 60,
         ..L3Params::default()
     };
-    let geo = PatchGeometry::new(5, &Cfa::parse("RG/WB").unwrap(), &params.levels, 1.799).unwrap();
-    let cancel = AtomicBool::new(false);
-    let ctl = TrainControl {
-        progress: &|_, _| {},
-        cancel: &cancel,
-    };
-    let nm = NoiseModel {
-        conversion_gain_v: 2e-4,
-        read_noise_v: 1e-3,
-        dsnu_v: 0.0,
-        prnu_fraction: 0.0,
-    };
-    let learned = learn(
-        &geo,
-        &params,
-        nm,
-        48,
-        |i| {
-            let scale = [0.01f32, 0.05, 0.2, 0.8, 1.5][i % 5];
-            Ok(vec![synth_frame(
-                i as u64,
-                48,
-                scale,
-                noise,
-                ((i / 5) % 2, (i / 10) % 2),
-            )])
-        },
-        None,
-        &ctl,
-    )
-    .unwrap();
-    package(meta(&params), learned).unwrap()
+    train_synthetic_table(&params, 48, |i| {
+        let scale = [0.01f32, 0.05, 0.2, 0.8, 1.5][i % 5];
+        let shift = ((i / 5) % 2, (i / 10) % 2);
+        Ok(vec![synthetic_frame_with_blocks(
+            i as u64, 48, BLOCK, scale, noise, shift,
+        )])
+    })
+    .unwrap()
 }
 
 #[test]
 fn learns_a_linear_sensor_and_renders_block_interiors() {
     let table = train_synthetic(0.0);
-    let f = synth_frame(999, 48, 0.5, 0.0, (0, 0));
+    let f = synthetic_frame_with_blocks(999, 48, BLOCK, 0.5, 0.0, (0, 0));
     let (xyz, stats) = render_reference(&table, &table.kernels, &f.volts, 48, 48).unwrap();
     assert_eq!(stats.pixels, 48 * 48);
     // interior pixels of blocks (2 px from block edges) are recovered closely
@@ -150,7 +52,7 @@ fn fused_correction_equals_correction_after_rendering() {
     let table = train_synthetic(0.01);
     let t = [[1.1, 0.05, -0.1], [0.02, 0.98, 0.01], [-0.03, 0.04, 1.4]];
     let fused = fuse_kernels(&table, &t);
-    let f = synth_frame(5, 32, 0.4, 0.01, (1, 0));
+    let f = synthetic_frame_with_blocks(5, 32, BLOCK, 0.4, 0.01, (1, 0));
     let (a, _) = render_reference(&table, &table.kernels, &f.volts, 32, 32).unwrap();
     let (b, _) = render_reference(&table, &fused, &f.volts, 32, 32).unwrap();
     for (pa, pb) in a.chunks_exact(3).zip(b.chunks_exact(3)) {
@@ -226,7 +128,7 @@ fn fast_renderer_matches_the_reference() {
     let t = [[1.1, 0.05, -0.1], [0.02, 0.98, 0.01], [-0.03, 0.04, 1.4]];
     let fused = fuse_kernels(&table, &t);
     // blocks from dark to clipped, plus noise: every level and saturated patches
-    let mut f = synth_frame(11, 96, 1.6, 0.02, (0, 0));
+    let mut f = synthetic_frame_with_blocks(11, 96, BLOCK, 1.6, 0.02, (0, 0));
     f.volts[40 * 96 + 40] = 1.8;
     for (simd, avx512) in [(true, true), (true, false), (false, false)] {
         for kernels in [&table.kernels, &fused] {
@@ -269,7 +171,7 @@ fn fast_renderer_matches_the_reference() {
 #[test]
 fn fast_srgb_and_dn_input_match_the_reference_pipeline() {
     let table = train_synthetic(0.01);
-    let f = synth_frame(12, 64, 1.2, 0.01, (1, 1));
+    let f = synthetic_frame_with_blocks(12, 64, BLOCK, 1.2, 0.01, (1, 1));
     let dn: Vec<u16> = f
         .volts
         .iter()
@@ -347,7 +249,7 @@ fn fast_srgb_and_dn_input_match_the_reference_pipeline() {
 #[test]
 fn a_canceled_render_stops_with_render_canceled() {
     let table = train_synthetic(0.01);
-    let f = synth_frame(13, 64, 1.0, 0.01, (0, 0));
+    let f = synthetic_frame_with_blocks(13, 64, BLOCK, 1.0, 0.01, (0, 0));
     let fast = FastRenderer::new(&table, &table.kernels).unwrap();
     let frame = Mosaic::Volts(&f.volts);
     let go = AtomicBool::new(false);

@@ -61,6 +61,15 @@ pub enum ServiceError {
     /// Database errors.
     #[error("database: {0}")]
     Database(String),
+    /// The listener cannot take its address (at start).
+    #[error(
+        "cannot listen on {addr}: {source} (is another process using it? choose another address with --bind or L3_BIND)"
+    )]
+    Bind {
+        addr: std::net::SocketAddr,
+        #[source]
+        source: std::io::Error,
+    },
     /// Anything else that is the server's fault.
     #[error("{0}")]
     Internal(String),
@@ -85,7 +94,9 @@ impl ServiceError {
             Overloaded { .. } | NotReady(_) => StatusCode::SERVICE_UNAVAILABLE,
             Timeout(_) => StatusCode::GATEWAY_TIMEOUT,
             BodyTimeout(_) => StatusCode::REQUEST_TIMEOUT,
-            Config(_) | Database(_) | Internal(_) => StatusCode::INTERNAL_SERVER_ERROR,
+            Config(_) | Database(_) | Bind { .. } | Internal(_) => {
+                StatusCode::INTERNAL_SERVER_ERROR
+            }
         }
     }
 
@@ -112,6 +123,7 @@ impl ServiceError {
             BodyTimeout(_) => "body_timeout",
             Config(_) => "config",
             Database(_) => "database",
+            Bind { .. } => "bind",
             Internal(_) => "internal",
         }
     }
@@ -201,23 +213,115 @@ impl From<crate::io::IoError> for ServiceError {
 
 impl From<crate::render_pipeline::PipelineError> for ServiceError {
     fn from(e: crate::render_pipeline::PipelineError) -> Self {
-        use crate::l3::L3Error;
         use crate::render_pipeline::PipelineError;
         match e {
             PipelineError::Options(m) => ServiceError::BadRequest(m),
             PipelineError::Correction(e) => ServiceError::Internal(e.to_string()),
             PipelineError::Encode(e) => e.into(),
-            PipelineError::Render(e) => match e {
-                L3Error::InvalidInput(_) | L3Error::InvalidParams(_) => {
-                    ServiceError::InvalidImage(e.to_string())
-                }
-                // nobody waits for the answer of a canceled render any more
-                L3Error::RenderCanceled => {
-                    ServiceError::Timeout("the render was abandoned by its request".into())
-                }
-                other => ServiceError::Internal(other.to_string()),
-            },
+            PipelineError::Render(e) => ServiceError::from_l3(e, ServiceError::InvalidImage),
         }
+    }
+}
+
+impl ServiceError {
+    /// An L3 core error, by variant: what the request got wrong becomes `input(message)`
+    /// (the caller picks the 4xx that fits where the input came from: a body, a query, a
+    /// table the request named), a render abandoned by its request a timeout, and the rest
+    /// (the table, the server) a 500 `internal`.
+    pub fn from_l3(
+        e: crate::l3::L3Error,
+        input: impl FnOnce(String) -> ServiceError,
+    ) -> ServiceError {
+        use crate::l3::L3Error::*;
+        let is_input = match &e {
+            InvalidParams(_) | InvalidInput(_) | NoSensor | Neutral(_) => true,
+            Spectral(s) => spectral_input_fault(s),
+            // nobody waits for the answer of a canceled render any more
+            RenderCanceled => {
+                return ServiceError::Timeout("the render was abandoned by its request".into());
+            }
+            BadTable { .. }
+            | Table(_)
+            | Write(_)
+            | Canceled
+            | PartialSums(_)
+            | KernelMismatch { .. }
+            | OutputBuffer { .. } => false,
+        };
+        by_fault(e, is_input, input)
+    }
+
+    /// An evaluation error, by variant (see [`ServiceError::from_l3`]).
+    pub fn from_eval(
+        e: crate::eval::EvalError,
+        input: impl FnOnce(String) -> ServiceError,
+    ) -> ServiceError {
+        use crate::eval::EvalError::*;
+        use crate::scene::SceneError;
+        let is_input = match &e {
+            L3(_) | Invalid(_) | Scene(SceneError::Invalid(_)) => true,
+            Spectral(s) | Scene(SceneError::Spectral(s)) => spectral_input_fault(s),
+            Colour(c) => colour_input_fault(c),
+            // the camera-aware correction of a table that cannot be fitted: the table's fault
+            Scene(SceneError::Image { .. }) | Train(_) => false,
+        };
+        match e {
+            L3(e) => ServiceError::from_l3(e, input),
+            e => by_fault(e, is_input, input),
+        }
+    }
+
+    /// A camera error (building the camera of a table's or a request's sensor), by variant.
+    pub fn from_camera(
+        e: crate::camera::CameraError,
+        input: impl FnOnce(String) -> ServiceError,
+    ) -> ServiceError {
+        use crate::camera::CameraError::*;
+        let is_input = match &e {
+            Spectral(s) => spectral_input_fault(s),
+            InvalidDesign(_) | InvalidCfa(_) | InvalidArgument(_) | GridMismatch { .. } => true,
+            Toml { .. } | Io { .. } => false,
+        };
+        by_fault(e, is_input, input)
+    }
+}
+
+/// `input(message)` for the request's faults, a 500 `internal` for the server's.
+fn by_fault(
+    e: impl std::fmt::Display,
+    is_input: bool,
+    input: impl FnOnce(String) -> ServiceError,
+) -> ServiceError {
+    if is_input {
+        input(e.to_string())
+    } else {
+        ServiceError::Internal(e.to_string())
+    }
+}
+
+/// Whether a spectral error is about data a request named or gave (an unknown light, bad
+/// samples) rather than the server's own data files.
+fn spectral_input_fault(e: &crate::spectral::SpectralError) -> bool {
+    use crate::spectral::SpectralError::*;
+    match e {
+        InvalidGrid(_)
+        | LengthMismatch { .. }
+        | InvalidSamples(_)
+        | GridMismatch(..)
+        | UnknownIlluminant(..)
+        | InvalidIlluminantSpec(..)
+        | NoSuchTable { .. } => true,
+        Io { .. } | Csv { .. } | NoSuchColumn { .. } | IsetDataMissing(_) => false,
+    }
+}
+
+/// Whether a colour error comes from what a request gave (a light, a temperature).
+fn colour_input_fault(e: &crate::colour::ColourError) -> bool {
+    use crate::colour::ColourError::*;
+    match e {
+        Spectral(s) => spectral_input_fault(s),
+        ZeroLuminance(_) | CctOutOfRange { .. } | TemperatureOutOfRange(..) => true,
+        NonFinite(_) => false,
     }
 }
 
@@ -243,5 +347,46 @@ mod tests {
             r.headers()[header::CONTENT_TYPE],
             "application/problem+json"
         );
+    }
+
+    /// Render errors map by their kind: the input's faults to 4xx, the table's or the
+    /// server's to 500 `internal` (not every render error is `invalid_image`).
+    #[test]
+    fn render_errors_map_by_kind() {
+        use crate::l3::L3Error;
+        use crate::render_pipeline::PipelineError;
+        let code = |e: L3Error| ServiceError::from(PipelineError::Render(e));
+        let e = code(L3Error::InvalidInput(
+            "input value at row 0 is not finite".into(),
+        ));
+        assert_eq!((e.status().as_u16(), e.code()), (400, "invalid_image"));
+        for internal in [
+            L3Error::KernelMismatch {
+                got: 1,
+                expected: 2,
+            },
+            L3Error::OutputBuffer {
+                got: 1,
+                need: 3,
+                width: 1,
+                height: 1,
+            },
+            L3Error::Table("a kernel weight is not finite".into()),
+        ] {
+            let e = code(internal);
+            assert_eq!((e.status().as_u16(), e.code()), (500, "internal"), "{e}");
+        }
+        let e = code(L3Error::RenderCanceled);
+        assert_eq!(e.code(), "request_timeout");
+        let e = ServiceError::from(PipelineError::Options("preview 17".into()));
+        assert_eq!(e.code(), "bad_request");
+        // the caller chooses the 4xx of an input fault
+        let e = ServiceError::from_l3(L3Error::NoSensor, ServiceError::Unprocessable);
+        assert_eq!((e.status().as_u16(), e.code()), (422, "unprocessable"));
+        let e = ServiceError::from_l3(
+            L3Error::Table("metadata".into()),
+            ServiceError::Unprocessable,
+        );
+        assert_eq!(e.code(), "internal");
     }
 }

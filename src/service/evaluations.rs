@@ -209,12 +209,13 @@ pub async fn create(
                 Some(t) => t
                     .table
                     .sensor_design()
-                    .map_err(|e| ServiceError::Unprocessable(e.to_string()))?,
+                    .map_err(|e| ServiceError::from_l3(e, ServiceError::Unprocessable))?,
                 None => SensorDesign::paper_default(),
             };
             let camera = Camera::new(&design, grid, iset.as_ref())
-                .map_err(|e| ServiceError::Unprocessable(e.to_string()))?;
-            let eval_err = |e: crate::eval::EvalError| ServiceError::Unprocessable(e.to_string());
+                .map_err(|e| ServiceError::from_camera(e, ServiceError::Unprocessable))?;
+            let eval_err =
+                |e: crate::eval::EvalError| ServiceError::from_eval(e, ServiceError::Unprocessable);
             let mut report = match &table {
                 Some(t) => {
                     let name = format!(

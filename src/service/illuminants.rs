@@ -81,7 +81,7 @@ pub fn apply(
         }
         reg.insert_cct(name, k)
     };
-    r.cloned().map_err(|e| bad(e.to_string()))
+    r.cloned().map_err(|e| ServiceError::from_l3(e, bad))
 }
 
 /// The persisted user illuminants, in creation order.

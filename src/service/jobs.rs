@@ -16,7 +16,7 @@ use super::state::{AppState, new_id, now_ms, sha256_hex};
 use super::store::{
     JOB_KIND_SHARDED, JOB_KIND_TRAIN, JobEnd, JobRow, JobStatus, NewJob, WORKER_KINDS, shard_stage,
 };
-use super::tables::{StoredTable, activate_table, insert_table, write_table_file_with_pause};
+use super::tables::{StoredTable, activate_table, insert_table, write_table_file};
 use crate::camera::SensorDesign;
 use crate::l3::{L3Error, L3Table};
 use crate::training::{TrainError, TrainingSpec, train_table};
@@ -782,11 +782,7 @@ pub(super) fn write_job_table(
         table.meta.created_unix_s = 0;
         table.meta.training_seconds = 0.0;
     }
-    let stored = write_table_file_with_pause(
-        &state.tables_dir,
-        &table,
-        super::debug_hooks::activation_pause_ms(),
-    )?;
+    let stored = write_table_file(&state.tables_dir, &table)?;
     Ok((table, stored))
 }
 

@@ -6,7 +6,6 @@ mod accept;
 mod admission;
 mod config;
 mod cpu;
-mod debug_hooks;
 mod error;
 mod evaluations;
 #[cfg(feature = "fault-injection")]
@@ -33,9 +32,14 @@ use tokio::sync::{Notify, Semaphore};
 pub use admission::Admission;
 pub use config::{DEFAULT_CONFIG_TOML, DataConfig, ServerConfig, ServiceConfig, TrainingConfig};
 pub use error::ServiceError;
-pub use illuminants::{IlluminantDefinition, SpdSamples, apply as apply_illuminant};
-pub use jobs::{JobRequest, parse_job_request};
-pub use render::{OutputFormat, RenderQuery, negotiate};
+// what the fuzz bodies (`crate::fuzzing`, test support only) run as the service does
+#[cfg(feature = "test-support")]
+pub(crate) use illuminants::{IlluminantDefinition, apply as apply_illuminant};
+#[cfg(feature = "test-support")]
+pub(crate) use jobs::parse_job_request;
+#[cfg(feature = "test-support")]
+pub(crate) use render::RenderQuery;
+pub use render::{OutputFormat, negotiate};
 pub use routes::{OPENAPI_YAML, ROUTES};
 pub use state::{ActiveTable, AppState, Inner, sha256_hex};
 pub use store::{JobStatus, Store};
@@ -151,6 +155,14 @@ pub async fn start_with(
     cfg: ServiceConfig,
     signal: impl std::future::Future<Output = ()> + Send + 'static,
 ) -> Result<Server, ServiceError> {
+    // the address first: a start that cannot listen changes nothing in the data directory
+    // or the database (connections made before the router runs wait in the backlog)
+    let listener = tokio::net::TcpListener::bind(cfg.server.bind)
+        .await
+        .map_err(|source| ServiceError::Bind {
+            addr: cfg.server.bind,
+            source,
+        })?;
     let data = cfg.data.dir.clone();
     let tables_dir = data.join("tables");
     std::fs::create_dir_all(&tables_dir).map_err(|e| {
@@ -215,9 +227,7 @@ pub async fn start_with(
     // the active table: the recorded one, else the last good one (most recently activated,
     // then the newest stored), skipping files found corrupt or missing
     let recorded = tables::recorded_active(&state).await?;
-    let mut candidates: Vec<String> = recorded.iter().cloned().collect();
-    candidates.extend(state.store.usable_tables_by_recency().await?);
-    for id in candidates {
+    for id in tables::activation_candidates(&state.store).await? {
         if unusable.iter().any(|(b, _)| *b == id) {
             continue;
         }
@@ -259,9 +269,6 @@ pub async fn start_with(
         .map(|_| tokio::spawn(jobs::worker(state.clone())))
         .collect();
     workers.push(tokio::spawn(sync::follower(state.clone())));
-    let listener = tokio::net::TcpListener::bind(cfg.server.bind)
-        .await
-        .map_err(|e| ServiceError::Config(format!("cannot listen on {}: {e}", cfg.server.bind)))?;
     let addr = listener
         .local_addr()
         .map_err(|e| ServiceError::Internal(format!("local address: {e}")))?;
@@ -293,6 +300,33 @@ pub async fn start_with(
 /// [`start_with`] without an external signal.
 pub async fn start(cfg: ServiceConfig) -> Result<Server, ServiceError> {
     start_with(cfg, std::future::pending()).await
+}
+
+/// The table a service on a data directory serves (see [`served_table`]).
+#[derive(Debug)]
+pub struct ServedTable {
+    pub id: String,
+    /// Its file in the data directory's `tables/`.
+    pub path: std::path::PathBuf,
+    pub table: crate::l3::L3Table,
+    /// The candidates passed over before it (a recorded active table whose file is corrupt
+    /// or missing, …), each with the reason.
+    pub passed_over: Vec<String>,
+}
+
+/// The table the service on `cfg`'s data directory and database renders with (what `l3
+/// render` uses without `--table`): the recorded active table, else, as a start falls back,
+/// the last good one, its file checked against its recorded SHA-256. Reads only; `None` when
+/// the data directory has no database (a service never ran there) or no usable table.
+pub async fn served_table(cfg: &ServiceConfig) -> Result<Option<ServedTable>, ServiceError> {
+    let url = cfg.data.database_url.trim();
+    if url.is_empty() && !cfg.data.dir.join(store::SQLITE_FILE).is_file() {
+        return Ok(None);
+    }
+    let store = Store::connect(url, &cfg.data.dir).await?;
+    let served = tables::served_table(&store, &cfg.data.dir.join("tables")).await;
+    store.close().await;
+    served
 }
 
 /// Stores a table in the service (file written atomically, checksum recorded) and optionally

@@ -447,9 +447,11 @@ pub async fn render(
                         .table
                         .frame_illuminant(metadata, &mosaic, w, h, st.iset.as_ref())
                         .map_err(|e| {
-                            ServiceError::Unprocessable(format!(
-                                "the illuminant cannot be taken from the DNG's AsShotNeutral ({e}); name one with illuminant="
-                            ))
+                            ServiceError::from_l3(e, |m| {
+                                ServiceError::Unprocessable(format!(
+                                    "the illuminant cannot be taken from the DNG's AsShotNeutral ({m}); name one with illuminant="
+                                ))
+                            })
                         })?;
                     (st.resolve_illuminant(&spec)?, source.name())
                 }

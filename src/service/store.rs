@@ -331,6 +331,9 @@ macro_rules! insert_shards {
     };
 }
 
+/// The embedded SQLite database's file in the data directory.
+pub const SQLITE_FILE: &str = "l3.sqlite";
+
 impl Store {
     /// Connects and applies the migrations. An empty `url` is the embedded SQLite database
     /// `l3.sqlite` in `data_dir`; otherwise `sqlite://…` or `postgres://…`.
@@ -338,7 +341,7 @@ impl Store {
         let url = url.trim();
         let store = if url.is_empty() || url.starts_with("sqlite:") {
             let opts = if url.is_empty() {
-                SqliteConnectOptions::new().filename(data_dir.join("l3.sqlite"))
+                SqliteConnectOptions::new().filename(data_dir.join(SQLITE_FILE))
             } else {
                 SqliteConnectOptions::from_str(url)
                     .map_err(|e| ServiceError::Config(format!("database_url: {e}")))?

@@ -3,7 +3,6 @@
 //! database keeps the table bytes (PostgreSQL, shared by replicas), the files are a local
 //! cache by id and SHA-256: a file missing or damaged is fetched again from the database.
 
-use std::io::Write;
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
 
@@ -16,7 +15,7 @@ use serde_json::{Value, json};
 
 use super::ServiceError;
 use super::state::{ActiveTable, AppState, Inner, now_ms, sha256_hex};
-use super::store::{NewTable, TableRow};
+use super::store::{NewTable, Store, TableRow};
 use crate::l3::L3Table;
 
 /// A table file written to disk.
@@ -29,44 +28,19 @@ pub struct StoredTable {
 }
 
 /// Serialises `table`, names it by its content (`tbl_` + 16 hex digits of its SHA-256) and
-/// writes it atomically under `dir` (temporary file, fsync, rename). Blocking.
+/// writes it atomically under `dir` ([`crate::io`]'s one routine: temporary file, fsync,
+/// rename, fsync of the directory). Blocking.
 pub fn write_table_file(dir: &Path, table: &L3Table) -> Result<StoredTable, ServiceError> {
-    write_table_file_with_pause(dir, table, 0)
-}
-
-/// [`write_table_file`] with the fault-injection pause ([`super::debug_hooks`]) between
-/// the fsync of the temporary file and the rename. Blocking.
-pub(super) fn write_table_file_with_pause(
-    dir: &Path,
-    table: &L3Table,
-    pause_ms: u64,
-) -> Result<StoredTable, ServiceError> {
     let bytes = table
         .to_bytes()
         .map_err(|e| ServiceError::Internal(format!("cannot serialise the table: {e}")))?;
     let sha256 = sha256_hex(&bytes);
     let id = format!("tbl_{}", &sha256[..16]);
-    let path = dir.join(format!("{id}.safetensors"));
-    let tmp = dir.join(format!(".{id}{TMP_SUFFIX}"));
-    let werr =
-        |e: std::io::Error| ServiceError::Internal(format!("cannot write {}: {e}", path.display()));
-    {
-        let mut f = std::fs::File::create(&tmp).map_err(werr)?;
-        f.write_all(&bytes).map_err(werr)?;
-        f.sync_all().map_err(werr)?;
-    }
-    if pause_ms > 0 {
-        tracing::warn!(
-            table = id,
-            "fault injection: temporary table file written, pausing {pause_ms} ms before the rename"
-        );
-        std::thread::sleep(std::time::Duration::from_millis(pause_ms));
-    }
-    std::fs::rename(&tmp, &path).map_err(werr)?;
-    // make the rename itself durable
-    if let Ok(d) = std::fs::File::open(dir) {
-        let _ = d.sync_all();
-    }
+    let path = dir.join(format!("{id}{TABLE_SUFFIX}"));
+    crate::io::write_bytes_atomic_then(&path, &bytes, || {
+        #[cfg(feature = "fault-injection")]
+        super::fault_injection::pause_before_table_rename(&id);
+    })?;
     Ok(StoredTable {
         id,
         path,
@@ -75,8 +49,8 @@ pub(super) fn write_table_file_with_pause(
     })
 }
 
-/// Suffix of the temporary files [`write_table_file`] renames into place.
-const TMP_SUFFIX: &str = ".safetensors.tmp";
+/// The ending of table files.
+const TABLE_SUFFIX: &str = ".safetensors";
 
 /// Removes temporary table files left by a crash between write and rename (at start, before
 /// any job runs); returns how many. Blocking.
@@ -88,7 +62,7 @@ pub fn remove_orphan_temp_files(dir: &Path) -> usize {
     for e in entries.flatten() {
         let name = e.file_name();
         let name = name.to_string_lossy();
-        if name.starts_with('.') && name.ends_with(TMP_SUFFIX) {
+        if crate::io::is_temp_of(&name, TABLE_SUFFIX) {
             match std::fs::remove_file(e.path()) {
                 Ok(()) => {
                     tracing::warn!(
@@ -156,13 +130,16 @@ async fn table_row(state: &Inner, id: &str) -> Result<TableRow, ServiceError> {
 }
 
 /// Why a stored table file cannot be used.
-#[derive(Debug)]
+#[derive(Debug, thiserror::Error)]
 pub(super) enum TableFileError {
     /// The file is gone.
+    #[error("{0}")]
     Missing(String),
     /// The file's bytes differ from the recorded checksum, or do not parse as a table.
+    #[error("{0}")]
     Corrupt(String),
     /// Any other I/O failure (permissions, …): not the file's fault.
+    #[error("{0}")]
     Io(String),
 }
 
@@ -208,47 +185,46 @@ fn check_bytes(bytes: &[u8], sha256: &str, what: &str) -> Result<L3Table, TableF
         .map_err(|e| TableFileError::Corrupt(format!("{what} does not parse: {e}")))
 }
 
-/// Writes bytes fetched from the database to the local cache file (atomically). Blocking.
-fn write_cache(dir: &Path, file: &str, bytes: &[u8]) -> std::io::Result<()> {
-    let tmp = dir.join(format!(".{file}.{}{TMP_SUFFIX}", std::process::id()));
-    {
-        let mut f = std::fs::File::create(&tmp)?;
-        f.write_all(bytes)?;
-        f.sync_all()?;
-    }
-    std::fs::rename(&tmp, dir.join(file))
-}
-
 /// A table's bytes, checked: the local file, else (where the database keeps the bytes) the
 /// database's copy, which then replaces the local file.
 async fn fetch_checked(
     state: &Inner,
     row: &TableRow,
 ) -> Result<(Vec<u8>, L3Table), TableFileError> {
-    let path = state.tables_dir.join(&row.path);
+    fetch_checked_in(&state.store, &state.tables_dir, row).await
+}
+
+/// [`fetch_checked`] from `store` and the table files in `tables_dir`.
+async fn fetch_checked_in(
+    store: &Store,
+    tables_dir: &Path,
+    row: &TableRow,
+) -> Result<(Vec<u8>, L3Table), TableFileError> {
+    let path = tables_dir.join(&row.path);
     let sha = row.sha256.clone();
     let local = tokio::task::spawn_blocking(move || read_checked(&path, &sha))
         .await
         .map_err(|e| TableFileError::Io(format!("table loader: {e}")))?;
     let err = match local {
         Ok(v) => return Ok(v),
-        Err(e) if !state.store.keeps_table_bytes() => return Err(e),
+        Err(e) if !store.keeps_table_bytes() => return Err(e),
         Err(e) => e,
     };
-    let bytes = match state.store.table_content(&row.id).await {
+    let bytes = match store.table_content(&row.id).await {
         Ok(Some(b)) => b,
         Ok(None) => return Err(err),
         Err(e) => return Err(TableFileError::Io(format!("table {}: {e}", row.id))),
     };
     let (dir, file, sha) = (
-        state.tables_dir.clone(),
+        tables_dir.to_path_buf(),
         row.path.clone(),
         row.sha256.clone(),
     );
     let what = format!("table {} in the database", row.id);
     tokio::task::spawn_blocking(move || {
         let table = check_bytes(&bytes, &sha, &what)?;
-        if let Err(e) = write_cache(&dir, &file, &bytes) {
+        // the local cache file, written with the one atomic routine
+        if let Err(e) = crate::io::write_bytes_atomic(&dir.join(&file), &bytes) {
             tracing::warn!("cannot cache {file} in {}: {e}", dir.display());
         }
         Ok((bytes, table))
@@ -322,6 +298,47 @@ pub async fn verify_all(state: &Inner) -> Result<Vec<(String, String)>, ServiceE
     Ok(bad)
 }
 
+/// The ids a start tries to make active, in order: the recorded active table, then the
+/// usable ones, most recently activated first, then the newest.
+pub(super) async fn activation_candidates(store: &Store) -> Result<Vec<String>, ServiceError> {
+    let mut ids: Vec<String> = store.recorded_active().await?.into_iter().collect();
+    for id in store.usable_tables_by_recency().await? {
+        if !ids.contains(&id) {
+            ids.push(id);
+        }
+    }
+    Ok(ids)
+}
+
+/// The table a service on `store` and `tables_dir` serves once started: the first of the
+/// [`activation_candidates`] whose file (or, where the database keeps them, bytes) verifies
+/// against its recorded SHA-256. Nothing is recorded or changed. Returns the table, its id
+/// and file, and why each candidate before it was passed over.
+pub(super) async fn served_table(
+    store: &Store,
+    tables_dir: &Path,
+) -> Result<Option<super::ServedTable>, ServiceError> {
+    let mut passed_over = Vec::new();
+    for id in activation_candidates(store).await? {
+        let Some(row) = store.table(&id).await? else {
+            passed_over.push(format!("{id}: recorded as active but not stored"));
+            continue;
+        };
+        match fetch_checked_in(store, tables_dir, &row).await {
+            Ok((_, table)) => {
+                return Ok(Some(super::ServedTable {
+                    path: tables_dir.join(&row.path),
+                    id,
+                    table,
+                    passed_over,
+                }));
+            }
+            Err(e) => passed_over.push(format!("{id}: {}", e.message())),
+        }
+    }
+    Ok(None)
+}
+
 /// Loads table `id` (checksum verified) for activation.
 async fn load_for_activation(state: &Inner, id: &str) -> Result<ActiveTable, ServiceError> {
     let (_, table, sha, _) = load_verified(state, id).await?;
@@ -357,13 +374,9 @@ pub async fn follow_recorded_active(state: &Inner) -> Result<(), ServiceError> {
 /// it to the other replicas.
 pub async fn activate_table(state: &AppState, id: &str) -> Result<(), ServiceError> {
     let loaded = load_for_activation(state, id).await?;
-    let pause = super::debug_hooks::activation_pause_ms();
-    if pause > 0 && state.active.load().is_some() {
-        tracing::warn!(
-            table = id,
-            "fault injection: table verified, pausing {pause} ms before recording it as active"
-        );
-        tokio::time::sleep(std::time::Duration::from_millis(pause)).await;
+    #[cfg(feature = "fault-injection")]
+    if state.active.load().is_some() {
+        super::fault_injection::pause_before_recording_activation(id).await;
     }
     state.store.record_activation(id, now_ms()).await?;
     state.active.store(Some(Arc::new(loaded)));

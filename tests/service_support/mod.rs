@@ -80,11 +80,37 @@ pub fn client() -> reqwest::Client {
     reqwest::Client::new()
 }
 
-/// Parses a JSON body.
+/// The status and body of an answer to `method` (`None`: not known), the body checked against
+/// openapi.yaml's schema for its route, status and content type ([`openapi::check_response`]).
+async fn checked_body(method: Option<&str>, resp: reqwest::Response) -> (u16, Vec<u8>) {
+    let path = resp.url().path().to_string();
+    let status = resp.status().as_u16();
+    let ctype = resp
+        .headers()
+        .get("content-type")
+        .and_then(|v| v.to_str().ok())
+        .unwrap_or_default()
+        .to_string();
+    let bytes = resp.bytes().await.expect("body").to_vec();
+    openapi::assert_response(method, &path, status, &ctype, &bytes);
+    (status, bytes)
+}
+
+/// Parses a JSON body, first checked against openapi.yaml.
 pub async fn json(resp: reqwest::Response) -> serde_json::Value {
-    let bytes = resp.bytes().await.expect("body");
+    let (_, bytes) = checked_body(None, resp).await;
     serde_json::from_slice(&bytes)
         .unwrap_or_else(|e| panic!("not JSON ({e}): {}", String::from_utf8_lossy(&bytes)))
+}
+
+/// The status and JSON body (`Null` when the body is not JSON) of an answer to `method`, the
+/// body first checked against openapi.yaml.
+pub async fn checked_json(method: &str, resp: reqwest::Response) -> (u16, serde_json::Value) {
+    let (status, bytes) = checked_body(Some(method), resp).await;
+    (
+        status,
+        serde_json::from_slice(&bytes).unwrap_or(serde_json::Value::Null),
+    )
 }
 
 /// Asserts a problem+json answer with `status` and `code`, and returns its detail.
@@ -126,4 +152,5 @@ pub async fn wait_job(
         tokio::time::sleep(std::time::Duration::from_millis(20)).await;
     }
 }
+pub mod openapi;
 pub mod pg;
