@@ -227,8 +227,8 @@ impl FromStr for CorrectionMode {
 }
 
 /// The correction `table` renders with under `entry` in `mode`: `entry` itself, or, for a
-/// same-illuminant table in [`CorrectionMode::Camera`] under a light whose spectrum is
-/// known, `entry` with C in place of T (fitted on the table's sensor, built-in curves or
+/// same-illuminant table with a sensor description in [`CorrectionMode::Camera`] under a
+/// light whose spectrum is known, `entry` with C in place of T (fitted on the table's sensor, built-in curves or
 /// `iset`'s).
 pub fn correction_for(
     table: &L3Table,
@@ -239,8 +239,13 @@ pub fn correction_for(
     if mode == CorrectionMode::Colorimetric || uses_own_kernels(table) || entry.spd.is_none() {
         return Ok(entry.clone());
     }
-    let camera = Camera::new(&table.sensor_design()?, WavelengthGrid::default(), iset)
-        .map_err(TrainError::from)?;
+    let design = match table.sensor_design() {
+        Ok(d) => d,
+        // a table with no sensor description has nothing to fit C on: T
+        Err(L3Error::NoSensor) => return Ok(entry.clone()),
+        Err(e) => return Err(e.into()),
+    };
+    let camera = Camera::new(&design, WavelengthGrid::default(), iset).map_err(TrainError::from)?;
     Ok(camera_corrected(
         &camera,
         &table.colour_map()?,
