@@ -193,13 +193,10 @@ impl TrainingSpec {
             levels: L3Params::levels_for(self.levels, swing)?,
             contrast_classes: self.contrast_classes,
             saturation_classes: self.saturation_classes,
-            ridge: match std::env::var("L3_DEBUG_RIDGE")
-                .ok()
-                .and_then(|v| v.parse::<f64>().ok())
-            {
-                Some(r) => RidgeChoice::Fixed { relative: r },
-                None if self.noise => RidgeChoice::Gcv,
-                None => RidgeChoice::NoiseVariance,
+            ridge: if self.noise {
+                RidgeChoice::Gcv
+            } else {
+                RidgeChoice::NoiseVariance
             },
             colour_map: Some(crate::l3::ColourMapFit {
                 averaging_px: (self.colour_averaging_px > 0.0).then_some(self.colour_averaging_px),
