@@ -117,6 +117,10 @@ pub struct TrainingConfig {
     /// the cores, at least one).
     #[serde(default)]
     pub background_threads: usize,
+    /// The scheduling priority of those threads (Linux): `idle` (the
+    /// default) runs training on the cores renders leave idle.
+    #[serde(default)]
+    pub background_priority: super::cpu::BackgroundPriority,
     /// Seconds a replica holds a claimed job without a heartbeat; a job whose replica died
     /// goes back to the queue after this.
     #[serde(default = "default_lease_s")]
@@ -206,6 +210,9 @@ impl ServiceConfig {
             "L3_BODY_BUDGET_BYTES" => self.server.body_budget_bytes = num(key, value)?,
             "L3_RENDER_THREADS" => self.server.render_threads = num(key, value)?,
             "L3_BACKGROUND_THREADS" => self.training.background_threads = num(key, value)?,
+            "L3_BACKGROUND_PRIORITY" => {
+                self.training.background_priority = value.trim().parse().map_err(bad)?
+            }
             "L3_REQUEST_TIMEOUT_S" => self.server.request_timeout_s = num(key, value)?,
             "L3_BEARER_TOKEN" => self.server.bearer_token = value.to_string(),
             "L3_LOG_FORMAT" => self.server.log_format = value.to_string(),

@@ -187,7 +187,11 @@ pub async fn start_with(
     let defaults = IlluminantRegistry::with_defaults(grid, iset.as_ref())
         .map_err(|e| ServiceError::Internal(format!("default illuminants: {e}")))?;
     let default_spec = default_training_spec(&cfg)?;
-    let pools = cpu::CpuPools::new(cfg.server.render_threads, cfg.training.background_threads)?;
+    let pools = cpu::CpuPools::new(
+        cfg.server.render_threads,
+        cfg.training.background_threads,
+        cfg.training.background_priority,
+    )?;
     let state = AppState(Arc::new(Inner {
         admission: admission::Admission::new(&cfg.server),
         cpu_gate: Arc::new(Semaphore::new(
