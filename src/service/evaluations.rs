@@ -133,6 +133,12 @@ pub async fn create(
     let mut value: Value = serde_json::from_slice(&body)
         .map_err(|e| ServiceError::InvalidJson(format!("evaluation request: {e}")))?;
     super::jobs::integral_floats_to_ints(&mut value);
+    if !value.is_object() {
+        // (serde would read a struct from an array too, field by field)
+        return Err(ServiceError::InvalidJson(
+            "evaluation request: the body must be a JSON object".into(),
+        ));
+    }
     let req: EvaluationRequest = serde_json::from_value(value)
         .map_err(|e| ServiceError::InvalidJson(format!("evaluation request: {e}")))?;
     if !CHARTS.contains(&req.chart.as_str()) {
