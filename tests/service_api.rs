@@ -1011,6 +1011,15 @@ async fn hostile_input_gets_a_clear_4xx() {
         .await
         .unwrap();
     problem(r, 400, "invalid_json").await;
+    // an array is not a request object (serde alone would read one field by field)
+    let r = c
+        .post(url(&server, "/v1/evaluations"))
+        .header("content-type", "application/json")
+        .body("[null]")
+        .send()
+        .await
+        .unwrap();
+    problem(r, 400, "invalid_json").await;
     let r = c
         .post(url(&server, "/v1/evaluations"))
         .json(&serde_json::json!({"method": "magic"}))
@@ -1329,6 +1338,68 @@ async fn concurrent_illuminant_changes_are_all_kept() {
         assert_eq!(text.contains(&name), i >= 6, "lamp{i} in {text}");
     }
     server.shutdown().await.unwrap();
+}
+
+/// 50 PUT/DELETE pairs of the same names, each pair sent at once: whatever order they land in,
+/// the registry in memory (the list the running service answers with) equals the database (the
+/// list a restart on the same database loads).
+#[tokio::test(flavor = "multi_thread", worker_threads = 4)]
+async fn racing_puts_and_deletes_leave_memory_equal_to_the_database() {
+    let data = tempfile::tempdir().unwrap();
+    let cfg = test_config(data.path());
+    let server = l3::service::start(cfg.clone()).await.unwrap();
+    let c = client();
+    let mut handles = Vec::new();
+    for i in 0..50u32 {
+        let name = format!("Race{}", i % 10);
+        let (cp, up) = (c.clone(), url(&server, &format!("/v1/illuminants/{name}")));
+        handles.push(tokio::spawn(async move {
+            let r = cp
+                .put(up)
+                .json(&serde_json::json!({"cct": 2500 + 50 * i}))
+                .send();
+            ("PUT", r.await.unwrap().status().as_u16())
+        }));
+        let (cd, ud) = (c.clone(), url(&server, &format!("/v1/illuminants/{name}")));
+        handles.push(tokio::spawn(async move {
+            (
+                "DELETE",
+                cd.delete(ud).send().await.unwrap().status().as_u16(),
+            )
+        }));
+    }
+    for h in handles {
+        let (method, status) = h.await.unwrap();
+        let ok: &[u16] = if method == "PUT" {
+            &[200, 201]
+        } else {
+            &[204, 404]
+        };
+        assert!(ok.contains(&status), "{method} answered {status}");
+    }
+    let listed = |v: serde_json::Value| -> Vec<String> {
+        let mut out: Vec<String> = v["items"]
+            .as_array()
+            .unwrap_or_else(|| panic!("no items: {v}"))
+            .iter()
+            .map(|e| e.to_string())
+            .filter(|e| e.to_ascii_lowercase().contains("race"))
+            .collect();
+        out.sort();
+        out
+    };
+    let in_memory =
+        listed(json(c.get(url(&server, "/v1/illuminants")).send().await.unwrap()).await);
+    server.shutdown().await.unwrap();
+    let again = l3::service::start(cfg).await.unwrap();
+    let in_database =
+        listed(json(c.get(url(&again, "/v1/illuminants")).send().await.unwrap()).await);
+    eprintln!(
+        "{} registered after the race: {in_memory:?}",
+        in_memory.len()
+    );
+    assert_eq!(in_memory, in_database);
+    again.shutdown().await.unwrap();
 }
 
 /// The illuminant a tungsten frame's AsShotNeutral chooses corrects Natural-100 about as well
