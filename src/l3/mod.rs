@@ -22,7 +22,8 @@ pub use baseline::{ColourMatrix, bilinear_demosaic, render_baseline};
 pub use camera_correction::camera_correction;
 pub use classify::{MAX_CHANNELS, PatchGeometry, PatchStats, mirror, sat_case_index};
 pub use colour_map::{
-    ColourMapFit, ColourSamples, DEFAULT_AVERAGING_PX, least_squares_map, level_maps,
+    CROSS_AVERAGING_PX, ColourMapFit, ColourSamples, DEFAULT_AVERAGING_PX, least_squares_map,
+    level_maps,
 };
 pub use correction::{
     CorrectionSource, IDENTITY, IlluminantEntry, IlluminantRegistry, MAX_MATRIX_ENTRY, Mat3,

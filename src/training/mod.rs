@@ -93,13 +93,11 @@ pub struct TrainingSpec {
     #[serde(default = "default_luminance")]
     pub mean_luminance: f64,
     /// Pixels per channel whose mean each level's colour map is made best
-    /// for under the sensor's noise (0: the noise-free map at every level).
-    #[serde(default = "default_averaging")]
-    pub colour_averaging_px: f64,
-}
-
-fn default_averaging() -> f64 {
-    crate::l3::DEFAULT_AVERAGING_PX
+    /// for under the sensor's noise (0: the noise-free map at every level;
+    /// absent: [`crate::l3::DEFAULT_AVERAGING_PX`] for a same-illuminant
+    /// table, [`crate::l3::CROSS_AVERAGING_PX`] for a cross-illuminant one).
+    #[serde(default)]
+    pub colour_averaging_px: Option<f64>,
 }
 
 fn default_kind() -> TableKind {
@@ -141,7 +139,7 @@ impl Default for TrainingSpec {
             contrast_classes: true,
             saturation_classes: true,
             mean_luminance: default_luminance(),
-            colour_averaging_px: default_averaging(),
+            colour_averaging_px: None,
         }
     }
 }
@@ -167,8 +165,9 @@ impl TrainingSpec {
         if !(16..=1024).contains(&self.scene_size) {
             return bad(format!("scene_size {} (16 to 1024)", self.scene_size));
         }
-        let px = self.colour_averaging_px;
-        if !(px.is_finite() && (px == 0.0 || px >= 1.0)) {
+        if let Some(px) = self.colour_averaging_px
+            && !(px.is_finite() && (px == 0.0 || px >= 1.0))
+        {
             return bad(format!("colour_averaging_px {px} (0, or at least 1)"));
         }
         if !(self.mean_luminance.is_finite() && self.mean_luminance > 0.0) {
@@ -186,6 +185,14 @@ impl TrainingSpec {
         self.scenes
     }
 
+    /// The colour maps' averaging (pixels per channel) this spec trains with.
+    pub fn colour_averaging(&self) -> f64 {
+        self.colour_averaging_px.unwrap_or(match self.kind {
+            TableKind::SameIlluminant => crate::l3::DEFAULT_AVERAGING_PX,
+            TableKind::CrossIlluminant => crate::l3::CROSS_AVERAGING_PX,
+        })
+    }
+
     /// The L3 parameters this spec implies for a sensor with `swing` volts.
     pub fn params(&self, swing: f64) -> Result<L3Params, TrainError> {
         let p = L3Params {
@@ -199,7 +206,7 @@ impl TrainingSpec {
                 RidgeChoice::NoiseVariance
             },
             colour_map: Some(crate::l3::ColourMapFit {
-                averaging_px: (self.colour_averaging_px > 0.0).then_some(self.colour_averaging_px),
+                averaging_px: Some(self.colour_averaging()).filter(|&px| px > 0.0),
                 perceptual: true,
             }),
             ..L3Params::default()
