@@ -549,6 +549,18 @@ fn bad_arguments_are_clear_errors() {
     assert!(!ok && err.contains("bad.safetensors"), "{err}");
     let (ok, _, err) = l3(&["train", "--patch", "4", "--out", "t.safetensors"], d);
     assert!(!ok && err.contains("patch"), "{err}");
+    let (ok, _, err) = l3(
+        &[
+            "train",
+            "--colour-averaging-px",
+            "0.5",
+            "--out",
+            "t.safetensors",
+        ],
+        d,
+    );
+    assert!(!ok && err.contains("colour_averaging_px 0.5"), "{err}");
+    assert!(!d.join("t.safetensors").exists());
     let (ok, _, err) = l3(&["simulate", "--exposure=-1", "--out", "x"], d);
     assert!(!ok && err.contains("exposure"), "{err}");
 }
@@ -583,6 +595,17 @@ fn train_in_shards_gives_the_same_table_file() {
         &["--shards", "2", "--shard-dir", "parts"],
     );
     assert_eq!(one, two, "2 shards give the single run's bytes");
+    // --colour-averaging-px: 128 is an SI table's default, 0 the noise-free maps
+    // (the spec, stored in the header, differs; the kernels tell)
+    train("avg128.safetensors", &["--colour-averaging-px", "128"]);
+    train("avg0.safetensors", &["--colour-averaging-px", "0"]);
+    let kernels = |f: &str| l3::l3::L3Table::load(&d.join(f)).unwrap().kernels;
+    assert_eq!(
+        kernels("one.safetensors"),
+        kernels("avg128.safetensors"),
+        "the SI default is 128 pixels per channel"
+    );
+    assert_ne!(kernels("one.safetensors"), kernels("avg0.safetensors"));
     assert!(stdout.contains("accumulation shard 2/2"), "{stdout}");
     assert!(d.join("parts/sums-2-of-2.l3p").is_file());
     // one step per process, as on separate machines: surveys, then sums

@@ -49,6 +49,11 @@ pub struct TrainArgs {
     /// No saturation cases.
     #[arg(long)]
     pub no_saturation: bool,
+    /// Pixels per channel whose mean the colour maps are fitted for under
+    /// the sensor's noise (0: the noise-free map). Default by kind: 128 for
+    /// same-illuminant tables, 64 for cross-illuminant ones.
+    #[arg(long)]
+    pub colour_averaging_px: Option<f64>,
     #[arg(long, default_value = "table.safetensors")]
     pub out: PathBuf,
     /// Train in this many shards (batch ranges), one after the other, each
@@ -98,6 +103,7 @@ pub fn run(cli: &Cli, a: &TrainArgs) -> Result<(), CliError> {
         noise: !a.noise_free,
         contrast_classes: !a.no_contrast,
         saturation_classes: !a.no_saturation,
+        colour_averaging_px: a.colour_averaging_px,
         ..TrainingSpec::default()
     };
     let bar = ProgressBar::new(1000);
