@@ -1,7 +1,8 @@
 //! The paper's Table 1 on the paper's sensor (`rgbw-iset`: ISETCam's
 //! default RGBW filters), on a small training set so it runs in CI:
-//! - the SI rows in the paper's order under tungsten (SI_Tun+T < SI_Ens+T <
-//!   SI_D65+T);
+//! - the rows in the paper's order under tungsten (I_Tun ≤ SI_Tun+T <
+//!   SI_Ens+T < SI_D65+T; I_Tun's lead is small, 3.46 against 3.49 here, and
+//!   3.53 against 3.63 over 16 captures);
 //! - every L3 row within 0.4 ΔE of its matching linear map (the same
 //!   least-squares channel → XYZ map in every class, evaluated on the same
 //!   noisy frame), or better;
@@ -45,6 +46,13 @@ fn table1_on_the_papers_sensor() {
         si_t.mean,
         si_e.mean,
         si_d.mean
+    );
+    let i_tun = row("I_Tun");
+    assert!(
+        i_tun.mean <= si_t.mean,
+        "I_Tun {} above SI_Tun+T {}",
+        i_tun.mean,
+        si_t.mean
     );
     let base = row("Baseline_Tun").mean.min(row("Baseline_Tun all").mean);
     for r in t.rows.iter().filter(|r| !r.method.starts_with("Baseline")) {
