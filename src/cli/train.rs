@@ -51,7 +51,7 @@ pub struct TrainArgs {
     pub no_saturation: bool,
     /// Pixels per channel whose mean the colour maps are fitted for under
     /// the sensor's noise (0: the noise-free map). Default by kind: 128 for
-    /// same-illuminant tables, 64 for cross-illuminant ones.
+    /// same-illuminant tables, 32 for cross-illuminant ones.
     #[arg(long)]
     pub colour_averaging_px: Option<f64>,
     #[arg(long, default_value = "table.safetensors")]
