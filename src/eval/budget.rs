@@ -33,7 +33,9 @@ pub struct ErrorBudget {
     pub per_patch: Vec<Vec<f64>>,
 }
 
-fn per_patch(est: &[Xyz], truth: &[Xyz], white: usize) -> Vec<f64> {
+/// ΔE2000 of each patch, both sides normalised by their `white` patch's Y
+/// and compared in CIELAB with the D65 white (as the evaluation scores).
+pub(super) fn per_patch(est: &[Xyz], truth: &[Xyz], white: usize) -> Vec<f64> {
     let (ye, yt) = (est[white][1], truth[white][1]);
     est.iter()
         .zip(truth)

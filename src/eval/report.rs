@@ -137,6 +137,23 @@ pub fn patch_means(patches: &[Patch], xyz: &[f32], width: usize) -> Vec<Xyz> {
         .collect()
 }
 
+/// The chart's white patch, which both sides are normalised by: the grey
+/// patch with the highest ideal Y (any patch, on a chart without greys).
+pub fn white_patch_index(patches: &[Patch], ideal: &[Xyz]) -> usize {
+    let greys: Vec<usize> = (0..patches.len().min(ideal.len()))
+        .filter(|&i| patches[i].category == "grey")
+        .collect();
+    let pool: Vec<usize> = if greys.is_empty() {
+        (0..patches.len().min(ideal.len())).collect()
+    } else {
+        greys
+    };
+    pool.iter()
+        .copied()
+        .max_by(|&a, &b| ideal[a][1].total_cmp(&ideal[b][1]))
+        .unwrap_or(0)
+}
+
 /// Evaluate a rendered XYZ image (`width × height × 3`, interleaved) of a
 /// chart. Both sides are normalised by their white patch (the grey patch
 /// with the highest ideal Y) and compared in CIELAB with the D65 white.
@@ -168,20 +185,7 @@ pub fn evaluate_chart(
             )));
         }
     }
-    // white patch: brightest ideal Y among greys (or overall)
-    let greys: Vec<usize> = (0..truth.patches.len())
-        .filter(|&i| truth.patches[i].category == "grey")
-        .collect();
-    let pool: Vec<usize> = if greys.is_empty() {
-        (0..truth.patches.len()).collect()
-    } else {
-        greys
-    };
-    let wi = pool
-        .iter()
-        .copied()
-        .max_by(|&a, &b| truth.ideal_d65[a][1].total_cmp(&truth.ideal_d65[b][1]))
-        .unwrap_or(0);
+    let wi = white_patch_index(truth.patches, truth.ideal_d65);
     let means = patch_means(truth.patches, xyz, width);
     let y_true = truth.ideal_d65[wi][1];
     let y_est = means[wi][1];
