@@ -396,6 +396,7 @@ fn simulate_train_render_eval() {
             table.to_str().unwrap(),
             "--captures",
             "4",
+            "--captured-floor",
             "--out",
             split_path.to_str().unwrap(),
         ],
@@ -403,6 +404,7 @@ fn simulate_train_render_eval() {
     );
     assert!(ok, "eval --captures failed: {out}{err}");
     assert!(out.contains("noise split over 4 captures"), "{out}");
+    assert!(out.contains("captured floor"), "{out}");
     let v: serde_json::Value =
         serde_json::from_slice(&std::fs::read(&split_path).unwrap()).unwrap();
     let split = &v["context"]["noise_split"];
@@ -419,6 +421,32 @@ fn simulate_train_render_eval() {
     let per_mean = split["per_capture_stats"]["mean"].as_f64().unwrap();
     assert!(averaged < per_mean, "{averaged} vs {per_mean}");
     assert!(split["noise_free"]["mean"].as_f64().unwrap() > 0.0);
+    // the captured floor: a 4-channel map fitted on the chart, its figures
+    // finite, the cross-validated one the mean of its two folds
+    let floor = &v["context"]["captured_floor"];
+    assert_eq!(floor["captures"], 4);
+    assert_eq!(floor["map"].as_array().unwrap().len(), 4);
+    let fig = |k: &str| floor[k].as_f64().unwrap();
+    for k in ["fitted", "fresh", "noise_free", "cross_validated"] {
+        assert!(fig(k).is_finite() && fig(k) > 0.0, "{k}: {floor}");
+    }
+    let folds: Vec<f64> = floor["folds"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|x| x.as_f64().unwrap())
+        .collect();
+    assert!((fig("cross_validated") - 0.5 * (folds[0] + folds[1])).abs() < 1e-12);
+    let (ok, _, err) = l3(
+        &[
+            "eval",
+            "--table",
+            table.to_str().unwrap(),
+            "--captured-floor",
+        ],
+        d,
+    );
+    assert!(!ok && err.contains("captures"), "{err}");
     let (ok, _, err) = l3(
         &[
             "eval",

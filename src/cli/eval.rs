@@ -63,6 +63,13 @@ pub struct EvalArgs {
     /// bias) and the noise-free chart. 2–64; not with --paper-table.
     #[arg(long, value_parser = clap::value_parser!(u16).range(2..=64), conflicts_with = "paper_table")]
     pub captures: Option<u16>,
+    /// With --captures N: also fit the captured floor, a linear map from each
+    /// patch's channel means to XYZ fitted on the chart itself (minimising the
+    /// mean ΔE2000 over the N captures), scored on N fresh captures and
+    /// 2-fold cross-validated over the patches: what a linear pipeline reaches
+    /// on this capture's flare and noise given the answers, and without them.
+    #[arg(long, requires = "captures")]
+    pub captured_floor: bool,
     /// Study the light taken from a frame with `--table` (an SI table): under A,
     /// Tungsten, D50, D65, F2, F11 and 2700–10000 K, the colour temperature from
     /// metadata (the camera's white, as a DNG's AsShotNeutral) and estimated from
@@ -394,6 +401,19 @@ fn evaluate_and_explain(
             split.noise_free.mean,
         );
         report.context["noise_split"] = serde_json::to_value(&split).unwrap_or_default();
+        if a.captured_floor {
+            let floor = crate::eval::captured_floor(camera, acq, iset, chart, n.into())?;
+            println!(
+                "captured floor (a linear map fitted on this chart's patch channel means, minimising ΔE2000 over {n} captures): {:.2} on them, {:.2} on {n} fresh captures, {:.2} noise-free; 2-fold cross-validated over the patches {:.2} ({:.2}, {:.2})",
+                floor.fitted,
+                floor.fresh,
+                floor.noise_free,
+                floor.cross_validated,
+                floor.folds[0],
+                floor.folds[1],
+            );
+            report.context["captured_floor"] = serde_json::to_value(&floor).unwrap_or_default();
+        }
     }
     let budget = crate::eval::error_budget(camera, acq, corr, iset, chart)?;
     println!(

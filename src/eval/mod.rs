@@ -2,6 +2,7 @@
 //! chart's ideal XYZ under D65 (DESIGN.md §7), as a stable JSON report.
 
 mod budget;
+mod captured_floor;
 mod figure;
 mod illuminant_estimation;
 mod noise_split;
@@ -10,6 +11,7 @@ mod report;
 mod workflow;
 
 pub use budget::{ErrorBudget, error_budget};
+pub use captured_floor::{CapturedFloor, captured_floor};
 pub use figure::report_svg;
 pub use illuminant_estimation::{
     EstimateResult, EstimationRow, STUDY_LIGHTS, estimation_markdown, illuminant_estimation_study,
@@ -21,7 +23,7 @@ pub use paper_table::{
 };
 pub use report::{
     ChartTruth, DeltaEReport, ErrorStats, PatchResult, PixelStats, REPORT_SCHEMA, evaluate_chart,
-    interior, patch_means, summarize,
+    interior, patch_means, summarize, white_patch_index,
 };
 pub use workflow::{
     ChannelSet, ChartCapture, ChartSetup, ColourFit, LightLevel, Method, REFERENCE_LUMINANCE,
