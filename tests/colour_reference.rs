@@ -161,6 +161,27 @@ proptest! {
     }
 
     #[test]
+    fn ciede2000_metric_is_its_second_order_expansion(
+        a in lab_strategy(),
+        dir in (-1.0..1.0f64, -1.0..1.0f64, -1.0..1.0f64),
+    ) {
+        // away from the neutral axis, where ΔE00's hue term is smooth
+        prop_assume!(a[1].hypot(a[2]) > 2.0);
+        let d = [dir.0, dir.1, dir.2];
+        prop_assume!(d.iter().map(|v| v * v).sum::<f64>() > 0.01);
+        let h = 1e-4;
+        let q = ciede2000_metric(a);
+        let quad: f64 = (0..3)
+            .map(|i| (0..3).map(|j| d[i] * q[i][j] * d[j]).sum::<f64>())
+            .sum::<f64>()
+            * h
+            * h;
+        let de = ciede2000(a, [a[0] + h * d[0], a[1] + h * d[1], a[2] + h * d[2]]);
+        prop_assert!(quad >= 0.0);
+        prop_assert!((quad - de * de).abs() <= 1e-3 * de * de, "{:?} {:?}: {} against {}", a, d, quad, de * de);
+    }
+
+    #[test]
     fn xyz_lab_round_trip(x in 0.0..1.2f64, y in 0.0..1.2f64, z in 0.0..1.2f64) {
         let v = [x, y, z];
         let back = lab_to_xyz(xyz_to_lab(v, D65_WHITE_XYZ), D65_WHITE_XYZ);

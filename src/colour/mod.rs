@@ -10,7 +10,7 @@ mod srgb;
 mod tristimulus;
 
 pub use cct::{cct_duv_from_xy, cct_from_xy, daylight_xy, planck_xy, xy_to_uv};
-pub use ciede2000::ciede2000;
+pub use ciede2000::{ciede2000, ciede2000_metric};
 pub use lab::{lab_to_xyz, xy, xy_to_xyz, xyy_to_xyz, xyz_to_lab, xyz_to_xyy};
 pub use srgb::{
     LINEAR_SRGB_TO_XYZ, SRGB_PRIMARIES_XY, SRGB_WHITE_XY, SrgbLut, XYZ_TO_LINEAR_SRGB,
