@@ -326,13 +326,20 @@ mod tests {
         }
     }
 
+    const MAP: [f64; 9] = [0.4, 0.2, 0.02, 0.35, 0.7, 0.1, 0.15, 0.1, 0.9];
+
+    /// [`exact`] with patch 0 the white: every channel at its brightest.
+    fn exact_with_white() -> PatchData {
+        let mut d = exact(&MAP, 40, 0);
+        d.channels[0] = vec![1.0, 1.0, 1.0];
+        d.truth[0] = apply(&MAP, &d.channels[0]);
+        d
+    }
+
     #[test]
     fn an_exact_linear_chart_is_fitted_to_no_error() {
-        let m = [0.4, 0.2, 0.02, 0.35, 0.7, 0.1, 0.15, 0.1, 0.9];
-        let mut d = exact(&m, 40, 0);
-        // the white patch: every channel at its brightest
-        d.channels[0] = vec![1.0, 1.0, 1.0];
-        d.truth[0] = apply(&m, &d.channels[0]);
+        let m = MAP;
+        let d = exact_with_white();
         let all = |_: usize| true;
         let fitted = fit(std::slice::from_ref(&d), &all).unwrap();
         assert!(mean_over(std::slice::from_ref(&d), &fitted, &all) < 1e-3);
@@ -343,10 +350,8 @@ mod tests {
 
     #[test]
     fn a_wrong_map_scores_worse_than_the_fit() {
-        let m = [0.4, 0.2, 0.02, 0.35, 0.7, 0.1, 0.15, 0.1, 0.9];
-        let mut d = exact(&m, 40, 0);
-        d.channels[0] = vec![1.0, 1.0, 1.0];
-        d.truth[0] = apply(&m, &d.channels[0]);
+        let m = MAP;
+        let d = exact_with_white();
         let wrong = [0.4, 0.2, 0.02, 0.35, 0.7, 0.1, 0.15, 0.1, 0.6];
         let all = |_: usize| true;
         assert!(d.mean_delta_e(&wrong, &all) > 1.0);

@@ -327,7 +327,7 @@ pub fn evaluate_capture(
 }
 
 /// The least-squares colour matrix of the conventional baseline for
-/// `illuminants`: noise-free channel responses of the training reflectances
+/// `illuminants`: noise-free channel responses of the natural reflectances
 /// → their XYZ under the same illuminant (same-illuminant, like an SI
 /// table). A conventional pipeline uses a 3×3 matrix on R, G, B: when the
 /// CFA has channels named R, G and B only those are used (W gets weight 0);
@@ -357,7 +357,7 @@ pub enum ChannelSet {
     All,
 }
 
-/// What a colour matrix is fitted on: the training reflectances under
+/// What a colour matrix is fitted on: the natural reflectances under
 /// `illuminants`, to XYZ under the same light (`SameIlluminant`) or under
 /// D65 (`CrossIlluminant`), on `channels`. With `preserve_white` the fit is
 /// constrained to map a perfect white exactly (a white-balanced camera
@@ -370,7 +370,9 @@ pub struct ColourFit<'a> {
     pub preserve_white: bool,
 }
 
-/// The training reflectances' colour samples under `illuminants` (see
+/// The colour samples of the natural reflectances (the set every colour
+/// map and matrix is fitted on, [`crate::scene::natural_reflectances`])
+/// under `illuminants` (see
 /// [`crate::training::colour_samples`]), with the white's own samples
 /// (`whites`: the perfect white under each light, same normalisation).
 fn training_samples(
@@ -380,7 +382,7 @@ fn training_samples(
     iset: Option<&IsetData>,
 ) -> Result<(ColourSamples, ColourSamples), EvalError> {
     let grid = *camera.grid();
-    let refl: Vec<Spectrum> = crate::scene::training_reflectances(&grid, iset)?
+    let refl: Vec<Spectrum> = crate::scene::natural_reflectances(&grid, iset)?
         .into_iter()
         .map(|(_, s)| s)
         .collect();
@@ -481,7 +483,7 @@ fn fit_preserving(
 }
 
 /// The matching linear map of `table`: the plain least-squares channel →
-/// XYZ map fitted on the same training reflectances, illuminants and target
+/// XYZ map fitted on the same (natural) reflectances, illuminants and target
 /// (same-illuminant or D65) as the table, on every channel.
 pub fn matching_linear_map(
     camera: &Camera,

@@ -8,10 +8,10 @@
 //! another light the sensor's channels move in ways its colour map was never
 //! fitted for, and on real filters the error is large (ISET's RGBW under ISET's
 //! fluorescent lamp: 15.8 ΔE2000 with T). C instead fits, by least squares
-//! over the training reflectances,
+//! over the natural reflectances (`scene::natural_reflectances`),
 //!
-//! `C · (M · channels_X(r)) ≈ XYZ_D65(r)` (errors weighted by CIELAB's
-//! Jacobian, as the colour maps are),
+//! `C · (M · channels_X(r)) ≈ XYZ_D65(r)` (errors weighted by a first-order
+//! ΔE00, as the colour maps are),
 //!
 //! where `M` is the table's own colour map ([`L3Table::colour_map`]). The
 //! result is still one table and one 3×3 matrix per light. The fit needs the
@@ -19,7 +19,7 @@
 
 use nalgebra::{SMatrix, SVector};
 
-use super::colour_map::lab_jacobian;
+use super::colour_map::delta_e_weights;
 use super::{ColourMatrix, ColourSamples, L3Error, L3Table, MAX_MATRIX_ENTRY, Mat3};
 
 impl L3Table {
@@ -53,13 +53,14 @@ impl L3Table {
     }
 }
 
-/// C = argmin Σ‖J·(C · map(channels) − xyz)‖² over `samples`: channel
+/// C = argmin Σ ΔE00²(C · map(channels), xyz), to first order, over `samples`: channel
 /// responses under the acquisition light and their target XYZ under D65,
 /// relit to the same luminance (the cross-illuminant samples of the training
 /// set). `J` is the CIELAB Jacobian at the target colour relative to the
-/// sample's white, so the fit minimises a first-order colour difference, as
-/// the trainer's colour maps do; a plain XYZ fit lets bright surfaces decide
-/// and costs the dark ones.
+/// sample's white, taken through CIEDE2000's local metric (the norm is
+/// `eᵀ Jᵀ Q J e`, see `delta_e_weights`), so the fit minimises a first-order
+/// ΔE00, as the trainer's colour maps do; a plain XYZ fit lets bright
+/// surfaces decide and costs the dark ones.
 pub fn camera_correction(map: &ColourMatrix, samples: &ColourSamples) -> Result<Mat3, L3Error> {
     if samples.n_channels() != map.n_channels || map.m.len() != map.n_channels {
         return Err(L3Error::InvalidParams(format!(
@@ -86,9 +87,7 @@ pub fn camera_correction(map: &ColourMatrix, samples: &ColourSamples) -> Result<
         .zip(&samples.white)
     {
         let y: [f64; 3] = [0, 1, 2].map(|k| c.iter().zip(&map.m).map(|(v, col)| v * col[k]).sum());
-        let j = lab_jacobian(*x, *w);
-        let wm: [[f64; 3]; 3] =
-            [0, 1, 2].map(|i| [0, 1, 2].map(|k| (0..3).map(|q| j[q][i] * j[q][k]).sum()));
+        let wm = delta_e_weights(*x, *w);
         for i in 0..3 {
             for k in 0..3 {
                 for p in 0..3 {

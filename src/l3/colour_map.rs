@@ -22,8 +22,14 @@
 //!   over channels of the channel responses), as a patch of that level is;
 //! - the error is weighted perceptually: each sample's XYZ error goes
 //!   through the Jacobian of CIELAB at its true colour (relative to the
-//!   white of its illuminant), so the fit minimises a first-order ΔE76
-//!   rather than an XYZ error that bright colours dominate;
+//!   white of its illuminant) and CIEDE2000's local metric there
+//!   ([`delta_e_weights`]), so the fit minimises a first-order ΔE00², the
+//!   measure the evaluation reports, rather than an XYZ error that bright
+//!   colours dominate. The samples are the natural reflectances
+//!   (`scene::natural_reflectances`, no Munsell chips): on ISET's RGBW under
+//!   tungsten a cross table's one-capture error went from 3.55 (ΔE76 on the
+//!   training reflectances) to 2.86, where either change alone made it
+//!   worse (3.56 with ΔE00, 3.81 with the natural set; see the README);
 //! - the sensor's noise enters as a ridge: the expected error of the map on
 //!   a channel mean over `averaging_px` pixels per channel
 //!   (`tr(J M Σ Mᵀ Jᵀ)`, `Σ` the noise variance of such a mean at the level),
@@ -38,6 +44,7 @@ use nalgebra::{DMatrix, DVector};
 use serde::{Deserialize, Serialize};
 
 use super::{ColourMatrix, L3Error, NoiseModel};
+use crate::colour::{ciede2000_metric, xyz_to_lab};
 
 /// Noise-free channel responses and XYZ of a set of surfaces, the data every
 /// colour map is fitted on. All three lists have one entry per sample; each
@@ -120,10 +127,11 @@ impl Default for ColourMapFit {
 
 /// The default [`ColourMapFit::averaging_px`]: an 8×8-pixel region of a
 /// 2×2 CFA (about a quarter of an evaluation patch's interior). Measured on
-/// ISET's RGBW under tungsten (SI table, patch means, 3 noise seeds): 64 gave
-/// 3.24 noise-free / 3.53 noisy, 128 gave 3.06 / 3.57, 256 gave 2.96 / 3.72,
-/// no noise term 3.09 / 4.39; on the idealised `rgbw-paper` every choice is
-/// within 0.03.
+/// ISET's RGBW under tungsten (SI_Tun+T, 16 captures; one capture's mean /
+/// noise-free / per-pixel): 64 gave 3.17 / 2.98 / 4.91, 128 gave 3.25 / 2.89
+/// / 6.05, 256 gave 3.42 / 2.84 / 7.28; on rgbw-ar0132at 2.52, 2.55 and 2.58.
+/// 128 was chosen with the earlier ΔE76 maps, where 64 cost two fluorescent
+/// `+C` rows on rgbw-ar0132at; it has not been re-chosen since.
 pub const DEFAULT_AVERAGING_PX: f64 = 128.0;
 
 /// The averaging a cross-illuminant table's colour maps are fitted for. A
@@ -132,12 +140,10 @@ pub const DEFAULT_AVERAGING_PX: f64 = 128.0;
 /// The value is measured, not derived: a 16×16-pixel patch interior holds 64
 /// pixels per channel (2×2 CFA), yet over 16 noisy captures of the chart the
 /// mean patch-mean ΔE2000 of one capture is lowest near 32. On ISET's RGBW,
-/// I_Tun (one capture mean / noise-free / per-pixel): 32 gave 3.53 / 3.12 /
-/// 6.37, 48 gave 3.58 / 2.95 / 7.41, 64 gave 3.68 / 2.84 / 8.23, 128 gave
-/// 4.11 / 2.69 / 10.27. Over Table 1 on the six shipped sensors (seed 7), 32
-/// against 64 changed cross rows' patch means by −0.10 to +0.02 and lowered
-/// or kept every cross row's per-pixel ΔE (rgbw-iset I_Tun 8.23 → 6.37). Same-
-/// illuminant tables keep 128: 64 cost two fluorescent rows on rgbw-ar0132at.
+/// I_Tun (one capture's mean / noise-free / per-pixel): 24 gave 2.85 / 2.72 /
+/// 4.08, 32 gave 2.85 / 2.65 / 4.47, 48 gave 2.87 / 2.55 / 5.19, 64 gave 2.93
+/// / 2.48 / 5.80; on rgbw-ar0132at 32 and 48 gave 2.29, 24 and 64 2.30 and
+/// 2.31. Same-illuminant tables keep [`DEFAULT_AVERAGING_PX`].
 pub const CROSS_AVERAGING_PX: f64 = 32.0;
 
 impl ColourMapFit {
@@ -176,7 +182,7 @@ pub fn level_maps(
 }
 
 /// `∂(L*, a*, b*)/∂(X, Y, Z)` at `xyz` for reference white `white`.
-pub(super) fn lab_jacobian(xyz: [f64; 3], white: [f64; 3]) -> [[f64; 3]; 3] {
+fn lab_jacobian(xyz: [f64; 3], white: [f64; 3]) -> [[f64; 3]; 3] {
     // d f(t)/dt of the CIELAB function, kept finite at t → 0
     let df = |t: f64| {
         if t > 216.0 / 24389.0 {
@@ -191,6 +197,21 @@ pub(super) fn lab_jacobian(xyz: [f64; 3], white: [f64; 3]) -> [[f64; 3]; 3] {
         [500.0 * d[0], -500.0 * d[1], 0.0],
         [0.0, 200.0 * d[1], -200.0 * d[2]],
     ]
+}
+
+/// The weights `W = Jᵀ Q J` that make an XYZ error `e` at `xyz` (relative to
+/// `white`) cost `eᵀ W e`, its first-order ΔE00²: `J` is the CIELAB Jacobian,
+/// `Q` CIEDE2000's local metric in CIELAB ([`ciede2000_metric`]).
+pub(super) fn delta_e_weights(xyz: [f64; 3], white: [f64; 3]) -> [[f64; 3]; 3] {
+    let j = lab_jacobian(xyz, white);
+    let q = ciede2000_metric(xyz_to_lab(xyz, white));
+    [0, 1, 2].map(|k| {
+        [0, 1, 2].map(|l| {
+            (0..3)
+                .map(|p| (0..3).map(|r| j[p][k] * q[p][r] * j[r][l]).sum::<f64>())
+                .sum()
+        })
+    })
 }
 
 fn level_map(
@@ -219,12 +240,11 @@ fn level_map(
         used += 1;
         // this surface as a patch at `level`: channels (and XYZ) × s
         let s = level / lum;
-        // error weights W = JᵀJ (perceptual), or the identity; the error of a
+        // error weights W = JᵀQJ (perceptual), or the identity; the error of a
         // scaled sample is s × the error at unit scale, and J scales by 1/s:
         // both cancel, so every sample has the same weight at every level
         let wm: [[f64; 3]; 3] = if fit.perceptual {
-            let j = lab_jacobian(*x, *w);
-            [0, 1, 2].map(|k| [0, 1, 2].map(|l| (0..3).map(|q| j[q][k] * j[q][l]).sum()))
+            delta_e_weights(*x, *w)
         } else {
             let y = w[1].max(f64::MIN_POSITIVE);
             [0, 1, 2].map(|k| [0, 1, 2].map(|l| if k == l { 1.0 / (y * y) } else { 0.0 }))

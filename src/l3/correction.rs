@@ -26,7 +26,7 @@ pub const MAX_MATRIX_ENTRY: f64 = 1e3;
 pub const IDENTITY: Mat3 = [[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]];
 
 /// The crate-only reflectance set for T: the Munsell matt set and the 99
-/// CES samples, on `grid` (see `scene::correction_reflectances` for the
+/// CES samples, on `grid` (see `scene::natural_reflectances` for the
 /// default, which uses natural surfaces).
 pub fn default_reflectances(grid: &WavelengthGrid) -> Vec<Spectrum> {
     munsell_reflectances()
@@ -183,7 +183,7 @@ impl IlluminantRegistry {
     /// The defaults: D65, D50, A, F2, F11, and ISET's measured Tungsten and
     /// Fluorescent (from `iset`; `None`: the built-in data).
     pub fn with_defaults(grid: WavelengthGrid, iset: Option<&IsetData>) -> Result<Self, L3Error> {
-        let refl = crate::scene::correction_reflectances(&grid, iset)
+        let refl = crate::scene::natural_reflectances(&grid, iset)
             .map_err(|e| L3Error::InvalidInput(e.to_string()))?
             .into_iter()
             .map(|(_, s)| s)

@@ -26,7 +26,7 @@ pub use natural100::{
     natural100_chart, natural100_samples, natural100_samples_seeded,
 };
 pub use options::{DEFAULT_FOV_DEG, DEFAULT_MEAN_LUMINANCE, MAX_SCENE_VALUES, SceneOptions};
-pub use sets::{correction_reflectances, training_reflectances};
+pub use sets::{natural_reflectances, training_reflectances};
 pub use simple::{grey_ramp, uniform};
 
 use ndarray::Array3;

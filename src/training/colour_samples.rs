@@ -1,5 +1,5 @@
 //! The spectral data a table's colour maps are fitted on: noise-free channel
-//! responses and target XYZ of the training reflectances under the training
+//! responses and target XYZ of the natural reflectances (`scene::natural_reflectances`) under the training
 //! illuminants (DESIGN.md §5, `super::super::l3::colour_map`). The same
 //! samples give the evaluation's matching linear map and the conventional
 //! baseline's colour matrix, so every comparison is fitted on one set.
@@ -59,7 +59,7 @@ pub fn colour_samples(
 
 /// `entry` with its T replaced by the camera-aware correction C of a
 /// same-illuminant table whose colour map is `map` (see
-/// `crate::l3::camera_correction`), fitted on the training reflectances under
+/// `crate::l3::camera_correction`), fitted on the natural reflectances under
 /// the entry's light. An entry with no spectrum (a correction given as a
 /// matrix) is refused.
 pub fn camera_corrected(
@@ -75,7 +75,7 @@ pub fn camera_corrected(
         ))
     })?;
     let grid = *camera.grid();
-    let refl: Vec<Spectrum> = crate::scene::training_reflectances(&grid, iset)
+    let refl: Vec<Spectrum> = crate::scene::natural_reflectances(&grid, iset)
         .map_err(|e| TrainError::Invalid(e.to_string()))?
         .into_iter()
         .map(|(_, s)| s)

@@ -287,7 +287,11 @@ impl TrainingRun {
         let maps = match &params.colour_map {
             Some(fit) => {
                 let spds: Vec<_> = illuminants.iter().map(|(_, s)| s.clone()).collect();
-                let refl: Vec<_> = scenes.reflectances().to_vec();
+                let refl: Vec<_> = crate::scene::natural_reflectances(&grid, iset)
+                    .map_err(|e| TrainError::Invalid(e.to_string()))?
+                    .into_iter()
+                    .map(|(_, s)| s)
+                    .collect();
                 let samples = colour_samples(&camera, &spds, spec.kind, &d65, &refl)?;
                 Some(level_maps(&samples, &params.levels, &nm, swing, fit)?)
             }
