@@ -7,7 +7,7 @@
 //! renders the light's XYZ exactly. A table trained under D65 does not: under
 //! another light the sensor's channels move in ways its colour map was never
 //! fitted for, and on real filters the error is large (ISET's RGBW under ISET's
-//! fluorescent lamp: 15.8 ΔE2000 with T). C instead fits, by least squares
+//! fluorescent lamp: 15.3 ΔE2000 with T). C instead fits, by least squares
 //! over the natural reflectances (`scene::natural_reflectances`),
 //!
 //! `C · (M · channels_X(r)) ≈ XYZ_D65(r)` (errors weighted by a first-order
