@@ -243,13 +243,7 @@ pub fn captured_floor(
     setup: &ChartSetup,
     captures: usize,
 ) -> Result<CapturedFloor, EvalError> {
-    if !(super::MIN_CAPTURES..=super::MAX_CAPTURES).contains(&captures) {
-        return Err(EvalError::Invalid(format!(
-            "{captures} captures: the captured floor takes {} to {}",
-            super::MIN_CAPTURES,
-            super::MAX_CAPTURES
-        )));
-    }
+    super::noise_split::check_captures(captures, "the captured floor")?;
     let capture = |k: usize, noise: bool| -> Result<PatchData, EvalError> {
         let s = ChartSetup {
             seed: setup.seed.wrapping_add(k as u64),

@@ -24,6 +24,18 @@ pub const MIN_CAPTURES: usize = 2;
 /// Most captures a split is computed from.
 pub const MAX_CAPTURES: usize = 64;
 
+/// Refuse a number of captures outside [`MIN_CAPTURES`]..=[`MAX_CAPTURES`]
+/// for `what` (the study, named in the error).
+pub(super) fn check_captures(captures: usize, what: &str) -> Result<(), EvalError> {
+    if (MIN_CAPTURES..=MAX_CAPTURES).contains(&captures) {
+        Ok(())
+    } else {
+        Err(EvalError::Invalid(format!(
+            "{captures} captures: {what} takes {MIN_CAPTURES} to {MAX_CAPTURES}"
+        )))
+    }
+}
+
 /// A method's patch-mean ΔE2000 on the chart, split by noise.
 #[derive(Clone, Debug, Serialize, Deserialize)]
 pub struct NoiseSplit {
@@ -54,11 +66,7 @@ pub fn noise_split(
     setup: &ChartSetup,
     captures: usize,
 ) -> Result<NoiseSplit, EvalError> {
-    if !(MIN_CAPTURES..=MAX_CAPTURES).contains(&captures) {
-        return Err(EvalError::Invalid(format!(
-            "{captures} captures: a noise split takes {MIN_CAPTURES} to {MAX_CAPTURES}"
-        )));
-    }
+    check_captures(captures, "a noise split")?;
     let eval = |seed: u64, noise: bool| {
         let s = ChartSetup {
             seed,
