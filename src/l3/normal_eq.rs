@@ -1,6 +1,6 @@
 //! Streaming normal equations per class and their ridge (Wiener) solution.
 
-use nalgebra::{DMatrix, SymmetricEigen};
+use nalgebra::{DMatrix, DVector, SymmetricEigen};
 use ndarray::{Array2, ArrayView2, linalg::general_mat_mul, s};
 use serde::{Deserialize, Serialize};
 
@@ -226,6 +226,32 @@ pub fn solve(
     solve_with(gram, ridge, noise_var, None)
 }
 
+/// Eigenvalues and eigenvectors (columns) of the symmetric matrix `m`.
+/// nalgebra's symmetric QR iteration returns NaN on some finite covariance
+/// matrices (met on a noise-free Bayer class whose saturated channels'
+/// regressors are all but constant); the SVD, which for a symmetric
+/// positive semi-definite matrix gives the same decomposition, is the
+/// fallback.
+fn symmetric_eigen(m: &DMatrix<f64>) -> Result<(DVector<f64>, DMatrix<f64>), L3Error> {
+    let finite = |v: &DVector<f64>, u: &DMatrix<f64>| {
+        v.iter().all(|x| x.is_finite()) && u.iter().all(|x| x.is_finite())
+    };
+    let eig = SymmetricEigen::new(m.clone());
+    if finite(&eig.eigenvalues, &eig.eigenvectors) {
+        return Ok((eig.eigenvalues, eig.eigenvectors));
+    }
+    svd_eigen(m).filter(|(v, u)| finite(v, u)).ok_or_else(|| {
+        L3Error::Table("the class's covariance has no finite eigendecomposition".into())
+    })
+}
+
+/// The eigendecomposition of a symmetric positive semi-definite `m` from
+/// its SVD (`m = U Σ Uᵀ`).
+fn svd_eigen(m: &DMatrix<f64>) -> Option<(DVector<f64>, DMatrix<f64>)> {
+    let svd = m.clone().svd(true, false);
+    Some((svd.singular_values, svd.u?))
+}
+
 /// [`solve`], optionally subject to a [`ChannelSumConstraint`] (the ridge λ
 /// is still chosen on the unconstrained problem).
 pub fn solve_with(
@@ -252,8 +278,8 @@ pub fn solve_with(
     if !(cxx.iter().all(|v| v.is_finite()) && cxy.iter().all(|v| v.is_finite())) {
         return Err(L3Error::Table("non-finite normal equations".into()));
     }
-    let eig = SymmetricEigen::new(cxx.clone());
-    let evals: Vec<f64> = eig.eigenvalues.iter().map(|&e| e.max(0.0)).collect();
+    let (raw_evals, vecs) = symmetric_eigen(&cxx)?;
+    let evals: Vec<f64> = raw_evals.iter().map(|&e| e.max(0.0)).collect();
     let emax = evals.iter().copied().fold(0.0, f64::max);
     let emin = evals.iter().copied().fold(f64::INFINITY, f64::min);
     let mean_e = (evals.iter().sum::<f64>() / p as f64).max(f64::MIN_POSITIVE);
@@ -270,7 +296,7 @@ pub fn solve_with(
     } else {
         emax / sorted[active - 1].max(emax * 1e-16)
     };
-    let q = eig.eigenvectors.transpose() * &cxy; // p × 3
+    let q = vecs.transpose() * &cxy; // p × 3
     let qn: Vec<f64> = (0..p)
         .map(|i| (0..3).map(|k| q[(i, k)].powi(2)).sum())
         .collect();
@@ -312,7 +338,7 @@ pub fn solve_with(
             scaled[(i, k)] *= d;
         }
     }
-    let mut w = &eig.eigenvectors * scaled; // p × 3
+    let mut w = &vecs * scaled; // p × 3
     let mut intercept: Option<[f64; 3]> = None;
     if let Some(con) = constraint
         && con.channel_of.len() == p
@@ -327,14 +353,14 @@ pub fn solve_with(
             (con.channel_of[j] as usize == present[r]) as u8 as f64
         });
         let hinv = {
-            let mut d = eig.eigenvectors.clone();
+            let mut d = vecs.clone();
             for j in 0..p {
                 let f = 1.0 / (evals[j] + lambda);
                 for i in 0..p {
                     d[(i, j)] *= f;
                 }
             }
-            d * eig.eigenvectors.transpose()
+            d * vecs.transpose()
         };
         let ahinv = &a * &hinv; // nc × p
         let s_mat = &ahinv * a.transpose(); // nc × nc
@@ -381,6 +407,28 @@ mod tests {
     use super::*;
     use rand::{RngExt, SeedableRng};
     use rand_chacha::ChaCha8Rng;
+
+    #[test]
+    fn both_eigendecompositions_rebuild_a_singular_covariance() {
+        // a covariance with a constant (zeroed) regressor, as saturated
+        // channels give: one exact zero row and column
+        let mut rng = ChaCha8Rng::seed_from_u64(3);
+        let x = DMatrix::from_fn(40, 6, |_, j| {
+            if j == 2 {
+                0.0
+            } else {
+                rng.random_range(-1.0..1.0)
+            }
+        });
+        let m = x.transpose() * &x / 40.0;
+        let svd = svd_eigen(&m).unwrap();
+        for (vals, vecs) in [symmetric_eigen(&m).unwrap(), svd] {
+            let back = &vecs * DMatrix::from_diagonal(&vals) * vecs.transpose();
+            assert!((back - &m).abs().max() < 1e-12);
+            assert!(vals.iter().all(|&v| v > -1e-12));
+            assert_eq!(vals.iter().filter(|v| v.abs() < 1e-12).count(), 1);
+        }
+    }
 
     #[test]
     fn recovers_an_affine_map() {
