@@ -6,6 +6,7 @@ use std::path::Path;
 
 use serde::{Deserialize, Serialize};
 
+use super::optics::MAX_SAMPLES_PER_PIXEL;
 use super::{CameraError, Cfa, Optics};
 use crate::spectral::{Extrapolation, IsetData, Spectrum, WavelengthGrid};
 
@@ -535,6 +536,12 @@ impl SensorDesign {
                 false,
             ),
         ];
+        if !(1..=MAX_SAMPLES_PER_PIXEL).contains(&self.optics.samples_per_pixel) {
+            return err(format!(
+                "optics.samples_per_pixel = {} must be within 1–{MAX_SAMPLES_PER_PIXEL}",
+                self.optics.samples_per_pixel
+            ));
+        }
         for (field, v, lo, hi, lo_incl) in ranges {
             let ok = v.is_finite() && v <= hi && if lo_incl { v >= lo } else { v > lo };
             if !ok {

@@ -25,7 +25,9 @@ use ndarray::{Array2, Array3};
 pub use cfa::{Cfa, MAX_CFA_SIDE};
 pub use design::{FilterSpec, SensorDesign, parametric};
 pub use neutral::{NEUTRAL_CCT_RANGE, NeutralMatch};
-pub use optics::{KM, OpticalImage, Optics, diffraction_otf};
+pub use optics::{
+    DEFAULT_SAMPLES_PER_PIXEL, KM, MAX_SAMPLES_PER_PIXEL, OpticalImage, Optics, diffraction_otf,
+};
 pub use sensor::{
     AUTO_EXPOSURE_PERCENTILE, Camera, Exposure, MAX_AUTO_EXPOSURE_S, NoiseSwitches, mosaic,
 };

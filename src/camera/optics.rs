@@ -29,13 +29,38 @@ const MARGIN_LAMBDA_N: f64 = 16.0;
 /// error below 1e-5).
 const OTF_LUT_LEN: usize = 4097;
 
-/// A diffraction-limited lens (DESIGN.md §3): f-number and focal length.
+/// A diffraction-limited lens (DESIGN.md §3): f-number and focal length,
+/// and how finely the simulation samples its image.
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(default, deny_unknown_fields)]
 pub struct Optics {
     pub f_number: f64,
     pub focal_length_mm: f64,
+    /// Optical-image samples per pixel side ([`DEFAULT_SAMPLES_PER_PIXEL`]).
+    pub samples_per_pixel: u32,
 }
+
+/// Optical-image samples per pixel side: each scene pixel is a uniform
+/// pixel-sized square, imaged on a grid `k` times finer than the pixels, and
+/// each pixel integrates its `k × k` samples (its box aperture).
+///
+/// With one sample per pixel the lens's OTF is cut at the pixel Nyquist
+/// frequency, so a chart's sharp edges ring (Gibbs) at that frequency, and
+/// at f/4 the ringing is chromatic (the OTF at the pixel Nyquist falls from
+/// 0.55 at 400 nm to 0.22 at 700 nm with 2.2 µm pixels). A mosaic samples
+/// that ringing at a different phase in every channel, so the interior of
+/// a flat patch carries a colour error that is the simulation's, not the
+/// camera's. Measured on the Natural-100 chart under tungsten (noise-free,
+/// a linear map fitted on the natural reflectances, mean ΔE2000 of the
+/// patches' bilinear-demosaicked channel means against the same map on
+/// every channel at every pixel): ISET's RGBW 2.64 against 2.02 with one
+/// sample, 2.01 against 2.02 with 2, 3 or 4; AR0132AT 2.11 against 2.08,
+/// then 2.08; Nikon D5100 1.89 at every `k`. Two samples remove the
+/// artefact; more change nothing and cost FFT time.
+pub const DEFAULT_SAMPLES_PER_PIXEL: u32 = 2;
+
+/// The most optical-image samples per pixel side a design may ask for.
+pub const MAX_SAMPLES_PER_PIXEL: u32 = 4;
 
 impl Default for Optics {
     /// The paper's lens: f/4, 3 mm (aperture 0.75 mm).
@@ -43,6 +68,7 @@ impl Default for Optics {
         Self {
             f_number: 4.0,
             focal_length_mm: 3.0,
+            samples_per_pixel: DEFAULT_SAMPLES_PER_PIXEL,
         }
     }
 }

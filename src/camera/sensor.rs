@@ -11,6 +11,7 @@ use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 
 use super::{CameraError, Cfa, OpticalImage, Optics, SensorDesign};
+use crate::scene::MAX_SCENE_VALUES;
 use crate::spectral::{Extrapolation, IsetData, Spectrum, WavelengthGrid, cie1931_cmfs};
 
 /// Planck constant, J·s.
@@ -267,9 +268,22 @@ impl Camera {
         Ok((chans, xyz))
     }
 
-    /// The optical image of `scene` sampled at this sensor's pixel pitch.
+    /// The optical image of `scene` (one scene pixel per sensor pixel),
+    /// sampled [`Optics::samples_per_pixel`] times per pixel side; the
+    /// channel and XYZ projections integrate each pixel's samples. A scene
+    /// too large for that many samples (over [`MAX_SCENE_VALUES`] values)
+    /// gets the most that fit, down to one.
     pub fn optical_image(&self, scene: &crate::scene::Scene) -> Result<OpticalImage, CameraError> {
-        self.optics.image(scene, self.design.pixel_size_um)
+        let values = scene.bands() * scene.rows() * scene.cols();
+        let mut k = self.optics.samples_per_pixel.max(1) as usize;
+        while k > 1 && values.saturating_mul(k * k) > MAX_SCENE_VALUES {
+            k -= 1;
+        }
+        if k == 1 {
+            return self.optics.image(scene, self.design.pixel_size_um);
+        }
+        self.optics
+            .image(&scene.upsampled(k), self.design.pixel_size_um / k as f64)
     }
 
     /// Noise-free photo-electrons per second of every channel at every pixel,

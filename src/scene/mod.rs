@@ -90,4 +90,75 @@ impl Scene {
     pub fn bands(&self) -> usize {
         self.reflectance.shape()[0]
     }
+
+    /// The same scene on a grid `k` times finer: every pixel becomes a
+    /// `k × k` block of equal reflectance (patches scale with it).
+    pub fn upsampled(&self, k: usize) -> Scene {
+        let k = k.max(1);
+        let (bands, rows, cols) = self.reflectance.dim();
+        let reflectance = Array3::from_shape_fn((bands, rows * k, cols * k), |(b, r, c)| {
+            self.reflectance[[b, r / k, c / k]]
+        });
+        Scene {
+            reflectance,
+            patches: self
+                .patches
+                .iter()
+                .map(|p| Patch {
+                    row: p.row * k,
+                    col: p.col * k,
+                    height: p.height * k,
+                    width: p.width * k,
+                    ..p.clone()
+                })
+                .collect(),
+            name: self.name.clone(),
+            grid: self.grid,
+            illuminant: self.illuminant.clone(),
+            illuminant_name: self.illuminant_name.clone(),
+            mean_luminance: self.mean_luminance,
+            fov_deg: self.fov_deg,
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::spectral::cie_illuminant;
+
+    #[test]
+    fn upsampling_replicates_pixels_and_scales_patches() {
+        let grid = WavelengthGrid::default();
+        let scene = Scene {
+            name: "s".into(),
+            grid,
+            reflectance: Array3::from_shape_fn((grid.n, 2, 3), |(b, r, c)| {
+                (b + 10 * r + 100 * c) as f32
+            }),
+            illuminant: cie_illuminant("D65")
+                .unwrap()
+                .resample(&grid, crate::spectral::Extrapolation::Zero),
+            illuminant_name: "D65".into(),
+            mean_luminance: 100.0,
+            fov_deg: 10.0,
+            patches: vec![Patch {
+                name: "p".into(),
+                category: String::new(),
+                row: 1,
+                col: 2,
+                height: 1,
+                width: 1,
+                reflectance: Spectrum::constant(grid, 0.5),
+            }],
+        };
+        let up = scene.upsampled(3);
+        assert_eq!(up.reflectance.dim(), (grid.n, 6, 9));
+        for ((b, r, c), v) in up.reflectance.indexed_iter() {
+            assert_eq!(*v, scene.reflectance[[b, r / 3, c / 3]]);
+        }
+        let p = &up.patches[0];
+        assert_eq!((p.row, p.col, p.height, p.width), (3, 6, 3, 3));
+        assert_eq!(scene.upsampled(1).reflectance, scene.reflectance);
+    }
 }
