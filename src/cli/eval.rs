@@ -42,6 +42,8 @@ pub struct EvalArgs {
     #[arg(long, default_value_t = 7)]
     pub seed: u64,
     /// Simulate the chart without noise (isolates colour error from noise).
+    /// With --paper-table the tables are trained without noise too
+    /// (noise-free patches and colour maps).
     #[arg(long)]
     pub no_noise: bool,
     /// Exposure time relative to auto-exposure, in (0, 1]: 0.1 is a tenth of
