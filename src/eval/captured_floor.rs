@@ -7,9 +7,10 @@
 //! renders a patch's mean as a linear function of its channel means — a
 //! linear colour pipeline, and to first order every L3 class — meets two
 //! more things on a capture: the lens's flare mixes neighbouring patches
-//! into each interior, and one capture's interior means carry noise that
-//! the map amplifies. This study fits a 3 × channels map directly on what
-//! the method sees:
+//! into each interior, where each CFA channel's pixels sample it at their
+//! own positions, and one capture's interior means carry noise that the map
+//! amplifies. This study fits a 3 × channels map directly on what the
+//! method sees:
 //!
 //! - the patch channel means (per CFA channel, over each patch interior) of
 //!   `n` noisy captures, against the truth the evaluation scores with;
@@ -22,10 +23,13 @@
 //!   captures): the honest figure for a map that has not seen the test
 //!   surfaces.
 //!
-//! Neither is a bound on every method (a non-linear one may do better), but
-//! the fitted-on-the-chart figure is what any linear pipeline, given the
-//! answer key, reaches on one capture; a target below it asks for more
-//! than a linear map can give on this chart and noise.
+//! The channel means are per CFA channel, so they carry the mosaic's
+//! sampling of the flare's gradient, which a method that estimates every
+//! channel at every pixel (bilinear demosaicking, an L3 kernel) partly
+//! cancels. Neither figure is therefore a bound on every method (a
+//! non-linear one, or one with centred channel estimates, may do better):
+//! the fitted-on-the-chart figure is what a linear map of the raw channel
+//! means reaches on one capture, given the answer key.
 
 use argmin::core::{CostFunction, Executor, State};
 use argmin::solver::neldermead::NelderMead;
