@@ -25,7 +25,12 @@
 //!   white of its illuminant) and CIEDE2000's local metric there
 //!   ([`delta_e_weights`]), so the fit minimises a first-order ΔE00², the
 //!   measure the evaluation reports, rather than an XYZ error that bright
-//!   colours dominate. The samples are the natural reflectances
+//!   colours dominate. A same-illuminant table's output is judged after its
+//!   light's correction T, so its samples carry T
+//!   ([`ColourSamples::judged_through`]) and the error is weighted where it
+//!   is judged, at `T·xyz` relative to `T·white`, pulled back through T
+//!   (noise-free on ISET's RGBW under tungsten, SI_Tun+T 2.58 → 2.47 against
+//!   its matching linear map's 2.52). The samples are the natural reflectances
 //!   (`scene::natural_reflectances`, no Munsell chips): on ISET's RGBW under
 //!   tungsten a cross table's one-capture error went from 3.55 (ΔE76 on the
 //!   training reflectances) to 2.86, where either change alone made it
@@ -43,7 +48,7 @@
 use nalgebra::{DMatrix, DVector};
 use serde::{Deserialize, Serialize};
 
-use super::{ColourMatrix, L3Error, NoiseModel};
+use super::{ColourMatrix, IDENTITY, L3Error, Mat3, NoiseModel};
 use crate::colour::{ciede2000_metric, xyz_to_lab};
 
 /// Noise-free channel responses and XYZ of a set of surfaces, the data every
@@ -55,6 +60,10 @@ pub struct ColourSamples {
     pub channels: Vec<Vec<f64>>,
     pub xyz: Vec<[f64; 3]>,
     pub white: Vec<[f64; 3]>,
+    /// Per sample, the 3×3 matrix the table's output goes through before it
+    /// is judged: a same-illuminant table's correction T to D65. Empty when
+    /// the output is judged as it is (a cross table's D65 XYZ).
+    pub judged_through: Vec<Mat3>,
 }
 
 impl ColourSamples {
@@ -71,6 +80,30 @@ impl ColourSamples {
         self.channels.first().map(Vec::len).unwrap_or(0)
     }
 
+    /// The weights `W` that make an XYZ error `e` of sample `i` cost
+    /// `eᵀ W e` where it is judged: with `perceptual`, its first-order ΔE00²
+    /// after [`Self::judged_through`] (`Tᵀ (JᵀQJ at T·xyz, white T·white) T`),
+    /// otherwise its squared error relative to the judged white's luminance.
+    pub fn error_weights(&self, i: usize, perceptual: bool) -> [[f64; 3]; 3] {
+        let t = self.judged_through.get(i).copied().unwrap_or(IDENTITY);
+        let apply = |v: [f64; 3]| t.map(|row| (0..3).map(|k| row[k] * v[k]).sum::<f64>());
+        let white = apply(self.white[i]);
+        let w = if perceptual {
+            delta_e_weights(apply(self.xyz[i]), white)
+        } else {
+            let y = white[1].max(f64::MIN_POSITIVE);
+            [0, 1, 2].map(|k| [0, 1, 2].map(|l| if k == l { 1.0 / (y * y) } else { 0.0 }))
+        };
+        // Tᵀ W T
+        [0, 1, 2].map(|a| {
+            [0, 1, 2].map(|b| {
+                (0..3)
+                    .map(|p| (0..3).map(|q| t[p][a] * w[p][q] * t[q][b]).sum::<f64>())
+                    .sum()
+            })
+        })
+    }
+
     fn check(&self) -> Result<usize, L3Error> {
         let nc = self.n_channels();
         let n = self.len();
@@ -80,9 +113,12 @@ impl ColourSamples {
                 nc.max(3)
             )));
         }
-        if self.xyz.len() != n || self.white.len() != n {
+        if self.xyz.len() != n
+            || self.white.len() != n
+            || !(self.judged_through.is_empty() || self.judged_through.len() == n)
+        {
             return Err(L3Error::InvalidParams(
-                "colour samples: channel, XYZ and white lists differ in length".into(),
+                "colour samples: channel, XYZ, white and correction lists differ in length".into(),
             ));
         }
         if self.channels.iter().any(|c| c.len() != nc) {
@@ -92,6 +128,12 @@ impl ColourSamples {
         }
         let finite = self.channels.iter().flatten().all(|v| v.is_finite())
             && self.xyz.iter().flatten().all(|v| v.is_finite())
+            && self
+                .judged_through
+                .iter()
+                .flatten()
+                .flatten()
+                .all(|v| v.is_finite())
             && self
                 .white
                 .iter()
@@ -227,12 +269,7 @@ fn level_map(
     let mut a = DMatrix::<f64>::zeros(nn, nn);
     let mut b = DVector::<f64>::zeros(nn);
     let mut used = 0usize;
-    for ((c, x), w) in samples
-        .channels
-        .iter()
-        .zip(&samples.xyz)
-        .zip(&samples.white)
-    {
+    for (i, (c, x)) in samples.channels.iter().zip(&samples.xyz).enumerate() {
         let lum = c.iter().sum::<f64>() / nc as f64;
         if lum <= 0.0 {
             continue;
@@ -243,12 +280,7 @@ fn level_map(
         // error weights W = JᵀQJ (perceptual), or the identity; the error of a
         // scaled sample is s × the error at unit scale, and J scales by 1/s:
         // both cancel, so every sample has the same weight at every level
-        let wm: [[f64; 3]; 3] = if fit.perceptual {
-            delta_e_weights(*x, *w)
-        } else {
-            let y = w[1].max(f64::MIN_POSITIVE);
-            [0, 1, 2].map(|k| [0, 1, 2].map(|l| if k == l { 1.0 / (y * y) } else { 0.0 }))
-        };
+        let wm = samples.error_weights(i, fit.perceptual);
         // noise variance of a channel mean over `averaging_px` pixels, in the
         // sample's (unit-scale) units
         let var: Vec<f64> = match fit.averaging_px {
@@ -375,6 +407,39 @@ mod tests {
                 .flat_map(|m| m.m.iter().flatten())
                 .all(|v| v.is_finite())
         );
+    }
+
+    #[test]
+    fn error_weights_give_the_delta_e_after_the_judging_matrix() {
+        let mut s = exact_samples(&[[0.6, 0.3, 0.0], [0.3, 0.6, 0.1], [0.05, 0.1, 0.9]]);
+        // a tungsten-like T: more blue, less red, white-preserving in spirit
+        let t = [[0.85, 0.05, 0.1], [0.02, 0.97, 0.01], [0.0, -0.05, 3.1]];
+        s.judged_through = vec![t; s.len()];
+        let apply = |v: [f64; 3]| t.map(|row| (0..3).map(|k| row[k] * v[k]).sum::<f64>());
+        for i in [0, 7, 19] {
+            let (x, w) = (s.xyz[i], s.white[i]);
+            let e = [2e-4, -1.5e-4, 3e-4];
+            let moved = [x[0] + e[0], x[1] + e[1], x[2] + e[2]];
+            let white = apply(w);
+            let exact = crate::colour::ciede2000(
+                xyz_to_lab(apply(x), white),
+                xyz_to_lab(apply(moved), white),
+            )
+            .powi(2);
+            let wm = s.error_weights(i, true);
+            let quad: f64 = (0..3)
+                .map(|a| (0..3).map(|b| e[a] * wm[a][b] * e[b]).sum::<f64>())
+                .sum();
+            assert!((quad / exact - 1.0).abs() < 0.02, "{quad} {exact}");
+            // without a judging matrix the weights are the plain ΔE00 ones
+            let plain = ColourSamples {
+                judged_through: Vec::new(),
+                ..s.clone()
+            };
+            assert_eq!(plain.error_weights(i, true), delta_e_weights(x, w));
+        }
+        s.judged_through.pop();
+        assert!(level_maps(&s, &[0.1], &noise(), 1.8, &ColourMapFit::default()).is_err());
     }
 
     #[test]

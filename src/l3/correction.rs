@@ -266,6 +266,18 @@ impl IlluminantRegistry {
         Ok(self.entries.entry(e.name.clone()).or_insert(e))
     }
 
+    /// The correction T to D65 of an SPD on the registry's grid, as an entry
+    /// registered from it would carry.
+    pub fn correction_for(&self, spd: &Spectrum) -> Result<Mat3, L3Error> {
+        correction_matrix(
+            &self.cmfs,
+            &self.reflectances,
+            spd,
+            &self.d65,
+            self.white_preserving,
+        )
+    }
+
     /// The correction entry of an SPD already on the registry's grid.
     fn entry_for(
         &self,
@@ -279,13 +291,7 @@ impl IlluminantRegistry {
                 "SPD of '{name}' has negative values"
             )));
         }
-        let t = correction_matrix(
-            &self.cmfs,
-            &self.reflectances,
-            spd,
-            &self.d65,
-            self.white_preserving,
-        )?;
+        let t = self.correction_for(spd)?;
         let white = self.white_xy(spd);
         Ok(IlluminantEntry {
             name: name.to_string(),

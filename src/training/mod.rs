@@ -19,11 +19,11 @@ use sha2::{Digest, Sha256};
 
 use crate::camera::{Camera, CameraError, NoiseSwitches, SensorDesign, mosaic};
 use crate::l3::{
-    Classes, ColourMatrix, GramPartial, L3Error, L3Params, L3Table, Learned, NoiseModel,
-    PatchGeometry, RidgeChoice, ShardSpec, SurveyPartial, TABLE_FORMAT_VERSION, TableKind,
-    TableMeta, TrainControl, TrainSetup, TrainingFrame, accumulate_batches, classes_from_survey,
-    learn, level_maps, merge_partials, merge_surveys, package, plan_shards, solve_learned,
-    survey_batches,
+    Classes, ColourMatrix, GramPartial, IlluminantRegistry, L3Error, L3Params, L3Table, Learned,
+    NoiseModel, PatchGeometry, RidgeChoice, ShardSpec, SurveyPartial, TABLE_FORMAT_VERSION,
+    TableKind, TableMeta, TrainControl, TrainSetup, TrainingFrame, accumulate_batches,
+    classes_from_survey, learn, level_maps, merge_partials, merge_surveys, package, plan_shards,
+    solve_learned, survey_batches,
 };
 use crate::scene::SceneError;
 use crate::spectral::{
@@ -292,7 +292,17 @@ impl TrainingRun {
                     .into_iter()
                     .map(|(_, s)| s)
                     .collect();
-                let samples = colour_samples(&camera, &spds, spec.kind, &d65, &refl)?;
+                let mut samples = colour_samples(&camera, &spds, spec.kind, &d65, &refl)?;
+                if spec.kind == TableKind::SameIlluminant {
+                    // a same-illuminant table is judged after its light's T
+                    let registry = IlluminantRegistry::new(grid, refl.clone())?;
+                    for spd in &spds {
+                        let t = registry.correction_for(spd)?;
+                        samples
+                            .judged_through
+                            .extend(std::iter::repeat_n(t, refl.len()));
+                    }
+                }
                 Some(level_maps(&samples, &params.levels, &nm, swing, fit)?)
             }
             None => None,
