@@ -49,7 +49,7 @@ use nalgebra::{DMatrix, DVector};
 use serde::{Deserialize, Serialize};
 
 use super::{ColourMatrix, IDENTITY, L3Error, Mat3, NoiseModel};
-use crate::colour::{ciede2000_metric, xyz_to_lab};
+use crate::colour::{ciede2000_metric, mat3_mul_vec, xyz_to_lab};
 
 /// Noise-free channel responses and XYZ of a set of surfaces, the data every
 /// colour map is fitted on. All three lists have one entry per sample; each
@@ -86,7 +86,7 @@ impl ColourSamples {
     /// otherwise its squared error relative to the judged white's luminance.
     pub fn error_weights(&self, i: usize, perceptual: bool) -> [[f64; 3]; 3] {
         let t = self.judged_through.get(i).copied().unwrap_or(IDENTITY);
-        let apply = |v: [f64; 3]| t.map(|row| (0..3).map(|k| row[k] * v[k]).sum::<f64>());
+        let apply = |v: [f64; 3]| mat3_mul_vec(&t, v);
         let white = apply(self.white[i]);
         let w = if perceptual {
             delta_e_weights(apply(self.xyz[i]), white)
@@ -415,7 +415,7 @@ mod tests {
         // a tungsten-like T: more blue, less red, white-preserving in spirit
         let t = [[0.85, 0.05, 0.1], [0.02, 0.97, 0.01], [0.0, -0.05, 3.1]];
         s.judged_through = vec![t; s.len()];
-        let apply = |v: [f64; 3]| t.map(|row| (0..3).map(|k| row[k] * v[k]).sum::<f64>());
+        let apply = |v: [f64; 3]| mat3_mul_vec(&t, v);
         for i in [0, 7, 19] {
             let (x, w) = (s.xyz[i], s.white[i]);
             let e = [2e-4, -1.5e-4, 3e-4];
