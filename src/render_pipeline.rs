@@ -19,10 +19,10 @@ use crate::io::{
 };
 use crate::l3::{
     FastRenderer, Frame, IlluminantEntry, L3Error, L3Table, Mosaic, Region, RenderStats, TableKind,
-    WhiteLevel, fuse_kernels, xyz_to_srgb8, xyz_to_srgb16,
+    WhiteLevel, fuse_entry, xyz_to_srgb8, xyz_to_srgb16,
 };
 use crate::spectral::{IsetData, WavelengthGrid};
-use crate::training::{TrainError, camera_corrected};
+use crate::training::{TrainError, camera_corrected, noise_model};
 
 /// Largest preview downscale factor.
 pub const MAX_PREVIEW: usize = 16;
@@ -248,7 +248,7 @@ pub fn correction_for(
     let camera = Camera::new(&design, WavelengthGrid::default(), iset).map_err(TrainError::from)?;
     Ok(camera_corrected(
         &camera,
-        &table.colour_map()?,
+        &table.level_colour_maps(&noise_model(&design))?,
         entry,
         iset,
     )?)
@@ -259,7 +259,7 @@ pub fn kernels_for(table: &L3Table, entry: &IlluminantEntry) -> Vec<f32> {
     if uses_own_kernels(table) {
         table.kernels.clone()
     } else {
-        fuse_kernels(table, &entry.t)
+        fuse_entry(table, entry)
     }
 }
 

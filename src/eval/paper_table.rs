@@ -15,9 +15,9 @@ use super::workflow::{
 };
 use super::{DeltaEReport, EvalError};
 use crate::camera::{Camera, SensorDesign};
-use crate::l3::{IlluminantEntry, IlluminantRegistry, L3Table, TableKind};
+use crate::l3::{IlluminantEntry, IlluminantRegistry, L3Table, LevelMap, TableKind};
 use crate::spectral::{IsetData, WavelengthGrid};
-use crate::training::{TrainingSpec, camera_corrected, train_table};
+use crate::training::{TrainingSpec, camera_corrected, noise_model, train_table};
 
 /// The paper's Table 1 (tungsten acquisition): mean, std, p90 of ΔE2000.
 pub const PAPER_TABLE1: [(&str, f64, f64, f64); 4] = [
@@ -490,9 +490,12 @@ pub fn run_paper_table(
             let is_acq_baseline = name.starts_with("Baseline_");
             let camera_aware = name.ends_with("+C");
             let own: IlluminantEntry = match method {
-                Method::Table(t) if camera_aware => {
-                    camera_corrected(&camera, &t.colour_map()?, &corr, iset)?
-                }
+                Method::Table(t) if camera_aware => camera_corrected(
+                    &camera,
+                    &t.level_colour_maps(&noise_model(design))?,
+                    &corr,
+                    iset,
+                )?,
                 _ if is_acq_baseline => identity.clone(),
                 _ => corr.clone(),
             };
@@ -503,7 +506,15 @@ pub fn run_paper_table(
                     let map = matching_linear_map(&camera, t, iset)?;
                     // the linear map gets its own C, as the table does
                     let lin_corr = if camera_aware {
-                        camera_corrected(&camera, &map, &corr, iset)?
+                        camera_corrected(
+                            &camera,
+                            &[LevelMap {
+                                map: map.clone(),
+                                noise: None,
+                            }],
+                            &corr,
+                            iset,
+                        )?
                     } else {
                         corr.clone()
                     };

@@ -13,33 +13,70 @@
 //! `C · (M · channels_X(r)) ≈ XYZ_D65(r)` (errors weighted by a first-order
 //! ΔE00, as the colour maps are),
 //!
-//! where `M` is the table's own colour map ([`L3Table::colour_map`]). The
-//! result is still one table and one 3×3 matrix per light. The fit needs the
-//! table's sensor and the light's spectrum; T needs neither.
+//! where `M` is the table's own colour map. The fit needs the table's sensor
+//! and the light's spectrum; T needs neither.
+//!
+//! **One C per level.** A table's darker levels have colour maps shrunk for
+//! its own light's noise (`super::colour_map`). Under another light that
+//! shrinkage is a colour cast which differs from level to level, and one C
+//! fitted on the brightest level's map cannot undo it: rgbw-ar0132at's D65
+//! table under the fluorescent lamp gave 2.48 ΔE2000 (8 captures), 9.26 at a
+//! tenth of the exposure, dark patches shifted green (a* −5). So C is fitted
+//! for every level on that level's map ([`L3Table::level_colour_maps`]) with
+//! the noise that map was fitted for (the expected ΔE00² of the level's noise
+//! after `C · M` joins the objective, so a dark level's C keeps its map's
+//! noise trade instead of undoing it): 1.79 and 2.94 there. The registry
+//! still holds one T (and the spectrum) per light; the per-level C (20 × 9
+//! numbers per light) is derived from the table and fused into each class's
+//! kernel, so rendering costs the same.
 
 use nalgebra::{SMatrix, SVector};
 
 use super::colour_map::delta_e_weights;
-use super::{ColourMatrix, ColourSamples, L3Error, L3Table, MAX_MATRIX_ENTRY, Mat3};
+use super::{
+    ColourMatrix, ColourSamples, L3Error, L3Table, LevelNoise, MAX_MATRIX_ENTRY, Mat3, NoiseModel,
+};
 
 impl L3Table {
+    /// Every level's colour map, darkest first (see [`Self::colour_map_at`]),
+    /// with the noise it was fitted for on a sensor with `noise` (none for a
+    /// table whose maps were fitted noise-free).
+    pub fn level_colour_maps(&self, noise: &NoiseModel) -> Result<Vec<LevelMap>, L3Error> {
+        let averaging = self.meta.params.colour_map.and_then(|fit| fit.averaging_px);
+        self.meta
+            .params
+            .levels
+            .iter()
+            .enumerate()
+            .map(|(l, &level_v)| {
+                Ok(LevelMap {
+                    map: self.colour_map_at(l)?,
+                    noise: averaging.map(|averaging_px| LevelNoise {
+                        model: *noise,
+                        level_v,
+                        swing_v: self.meta.voltage_swing,
+                        averaging_px,
+                    }),
+                })
+            })
+            .collect()
+    }
+
     /// The linear channel → XYZ map this table applies to a uniform,
-    /// unsaturated patch at its brightest level: the channel sums of the flat,
-    /// unsaturated kernels, averaged over CFA positions. The trainer fixes
-    /// these sums to the level's colour map, and the brightest level's is the
-    /// least shrunk by the noise term.
-    pub fn colour_map(&self) -> Result<ColourMatrix, L3Error> {
+    /// unsaturated patch of level `level`: the channel sums of the level's
+    /// flat, unsaturated kernels, averaged over CFA positions. The trainer
+    /// fixes these sums to the level's colour map.
+    pub fn colour_map_at(&self, level: usize) -> Result<ColourMatrix, L3Error> {
         let geo = self.geometry()?;
         let nf = self.n_features();
         let nch = geo.n_channels();
-        let top = self
-            .n_levels()
-            .checked_sub(1)
-            .ok_or_else(|| L3Error::Table("the table has no levels".into()))?;
+        if level >= self.n_levels() {
+            return Err(L3Error::Table(format!("the table has no level {level}")));
+        }
         let np = self.n_positions();
         let mut m = vec![[0.0f64; 3]; nch];
         for pos in 0..np {
-            let kernel = self.kernel(self.class_index(pos, top, 0, false));
+            let kernel = self.kernel(self.class_index(pos, level, 0, false));
             for (k, out) in kernel.chunks_exact(nf).take(3).enumerate() {
                 for (&c, &w) in geo.channels_of(pos).iter().zip(out) {
                     let c = c as usize;
@@ -53,6 +90,14 @@ impl L3Table {
     }
 }
 
+/// A colour map a camera-aware correction is fitted on, with the noise it
+/// was fitted for (none: noise-free).
+#[derive(Clone, Debug)]
+pub struct LevelMap {
+    pub map: ColourMatrix,
+    pub noise: Option<LevelNoise>,
+}
+
 /// C = argmin Σ ΔE00²(C · map(channels), xyz), to first order, over `samples`: channel
 /// responses under the acquisition light and their target XYZ under D65,
 /// relit to the same luminance (the cross-illuminant samples of the training
@@ -61,7 +106,17 @@ impl L3Table {
 /// `eᵀ Jᵀ Q J e`, see `delta_e_weights`), so the fit minimises a first-order
 /// ΔE00, as the trainer's colour maps do; a plain XYZ fit lets bright
 /// surfaces decide and costs the dark ones.
-pub fn camera_correction(map: &ColourMatrix, samples: &ColourSamples) -> Result<Mat3, L3Error> {
+///
+/// With `noise` (a level's map and the noise it was fitted for), the fit
+/// also counts the expected ΔE00² of that noise after `C · map`
+/// (`tr(W C M Σ Mᵀ Cᵀ)`, `Σ` the channel-mean variance at the level under
+/// this light), so a dark level's C keeps the noise trade its map made
+/// instead of undoing it.
+pub fn camera_correction(
+    map: &ColourMatrix,
+    samples: &ColourSamples,
+    noise: Option<&LevelNoise>,
+) -> Result<Mat3, L3Error> {
     if samples.n_channels() != map.n_channels || map.m.len() != map.n_channels {
         return Err(L3Error::InvalidParams(format!(
             "a {}-channel colour map for {}-channel samples",
@@ -88,11 +143,23 @@ pub fn camera_correction(map: &ColourMatrix, samples: &ColourSamples) -> Result<
     {
         let y: [f64; 3] = [0, 1, 2].map(|k| c.iter().zip(&map.m).map(|(v, col)| v * col[k]).sum());
         let wm = delta_e_weights(*x, *w);
+        // the map's output noise covariance M Σ Mᵀ for this sample
+        let var = noise.map(|n| n.channel_variance(c));
+        let out_cov: [[f64; 3]; 3] = [0, 1, 2].map(|p| {
+            [0, 1, 2].map(|l| match &var {
+                Some(v) => v
+                    .iter()
+                    .zip(&map.m)
+                    .map(|(s2, col)| s2 * col[p] * col[l])
+                    .sum(),
+                None => 0.0,
+            })
+        });
         for i in 0..3 {
             for k in 0..3 {
                 for p in 0..3 {
                     for l in 0..3 {
-                        a[(3 * i + p, 3 * k + l)] += wm[i][k] * y[p] * y[l];
+                        a[(3 * i + p, 3 * k + l)] += wm[i][k] * (y[p] * y[l] + out_cov[p][l]);
                     }
                     b[3 * i + p] += wm[i][k] * x[k] * y[p];
                 }
@@ -151,12 +218,117 @@ mod tests {
             m: truth.to_vec(),
             n_channels: 4,
         };
-        let c = camera_correction(&map, &samples_from(&truth, &t)).unwrap();
+        let c = camera_correction(&map, &samples_from(&truth, &t), None).unwrap();
         for i in 0..3 {
             for j in 0..3 {
                 assert!((c[i][j] - t[i][j]).abs() < 1e-7, "{c:?}");
             }
         }
+    }
+
+    #[test]
+    fn a_level_map_biased_in_output_space_gets_the_bias_undone() {
+        // a darker level's map that renders every colour through a shrink A
+        // (desaturated, dimmed): its C is T·A⁻¹, so the level renders as the
+        // brightest one does
+        let truth = [
+            [0.6, 0.3, 0.0],
+            [0.3, 0.6, 0.1],
+            [0.05, 0.1, 0.9],
+            [0.2, 0.2, 0.2],
+        ];
+        let t = [[1.1, 0.1, -0.05], [0.02, 0.97, 0.01], [-0.03, 0.05, 1.4]];
+        let a = nalgebra::Matrix3::new(0.8, 0.1, 0.05, 0.1, 0.85, 0.05, 0.05, 0.1, 0.75);
+        let shrunk: Vec<[f64; 3]> = truth
+            .iter()
+            .map(|r| {
+                let v = a * nalgebra::Vector3::new(r[0], r[1], r[2]);
+                [v[0], v[1], v[2]]
+            })
+            .collect();
+        let map = ColourMatrix {
+            m: shrunk,
+            n_channels: 4,
+        };
+        let c = camera_correction(&map, &samples_from(&truth, &t), None).unwrap();
+        let a_inv = a.try_inverse().unwrap();
+        let want = nalgebra::Matrix3::from_fn(|i, j| t[i][j]) * a_inv;
+        for i in 0..3 {
+            for j in 0..3 {
+                assert!(
+                    (c[i][j] - want[(i, j)]).abs() < 1e-7,
+                    "{c:?} against {want}"
+                );
+            }
+        }
+    }
+
+    #[test]
+    fn the_noise_term_keeps_a_dark_levels_noise_trade() {
+        let truth = [
+            [0.6, 0.3, 0.0],
+            [0.3, 0.6, 0.1],
+            [0.05, 0.1, 0.9],
+            [0.2, 0.2, 0.2],
+        ];
+        let t = [[1.1, 0.1, -0.05], [0.02, 0.97, 0.01], [-0.03, 0.05, 1.4]];
+        let map = ColourMatrix {
+            m: truth.to_vec(),
+            n_channels: 4,
+        };
+        let s = samples_from(&truth, &t);
+        let at = |level_v: f64| LevelNoise {
+            model: NoiseModel {
+                conversion_gain_v: 1e-4,
+                read_noise_v: 1e-3,
+                dsnu_v: 5e-4,
+                prnu_fraction: 0.005,
+            },
+            level_v,
+            swing_v: 1.8,
+            averaging_px: 16.0,
+        };
+        let clean = camera_correction(&map, &s, None).unwrap();
+        let bright = camera_correction(&map, &s, Some(&at(1.5))).unwrap();
+        let dark = camera_correction(&map, &s, Some(&at(0.002))).unwrap();
+        // bright: the noise is negligible and C is the noise-free fit
+        for i in 0..3 {
+            for j in 0..3 {
+                assert!((bright[i][j] - clean[i][j]).abs() < 5e-3, "{bright:?}");
+            }
+        }
+        // dark: C trades colour for noise, as the level's map did: it passes
+        // less noise than the noise-free C, and its expected ΔE00² (colour
+        // error plus noise, computed here independently) is the lower
+        let noise = at(0.002);
+        let cost = |c: &Mat3| {
+            let (mut colour, mut noisy) = (0.0, 0.0);
+            for ((ch, x), w) in s.channels.iter().zip(&s.xyz).zip(&s.white) {
+                let wm = delta_e_weights(*x, *w);
+                let y: [f64; 3] =
+                    [0, 1, 2].map(|k| ch.iter().zip(&map.m).map(|(v, col)| v * col[k]).sum());
+                let e: [f64; 3] =
+                    [0, 1, 2].map(|i| (0..3).map(|p| c[i][p] * y[p]).sum::<f64>() - x[i]);
+                colour += (0..3)
+                    .map(|i| (0..3).map(|k| e[i] * wm[i][k] * e[k]).sum::<f64>())
+                    .sum::<f64>();
+                // noise of C·M on each channel, weighted
+                for (var, col) in noise.channel_variance(ch).iter().zip(&map.m) {
+                    let g: [f64; 3] =
+                        [0, 1, 2].map(|i| (0..3).map(|p| c[i][p] * col[p]).sum::<f64>());
+                    noisy += var
+                        * (0..3)
+                            .map(|i| (0..3).map(|k| g[i] * wm[i][k] * g[k]).sum::<f64>())
+                            .sum::<f64>();
+                }
+            }
+            (colour, noisy)
+        };
+        let (dc, dn) = cost(&dark);
+        let (cc, cn) = cost(&clean);
+        assert!(dn < cn, "noise {dn} against {cn}");
+        assert!(dc + dn < cc + cn, "total {} against {}", dc + dn, cc + cn);
+        assert!(dark.iter().flatten().all(|v| v.is_finite()));
     }
 
     #[test]
@@ -167,6 +339,6 @@ mod tests {
             m: vec![[1.0, 0.0, 0.0]; 4],
             n_channels: 4,
         };
-        assert!(camera_correction(&map, &s).is_err());
+        assert!(camera_correction(&map, &s, None).is_err());
     }
 }

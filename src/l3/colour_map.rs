@@ -206,6 +206,37 @@ pub fn least_squares_map(samples: &ColourSamples) -> Result<ColourMatrix, L3Erro
     ColourMatrix::fit(&samples.channels, &samples.xyz)
 }
 
+/// The noise a level's colour map is fitted for: the sensor's noise on a
+/// channel mean over `averaging_px` pixels per channel, at the level's
+/// luminance statistic `level_v` volts (of a `swing_v` swing).
+#[derive(Clone, Copy, Debug)]
+pub struct LevelNoise {
+    pub model: NoiseModel,
+    pub level_v: f64,
+    pub swing_v: f64,
+    pub averaging_px: f64,
+}
+
+impl LevelNoise {
+    /// Per channel, the noise variance of a patch of this level whose
+    /// noise-free channel responses are proportional to `channels`, in
+    /// `channels`' units (the sample is scaled so that its mean channel
+    /// response is the level; zero noise for a sample with no signal).
+    pub fn channel_variance(&self, channels: &[f64]) -> Vec<f64> {
+        let lum = channels.iter().sum::<f64>() / channels.len().max(1) as f64;
+        if !(lum > 0.0 && self.level_v > 0.0) {
+            return vec![0.0; channels.len()];
+        }
+        let s = self.level_v / lum;
+        channels
+            .iter()
+            .map(|v| {
+                self.model.variance((v * s).clamp(0.0, self.swing_v)) / self.averaging_px / (s * s)
+            })
+            .collect()
+    }
+}
+
 /// One colour map per level (`levels` in volts, the patch luminance
 /// statistic), for a sensor with `noise` and `swing` volts.
 pub fn level_maps(
@@ -275,19 +306,22 @@ fn level_map(
             continue;
         }
         used += 1;
-        // this surface as a patch at `level`: channels (and XYZ) × s
-        let s = level / lum;
-        // error weights W = JᵀQJ (perceptual), or the identity; the error of a
-        // scaled sample is s × the error at unit scale, and J scales by 1/s:
-        // both cancel, so every sample has the same weight at every level
+        // this surface as a patch at `level` is the sample × level / lum.
+        // Error weights W = JᵀQJ (perceptual), or the identity: the error of a
+        // scaled sample is that scale × the error at unit scale, and J scales
+        // by its inverse: both cancel, so every sample has the same weight at
+        // every level
         let wm = samples.error_weights(i, fit.perceptual);
         // noise variance of a channel mean over `averaging_px` pixels, in the
         // sample's (unit-scale) units
         let var: Vec<f64> = match fit.averaging_px {
-            Some(n) => c
-                .iter()
-                .map(|v| noise.variance((v * s).clamp(0.0, swing)) / n / (s * s))
-                .collect(),
+            Some(n) => LevelNoise {
+                model: *noise,
+                level_v: level,
+                swing_v: swing,
+                averaging_px: n,
+            }
+            .channel_variance(c),
             None => vec![0.0; nc],
         };
         for k in 0..3 {

@@ -137,6 +137,10 @@ pub struct IlluminantEntry {
     /// fitted on (`crate::training::camera_corrected`).
     #[serde(skip)]
     pub spd: Option<Spectrum>,
+    /// Per table level, the correction a same-illuminant table's classes of that level
+    /// render with, when it has been fitted per level; empty: `t` for every class.
+    #[serde(skip)]
+    pub level_corrections: Vec<Mat3>,
 }
 
 /// The registry: illuminant name → T. D65 is always present (identity).
@@ -175,6 +179,7 @@ impl IlluminantRegistry {
                 cct: white.and_then(|w| cct_from_xy(w).ok()),
                 source: CorrectionSource::Builtin,
                 spd: Some(r.d65.clone()),
+                level_corrections: Vec::new(),
             },
         );
         Ok(r)
@@ -300,6 +305,7 @@ impl IlluminantRegistry {
             cct: cct.or_else(|| white.and_then(|w| cct_from_xy(w).ok())),
             source,
             spd: Some(spd.clone()),
+            level_corrections: Vec::new(),
         })
     }
 
@@ -339,6 +345,7 @@ impl IlluminantRegistry {
             cct: None,
             source: CorrectionSource::Matrix,
             spd: None,
+            level_corrections: Vec::new(),
         })
     }
 

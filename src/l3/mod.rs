@@ -19,11 +19,11 @@ mod table;
 mod trainer;
 
 pub use baseline::{ColourMatrix, bilinear_demosaic, render_baseline};
-pub use camera_correction::camera_correction;
+pub use camera_correction::{LevelMap, camera_correction};
 pub use classify::{MAX_CHANNELS, PatchGeometry, PatchStats, mirror, sat_case_index};
 pub use colour_map::{
-    CROSS_AVERAGING_PX, ColourMapFit, ColourSamples, DEFAULT_AVERAGING_PX, least_squares_map,
-    level_maps,
+    CROSS_AVERAGING_PX, ColourMapFit, ColourSamples, DEFAULT_AVERAGING_PX, LevelNoise,
+    least_squares_map, level_maps,
 };
 pub use correction::{
     CorrectionSource, IDENTITY, IlluminantEntry, IlluminantRegistry, MAX_MATRIX_ENTRY, Mat3,
@@ -41,7 +41,7 @@ pub use output::{
 };
 pub use params::{DEFAULT_LEVELS_1V8, L3Params};
 pub use partial_format::PARTIAL_FORMAT_VERSION;
-pub use render::{RenderStats, fuse_kernels, render_reference, resolve_sat_case};
+pub use render::{RenderStats, fuse_entry, fuse_kernels, render_reference, resolve_sat_case};
 pub use shards::{
     ClassSums, Classes, GramPartial, Node, ShardSpec, SurveyPartial, SurveyShape, cover,
     merge_partials, merge_surveys, plan_shards,

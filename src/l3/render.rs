@@ -45,6 +45,23 @@ pub fn fuse_kernels(table: &L3Table, m: &[[f64; 3]; 3]) -> Vec<f32> {
     fuse_matrix(&table.kernels, m, table.n_features())
 }
 
+/// The kernels `table` renders with under `entry`: each class's kernel times its
+/// level's correction when the entry has one per level, else times `entry.t`.
+pub fn fuse_entry(table: &L3Table, entry: &super::IlluminantEntry) -> Vec<f32> {
+    let nl = table.n_levels();
+    if entry.level_corrections.len() != nl || nl == 0 {
+        return fuse_kernels(table, &entry.t);
+    }
+    let nf = table.n_features();
+    let per_group = 2 * table.n_sat_cases().max(1);
+    let mut out = Vec::with_capacity(table.kernels.len());
+    for (class, k) in table.kernels.chunks_exact(3 * nf).enumerate() {
+        let level = (class / per_group) % nl;
+        out.extend(fuse_matrix(k, &entry.level_corrections[level], nf));
+    }
+    out
+}
+
 /// `M·K` for every class's 3 output rows of `n_features` weights (f64 sums).
 pub(super) fn fuse_matrix(kernels: &[f32], m: &[[f64; 3]; 3], nf: usize) -> Vec<f32> {
     let mut out = vec![0f32; kernels.len()];

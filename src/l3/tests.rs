@@ -64,6 +64,62 @@ fn fused_correction_equals_correction_after_rendering() {
 }
 
 #[test]
+fn per_level_corrections_fuse_each_class_with_its_levels_matrix() {
+    let table = train_synthetic(0.01);
+    let nl = table.n_levels();
+    let per_level: Vec<Mat3> = (0..nl)
+        .map(|l| {
+            let s = 1.0 + 0.1 * l as f64;
+            [
+                [s, 0.02, 0.0],
+                [0.0, 1.0, 0.03 * s],
+                [-0.01, 0.0, 2.0 - 0.05 * l as f64],
+            ]
+        })
+        .collect();
+    let t = [[1.1, 0.05, -0.1], [0.02, 0.98, 0.01], [-0.03, 0.04, 1.4]];
+    let mut entry = IlluminantEntry {
+        name: "test".into(),
+        t,
+        white_xy: None,
+        cct: None,
+        source: CorrectionSource::Matrix,
+        spd: None,
+        level_corrections: Vec::new(),
+    };
+    // without per-level corrections: T everywhere
+    assert_eq!(fuse_entry(&table, &entry), fuse_kernels(&table, &t));
+    // a list that does not match the table's levels is not used
+    entry.level_corrections = per_level[..nl - 1].to_vec();
+    assert_eq!(fuse_entry(&table, &entry), fuse_kernels(&table, &t));
+    entry.level_corrections = per_level.clone();
+    let fused = fuse_entry(&table, &entry);
+    let nf = table.n_features();
+    for pos in 0..table.n_positions() {
+        for (level, m) in per_level.iter().enumerate() {
+            for sat in 0..table.n_sat_cases() {
+                for texture in [false, true] {
+                    let c = table.class_index(pos, level, sat, texture);
+                    let k = table.kernel(c);
+                    let got = &fused[c * 3 * nf..(c + 1) * 3 * nf];
+                    for i in 0..3 {
+                        for j in 0..nf {
+                            let want: f64 =
+                                (0..3).map(|q| m[i][q] * f64::from(k[q * nf + j])).sum();
+                            assert!(
+                                (f64::from(got[i * nf + j]) - want).abs()
+                                    < 1e-5 * (1.0 + want.abs()),
+                                "class {c} (level {level}) row {i} weight {j}"
+                            );
+                        }
+                    }
+                }
+            }
+        }
+    }
+}
+
+#[test]
 fn table_round_trips_and_rejects_corruption() {
     let table = train_synthetic(0.005);
     let bytes = table.to_bytes().unwrap();

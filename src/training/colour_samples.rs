@@ -4,8 +4,10 @@
 //! samples give the evaluation's matching linear map and the conventional
 //! baseline's colour matrix, so every comparison is fitted on one set.
 
-use crate::camera::Camera;
-use crate::l3::{ColourMatrix, ColourSamples, IlluminantEntry, TableKind, camera_correction};
+use crate::camera::{Camera, SensorDesign};
+use crate::l3::{
+    ColourSamples, IlluminantEntry, LevelMap, NoiseModel, TableKind, camera_correction,
+};
 use crate::spectral::{Extrapolation, IsetData, Spectrum, cie_illuminant};
 
 use super::TrainError;
@@ -65,13 +67,17 @@ pub fn colour_samples(
 }
 
 /// `entry` with its T replaced by the camera-aware correction C of a
-/// same-illuminant table whose colour map is `map` (see
-/// `crate::l3::camera_correction`), fitted on the natural reflectances under
-/// the entry's light. An entry with no spectrum (a correction given as a
-/// matrix) is refused.
+/// same-illuminant table whose colour maps are `maps` (one per level, the
+/// brightest last, each with the noise it was fitted for:
+/// [`crate::l3::L3Table::level_colour_maps`]; or one map every level shares),
+/// fitted on the natural reflectances under the entry's light (see
+/// `crate::l3::camera_correction`). `t` is the brightest level's C; with
+/// several maps every level also gets its own
+/// ([`IlluminantEntry::level_corrections`]). An entry with no spectrum (a
+/// correction given as a matrix) is refused.
 pub fn camera_corrected(
     camera: &Camera,
-    map: &ColourMatrix,
+    maps: &[LevelMap],
     entry: &IlluminantEntry,
     iset: Option<&IsetData>,
 ) -> Result<IlluminantEntry, TrainError> {
@@ -97,8 +103,31 @@ pub fn camera_corrected(
         &d65,
         &refl,
     )?;
+    let corrections = maps
+        .iter()
+        .map(|m| camera_correction(&m.map, &samples, m.noise.as_ref()))
+        .collect::<Result<Vec<_>, _>>()?;
+    let t = *corrections.last().ok_or_else(|| {
+        TrainError::Invalid("a camera-aware correction needs a colour map".into())
+    })?;
     Ok(IlluminantEntry {
-        t: camera_correction(map, &samples)?,
+        t,
+        level_corrections: if corrections.len() > 1 {
+            corrections
+        } else {
+            Vec::new()
+        },
         ..entry.clone()
     })
+}
+
+/// The noise model of `design`'s sensor: what the colour maps and the
+/// camera-aware corrections trade colour against.
+pub fn noise_model(design: &SensorDesign) -> NoiseModel {
+    NoiseModel {
+        conversion_gain_v: design.conversion_gain_v(),
+        read_noise_v: design.read_noise_v(),
+        dsnu_v: design.dsnu_v(),
+        prnu_fraction: design.prnu_fraction(),
+    }
 }

@@ -32,7 +32,7 @@ use crate::spectral::{
 };
 
 pub use crate::scene::training_reflectances;
-pub use colour_samples::{camera_corrected, colour_samples};
+pub use colour_samples::{camera_corrected, colour_samples, noise_model};
 pub use scenes::TrainingScenes;
 
 /// Errors of a training run.
@@ -278,12 +278,7 @@ impl TrainingRun {
         } else {
             NoiseSwitches::none()
         };
-        let nm = NoiseModel {
-            conversion_gain_v: design.conversion_gain_v(),
-            read_noise_v: design.read_noise_v(),
-            dsnu_v: design.dsnu_v(),
-            prnu_fraction: design.prnu_fraction(),
-        };
+        let nm = noise_model(design);
         let maps = match &params.colour_map {
             Some(fit) => {
                 let spds: Vec<_> = illuminants.iter().map(|(_, s)| s.clone()).collect();
