@@ -197,7 +197,7 @@ pub enum CorrectionMode {
     /// paper's method).
     #[serde(alias = "t")]
     Colorimetric,
-    /// C, fitted on the table's own colour map and its sensor's response under the light
+    /// C, fitted per level on the table's own colour maps and its sensor's response under the light
     /// (`crate::l3::camera_correction`), wherever the light's spectrum is known; T for a
     /// correction given only as a matrix.
     #[default]

@@ -13,7 +13,10 @@
 //! - every L3 row against its like-for-like baseline: no worse by more than
 //!   0.1 on patch means, better per pixel at every exposure (1, 0.5, 0.25,
 //!   0.1×), by a quarter or more at 0.1×;
-//! - the storage comparison.
+//! - the storage comparison;
+//! - the camera-aware correction: a D65 table under the fluorescent lamp
+//!   with C against T, and with one C per level against the brightest
+//!   level's C alone at a tenth of the exposure (on rgbw-ar0132at).
 //!
 //! `l3 eval --paper-table --sensor config/sensors/rgbw-iset.toml` runs the
 //! full version, under fluorescent too.

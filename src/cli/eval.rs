@@ -81,7 +81,7 @@ pub struct EvalArgs {
     pub estimate_illuminant: bool,
     /// The correction an SI table's output gets under the acquisition light:
     /// `colorimetric` (or `t`: the paper's T, from colorimetry alone) or
-    /// `camera` (C, fitted on the table's colour map and the sensor under that
+    /// `camera` (C, fitted per level on the table's colour maps and the sensor under that
     /// light; what `l3 render` and the service use by default).
     #[arg(long, default_value = "colorimetric")]
     pub correction: CorrectionMode,

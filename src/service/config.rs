@@ -62,7 +62,7 @@ pub struct ServerConfig {
     #[serde(default = "default_png_compression")]
     pub png_compression: PngCompression,
     /// How the active SI table's output is taken to D65 unless a request names one:
-    /// `camera` (C, fitted on the table's colour map and sensor under the light) or
+    /// `camera` (C, fitted per level on the table's colour maps and sensor under the light) or
     /// `colorimetric` (the registry's T). `l3 render --correction` has the same default.
     #[serde(default)]
     pub correction: CorrectionMode,
