@@ -128,60 +128,86 @@ fn table1_on_the_papers_sensor() {
     }
 }
 
-/// One D65 table serves a light it was not trained for through one 3×3
-/// matrix: on the paper's sensor under ISET's fluorescent lamp the paper's
-/// colorimetric T leaves the chart unusable (about 16 ΔE2000), and the
-/// camera-aware C, fitted on the table's own colour maps and the sensor's
-/// response under the lamp, brings it close to a table trained under the lamp.
-#[test]
-fn camera_aware_correction_serves_a_d65_table_under_fluorescent() {
-    use l3::camera::Camera;
-    use l3::eval::{Method, evaluate_method};
-    use l3::l3::{IlluminantRegistry, TableKind};
-    use l3::spectral::WavelengthGrid;
-    use l3::training::{TrainingSpec, camera_corrected, noise_model, train_table};
+/// A D65 table of a shipped sensor, to be judged under ISET's fluorescent
+/// lamp: the lamp's colorimetric T and the table's camera-aware C.
+struct D65TableUnderTheLamp {
+    table: l3::l3::L3Table,
+    camera: l3::camera::Camera,
+    t: l3::l3::IlluminantEntry,
+    c: l3::l3::IlluminantEntry,
+}
 
-    let sensor = concat!(env!("CARGO_MANIFEST_DIR"), "/config/sensors/rgbw-iset.toml");
-    let design = SensorDesign::load(sensor, None).unwrap();
-    let spec = TrainingSpec {
-        kind: TableKind::SameIlluminant,
-        illuminants: vec!["D65".into()],
-        seed: 1,
-        scenes: 48,
-        scene_size: 96,
-        ..TrainingSpec::default()
-    };
-    let cancel = std::sync::atomic::AtomicBool::new(false);
-    let table = train_table(&design, &spec, None, &|_, _| {}, &cancel).unwrap();
-    let grid = WavelengthGrid::default();
-    let camera = Camera::new(&design, grid, None).unwrap();
-    let t = IlluminantRegistry::with_defaults(grid, None)
-        .unwrap()
-        .resolve("Fluorescent", None)
-        .unwrap();
-    let c = camera_corrected(
-        &camera,
-        &table.level_colour_maps(&noise_model(&design)).unwrap(),
-        &t,
-        None,
-    )
-    .unwrap();
-    let chart = ChartSetup::default();
-    let eval = |corr| {
-        evaluate_method(
+impl D65TableUnderTheLamp {
+    fn train(sensor: &str) -> Self {
+        use l3::camera::Camera;
+        use l3::l3::{IlluminantRegistry, TableKind};
+        use l3::spectral::WavelengthGrid;
+        use l3::training::{TrainingSpec, camera_corrected, noise_model, train_table};
+
+        let path = format!(
+            "{}/config/sensors/{sensor}.toml",
+            env!("CARGO_MANIFEST_DIR")
+        );
+        let design = SensorDesign::load(&path, None).unwrap();
+        let spec = TrainingSpec {
+            kind: TableKind::SameIlluminant,
+            illuminants: vec!["D65".into()],
+            seed: 1,
+            scenes: 48,
+            scene_size: 96,
+            ..TrainingSpec::default()
+        };
+        let cancel = std::sync::atomic::AtomicBool::new(false);
+        let table = train_table(&design, &spec, None, &|_, _| {}, &cancel).unwrap();
+        let grid = WavelengthGrid::default();
+        let camera = Camera::new(&design, grid, None).unwrap();
+        let t = IlluminantRegistry::with_defaults(grid, None)
+            .unwrap()
+            .resolve("Fluorescent", None)
+            .unwrap();
+        let c = camera_corrected(
             &camera,
-            &Method::Table(&table),
+            &table.level_colour_maps(&noise_model(&design)).unwrap(),
+            &t,
+            None,
+        )
+        .unwrap();
+        Self {
+            table,
+            camera,
+            t,
+            c,
+        }
+    }
+
+    /// Mean patch-mean ΔE2000 of the chart under the lamp with `corr`.
+    fn mean(&self, corr: &l3::l3::IlluminantEntry, chart: &ChartSetup) -> f64 {
+        use l3::eval::{Method, evaluate_method};
+        evaluate_method(
+            &self.camera,
+            &Method::Table(&self.table),
             "SI_D65",
             "Fluorescent",
             corr,
             None,
-            &chart,
+            chart,
         )
         .unwrap()
         .summary
         .mean
-    };
-    let (with_t, with_c) = (eval(&t), eval(&c));
+    }
+}
+
+/// One D65 table serves a light it was not trained for through the light's
+/// correction: on the paper's sensor under ISET's fluorescent lamp the
+/// paper's colorimetric T leaves the chart unusable (about 16 ΔE2000), and
+/// the camera-aware C, fitted on the table's own colour maps and the sensor's
+/// response under the lamp, brings it close to a table trained under the lamp.
+#[test]
+fn camera_aware_correction_serves_a_d65_table_under_fluorescent() {
+    let d = D65TableUnderTheLamp::train("rgbw-iset");
+    let chart = ChartSetup::default();
+    let (with_t, with_c) = (d.mean(&d.t, &chart), d.mean(&d.c, &chart));
     println!("SI_D65 under Fluorescent: +T {with_t:.2}, +C {with_c:.2}");
     assert!(
         with_c < 4.0 && with_c * 3.0 < with_t,
@@ -198,63 +224,16 @@ fn camera_aware_correction_serves_a_d65_table_under_fluorescent() {
 /// C alone.
 #[test]
 fn per_level_camera_correction_serves_a_d65_table_in_dim_light() {
-    use l3::camera::Camera;
-    use l3::eval::{LightLevel, Method, evaluate_method};
-    use l3::l3::{IlluminantRegistry, TableKind};
-    use l3::spectral::WavelengthGrid;
-    use l3::training::{TrainingSpec, camera_corrected, noise_model, train_table};
-
-    let sensor = concat!(
-        env!("CARGO_MANIFEST_DIR"),
-        "/config/sensors/rgbw-ar0132at.toml"
-    );
-    let design = SensorDesign::load(sensor, None).unwrap();
-    let spec = TrainingSpec {
-        kind: TableKind::SameIlluminant,
-        illuminants: vec!["D65".into()],
-        seed: 1,
-        scenes: 48,
-        scene_size: 96,
-        ..TrainingSpec::default()
-    };
-    let cancel = std::sync::atomic::AtomicBool::new(false);
-    let table = train_table(&design, &spec, None, &|_, _| {}, &cancel).unwrap();
-    let grid = WavelengthGrid::default();
-    let camera = Camera::new(&design, grid, None).unwrap();
-    let t = IlluminantRegistry::with_defaults(grid, None)
-        .unwrap()
-        .resolve("Fluorescent", None)
-        .unwrap();
-    let per_level = camera_corrected(
-        &camera,
-        &table.level_colour_maps(&noise_model(&design)).unwrap(),
-        &t,
-        None,
-    )
-    .unwrap();
-    assert_eq!(per_level.level_corrections.len(), table.n_levels());
+    let d = D65TableUnderTheLamp::train("rgbw-ar0132at");
+    assert_eq!(d.c.level_corrections.len(), d.table.n_levels());
     let brightest_only = l3::l3::IlluminantEntry {
         level_corrections: Vec::new(),
-        ..per_level.clone()
+        ..d.c.clone()
     };
-    let dim = LightLevel::ExposureFactor(0.1)
+    let dim = l3::eval::LightLevel::ExposureFactor(0.1)
         .apply(&ChartSetup::default())
         .unwrap();
-    let eval = |corr| {
-        evaluate_method(
-            &camera,
-            &Method::Table(&table),
-            "SI_D65+C",
-            "Fluorescent",
-            corr,
-            None,
-            &dim,
-        )
-        .unwrap()
-        .summary
-        .mean
-    };
-    let (levels, top) = (eval(&per_level), eval(&brightest_only));
+    let (levels, top) = (d.mean(&d.c, &dim), d.mean(&brightest_only, &dim));
     println!(
         "SI_D65+C under Fluorescent at 0.1×: C per level {levels:.2}, brightest level's C {top:.2}"
     );

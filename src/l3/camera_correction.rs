@@ -190,6 +190,23 @@ pub fn camera_correction(
 mod tests {
     use super::*;
 
+    /// A 4-channel sensor's exact channel → XYZ map, and a correction.
+    const TRUTH: [[f64; 3]; 4] = [
+        [0.6, 0.3, 0.0],
+        [0.3, 0.6, 0.1],
+        [0.05, 0.1, 0.9],
+        [0.2, 0.2, 0.2],
+    ];
+    const T: Mat3 = [[1.1, 0.1, -0.05], [0.02, 0.97, 0.01], [-0.03, 0.05, 1.4]];
+
+    /// The map of `truth` as a colour map.
+    fn exact_map(truth: &[[f64; 3]]) -> ColourMatrix {
+        ColourMatrix {
+            m: truth.to_vec(),
+            n_channels: truth.len(),
+        }
+    }
+
     fn samples_from(truth: &[[f64; 3]], t: &Mat3) -> ColourSamples {
         let mut s = ColourSamples::default();
         for i in 0..30 {
@@ -207,17 +224,8 @@ mod tests {
 
     #[test]
     fn recovers_the_correction_after_an_exact_map() {
-        let truth = [
-            [0.6, 0.3, 0.0],
-            [0.3, 0.6, 0.1],
-            [0.05, 0.1, 0.9],
-            [0.2, 0.2, 0.2],
-        ];
-        let t = [[1.1, 0.1, -0.05], [0.02, 0.97, 0.01], [-0.03, 0.05, 1.4]];
-        let map = ColourMatrix {
-            m: truth.to_vec(),
-            n_channels: 4,
-        };
+        let (truth, t) = (TRUTH, T);
+        let map = exact_map(&truth);
         let c = camera_correction(&map, &samples_from(&truth, &t), None).unwrap();
         for i in 0..3 {
             for j in 0..3 {
@@ -231,13 +239,7 @@ mod tests {
         // a darker level's map that renders every colour through a shrink A
         // (desaturated, dimmed): its C is T·A⁻¹, so the level renders as the
         // brightest one does
-        let truth = [
-            [0.6, 0.3, 0.0],
-            [0.3, 0.6, 0.1],
-            [0.05, 0.1, 0.9],
-            [0.2, 0.2, 0.2],
-        ];
-        let t = [[1.1, 0.1, -0.05], [0.02, 0.97, 0.01], [-0.03, 0.05, 1.4]];
+        let (truth, t) = (TRUTH, T);
         let a = nalgebra::Matrix3::new(0.8, 0.1, 0.05, 0.1, 0.85, 0.05, 0.05, 0.1, 0.75);
         let shrunk: Vec<[f64; 3]> = truth
             .iter()
@@ -246,10 +248,7 @@ mod tests {
                 [v[0], v[1], v[2]]
             })
             .collect();
-        let map = ColourMatrix {
-            m: shrunk,
-            n_channels: 4,
-        };
+        let map = exact_map(&shrunk);
         let c = camera_correction(&map, &samples_from(&truth, &t), None).unwrap();
         let a_inv = a.try_inverse().unwrap();
         let want = nalgebra::Matrix3::from_fn(|i, j| t[i][j]) * a_inv;
@@ -265,17 +264,8 @@ mod tests {
 
     #[test]
     fn the_noise_term_keeps_a_dark_levels_noise_trade() {
-        let truth = [
-            [0.6, 0.3, 0.0],
-            [0.3, 0.6, 0.1],
-            [0.05, 0.1, 0.9],
-            [0.2, 0.2, 0.2],
-        ];
-        let t = [[1.1, 0.1, -0.05], [0.02, 0.97, 0.01], [-0.03, 0.05, 1.4]];
-        let map = ColourMatrix {
-            m: truth.to_vec(),
-            n_channels: 4,
-        };
+        let (truth, t) = (TRUTH, T);
+        let map = exact_map(&truth);
         let s = samples_from(&truth, &t);
         let at = |level_v: f64| LevelNoise {
             model: NoiseModel {
