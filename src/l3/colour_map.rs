@@ -300,6 +300,12 @@ fn level_map(
     let mut a = DMatrix::<f64>::zeros(nn, nn);
     let mut b = DVector::<f64>::zeros(nn);
     let mut used = 0usize;
+    let level_noise = fit.averaging_px.map(|n| LevelNoise {
+        model: *noise,
+        level_v: level,
+        swing_v: swing,
+        averaging_px: n,
+    });
     for (i, (c, x)) in samples.channels.iter().zip(&samples.xyz).enumerate() {
         let lum = c.iter().sum::<f64>() / nc as f64;
         if lum <= 0.0 {
@@ -314,14 +320,8 @@ fn level_map(
         let wm = samples.error_weights(i, fit.perceptual);
         // noise variance of a channel mean over `averaging_px` pixels, in the
         // sample's (unit-scale) units
-        let var: Vec<f64> = match fit.averaging_px {
-            Some(n) => LevelNoise {
-                model: *noise,
-                level_v: level,
-                swing_v: swing,
-                averaging_px: n,
-            }
-            .channel_variance(c),
+        let var: Vec<f64> = match &level_noise {
+            Some(n) => n.channel_variance(c),
             None => vec![0.0; nc],
         };
         for k in 0..3 {

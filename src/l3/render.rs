@@ -53,11 +53,13 @@ pub fn fuse_entry(table: &L3Table, entry: &super::IlluminantEntry) -> Vec<f32> {
         return fuse_kernels(table, &entry.t);
     }
     let nf = table.n_features();
-    let per_group = 2 * table.n_sat_cases().max(1);
     let mut out = Vec::with_capacity(table.kernels.len());
     for (class, k) in table.kernels.chunks_exact(3 * nf).enumerate() {
-        let level = (class / per_group) % nl;
-        out.extend(fuse_matrix(k, &entry.level_corrections[level], nf));
+        out.extend(fuse_matrix(
+            k,
+            &entry.level_corrections[table.class_level(class)],
+            nf,
+        ));
     }
     out
 }

@@ -210,6 +210,12 @@ impl L3Table {
         self.group_index(pos, level, sat) * 2 + texture as usize
     }
 
+    /// The level of class `class` (the inverse of [`Self::class_index`] for the level).
+    #[inline]
+    pub fn class_level(&self, class: usize) -> usize {
+        (class / (2 * self.n_sat_cases().max(1))) % self.n_levels().max(1)
+    }
+
     /// The kernel of class `class`: 3 rows of `n_features`.
     pub fn kernel(&self, class: usize) -> &[f32] {
         let n = 3 * self.n_features();

@@ -100,6 +100,7 @@ fn per_level_corrections_fuse_each_class_with_its_levels_matrix() {
             for sat in 0..table.n_sat_cases() {
                 for texture in [false, true] {
                     let c = table.class_index(pos, level, sat, texture);
+                    assert_eq!(table.class_level(c), level);
                     let k = table.kernel(c);
                     let got = &fused[c * 3 * nf..(c + 1) * 3 * nf];
                     for i in 0..3 {
