@@ -588,6 +588,11 @@ fn bad_arguments_are_clear_errors() {
         d,
     );
     assert!(!ok && err.contains("colour_averaging_px 0.5"), "{err}");
+    let (ok, _, err) = l3(
+        &["train", "--colour-loss", "median", "--out", "t.safetensors"],
+        d,
+    );
+    assert!(!ok && err.contains("--colour-loss"), "{err}");
     assert!(!d.join("t.safetensors").exists());
     let (ok, _, err) = l3(&["simulate", "--exposure=-1", "--out", "x"], d);
     assert!(!ok && err.contains("exposure"), "{err}");

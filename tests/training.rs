@@ -177,3 +177,36 @@ fn sharded_training_gives_the_single_run_table_byte_for_byte() {
     assert!(run.plan(0).is_err());
     assert!(run.plan(spec.scenes + 1).is_err());
 }
+
+#[test]
+fn the_colour_loss_defaults_by_illuminant_count_and_is_recorded_in_the_table() {
+    use l3::l3::ColourLoss;
+    let design = SensorDesign::paper_default();
+    let cancel = AtomicBool::new(false);
+    let one_light = TrainingSpec {
+        illuminants: vec!["Tungsten".into()],
+        ..tiny(3)
+    };
+    assert_eq!(one_light.colour_loss(), ColourLoss::MeanDeltaE);
+    assert_eq!(tiny(3).colour_loss(), ColourLoss::SquaredDeltaE);
+    let recorded = |t: &L3Table| t.meta.params.colour_map.map(|f| f.loss);
+    let mean = train_table(&design, &one_light, None, &|_, _| {}, &cancel).unwrap();
+    assert_eq!(recorded(&mean), Some(ColourLoss::MeanDeltaE));
+    let squared_spec = TrainingSpec {
+        colour_loss: Some(ColourLoss::SquaredDeltaE),
+        ..one_light.clone()
+    };
+    let squared = train_table(&design, &squared_spec, None, &|_, _| {}, &cancel).unwrap();
+    assert_eq!(recorded(&squared), Some(ColourLoss::SquaredDeltaE));
+    assert_ne!(
+        mean.kernels, squared.kernels,
+        "the loss changes the colour maps"
+    );
+    assert!(squared.kernels.iter().all(|v| v.is_finite()));
+    // a spec names the loss in kebab case, and an unknown one is refused
+    let json = serde_json::to_value(&squared_spec).unwrap();
+    assert_eq!(json["colour_loss"], "squared-delta-e");
+    let mut bad = json.clone();
+    bad["colour_loss"] = "median".into();
+    assert!(serde_json::from_value::<TrainingSpec>(bad).is_err());
+}

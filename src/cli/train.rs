@@ -6,8 +6,17 @@ use clap::Args;
 use indicatif::{ProgressBar, ProgressStyle};
 
 use super::{Cli, CliError, iset, load_sensor, write_file};
-use crate::l3::{Classes, GramPartial, L3Table, ShardSpec, SurveyPartial, TableKind};
+use crate::l3::{Classes, ColourLoss, GramPartial, L3Table, ShardSpec, SurveyPartial, TableKind};
 use crate::training::{TrainingRun, TrainingSpec};
+
+/// `--colour-loss`: [`ColourLoss`] by a short name.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
+pub enum ColourLossArg {
+    /// Every light's mean ΔE00.
+    Mean,
+    /// The sum of squared ΔE00.
+    Squared,
+}
 
 /// A step of a sharded training run.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
@@ -51,9 +60,14 @@ pub struct TrainArgs {
     pub no_saturation: bool,
     /// Pixels per channel whose mean the colour maps are fitted for under
     /// the sensor's noise (0: the noise-free map). Default by kind: 128 for
-    /// same-illuminant tables, 32 for cross-illuminant ones.
+    /// same-illuminant tables, 48 for cross-illuminant ones.
     #[arg(long)]
     pub colour_averaging_px: Option<f64>,
+    /// What each level's colour map minimises: every light's mean ΔE00 or
+    /// the sum of squared ΔE00. Default by illuminants: mean for one light,
+    /// squared for an ensemble.
+    #[arg(long, value_enum)]
+    pub colour_loss: Option<ColourLossArg>,
     #[arg(long, default_value = "table.safetensors")]
     pub out: PathBuf,
     /// Train in this many shards (batch ranges), one after the other, each
@@ -104,6 +118,10 @@ pub fn run(cli: &Cli, a: &TrainArgs) -> Result<(), CliError> {
         contrast_classes: !a.no_contrast,
         saturation_classes: !a.no_saturation,
         colour_averaging_px: a.colour_averaging_px,
+        colour_loss: a.colour_loss.map(|l| match l {
+            ColourLossArg::Mean => ColourLoss::MeanDeltaE,
+            ColourLossArg::Squared => ColourLoss::SquaredDeltaE,
+        }),
         ..TrainingSpec::default()
     };
     let bar = ProgressBar::new(1000);

@@ -22,7 +22,7 @@ pub use baseline::{ColourMatrix, bilinear_demosaic, render_baseline};
 pub use camera_correction::{LevelMap, camera_correction};
 pub use classify::{MAX_CHANNELS, PatchGeometry, PatchStats, mirror, sat_case_index};
 pub use colour_map::{
-    CROSS_AVERAGING_PX, ColourMapFit, ColourSamples, DEFAULT_AVERAGING_PX, LevelNoise,
+    CROSS_AVERAGING_PX, ColourLoss, ColourMapFit, ColourSamples, DEFAULT_AVERAGING_PX, LevelNoise,
     least_squares_map, level_maps,
 };
 pub use correction::{

@@ -36,7 +36,7 @@ pub fn colour_samples(
     let grid = *camera.grid();
     let white = Spectrum::constant(grid, 1.0);
     let mut out = ColourSamples::default();
-    for ill in illuminants {
+    for (light, ill) in illuminants.iter().enumerate() {
         let (wc, wx) = camera.reflectance_response(&white, ill)?;
         let (_, wd) = camera.reflectance_response(&white, d65)?;
         let norm = wx[1];
@@ -61,6 +61,7 @@ pub fn colour_samples(
             out.channels.push(c.iter().map(|v| v / norm).collect());
             out.xyz.push(x.map(|v| v / norm));
             out.white.push(target_white.map(|v| v / norm));
+            out.light.push(light);
         }
     }
     Ok(out)
