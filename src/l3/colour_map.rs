@@ -384,35 +384,55 @@ fn level_map(
             prepared.len()
         )));
     }
-    let mut sample_weight = vec![1.0; prepared.len()];
-    let mut m = solve_level(samples, nc, &prepared, &sample_weight, level)?;
-    if fit.loss == ColourLoss::MeanDeltaE {
-        let light_of = |s: &LevelSample| samples.light.get(s.index).copied().unwrap_or(0);
-        let n_lights = prepared.iter().map(|s| light_of(s) + 1).max().unwrap_or(1);
-        for _ in 0..MEAN_LOSS_ITERATIONS {
-            let errors: Vec<f64> = prepared
-                .iter()
-                .map(|s| {
-                    let e2 = expected_square_error(&m, nc, samples, s);
-                    (e2 + MEAN_LOSS_SMOOTHING * MEAN_LOSS_SMOOTHING).sqrt()
-                })
-                .collect();
-            // Σ over lights of (Σ over the light's samples of ΔE)²: the
-            // gradient weighs a sample by its light's total error over its own
-            let mut light_total = vec![0.0; n_lights];
-            for (s, e) in prepared.iter().zip(&errors) {
-                light_total[light_of(s)] += e;
-            }
-            for ((w, s), e) in sample_weight.iter_mut().zip(&prepared).zip(&errors) {
-                *w = light_total[light_of(s)] / e;
-            }
-            m = solve_level(samples, nc, &prepared, &sample_weight, level)?;
-        }
-    }
+    let solve = |weights: &[f64]| solve_level(samples, nc, &prepared, weights, level);
+    let m = match fit.loss {
+        ColourLoss::SquaredDeltaE => solve(&vec![1.0; prepared.len()])?,
+        ColourLoss::MeanDeltaE => mean_loss_fit(
+            prepared.len(),
+            |i| samples.light.get(prepared[i].index).copied().unwrap_or(0),
+            solve,
+            |m, i| expected_square_error(m, nc, samples, &prepared[i]),
+        )?,
+    };
     Ok(ColourMatrix {
         m: (0..nc).map(|c| [m[c], m[nc + c], m[2 * nc + c]]).collect(),
         n_channels: nc,
     })
+}
+
+/// Minimises `Σ_light (Σ_i e_i)²` over `n` samples, `e_i` sample i's
+/// smoothed error (`sqrt(square_error + s²)`, `s` [`MEAN_LOSS_SMOOTHING`]),
+/// by iteratively reweighted least squares: `solve(weights)` solves the
+/// problem whose loss is `Σ_i weights[i] · square_error_i`, and
+/// `square_error(x, i)` is sample i's squared error under solution `x`. The
+/// gradient of the loss weighs a sample by its light's total error over its
+/// own, so each round solves with those weights; the first round is the
+/// plain squared loss.
+pub(super) fn mean_loss_fit<T>(
+    n: usize,
+    light: impl Fn(usize) -> usize,
+    solve: impl Fn(&[f64]) -> Result<T, L3Error>,
+    square_error: impl Fn(&T, usize) -> f64,
+) -> Result<T, L3Error> {
+    let n_lights = (0..n).map(|i| light(i) + 1).max().unwrap_or(1);
+    let mut weights = vec![1.0; n];
+    let mut x = solve(&weights)?;
+    for _ in 0..MEAN_LOSS_ITERATIONS {
+        let errors: Vec<f64> = (0..n)
+            .map(|i| {
+                (square_error(&x, i).max(0.0) + MEAN_LOSS_SMOOTHING * MEAN_LOSS_SMOOTHING).sqrt()
+            })
+            .collect();
+        let mut light_total = vec![0.0; n_lights];
+        for (i, e) in errors.iter().enumerate() {
+            light_total[light(i)] += e;
+        }
+        for (i, (w, e)) in weights.iter_mut().zip(&errors).enumerate() {
+            *w = light_total[light(i)] / e;
+        }
+        x = solve(&weights)?;
+    }
+    Ok(x)
 }
 
 /// Reweighting rounds of the mean-ΔE loss ([`ColourLoss::MeanDeltaE`]).

@@ -6,7 +6,7 @@
 
 use crate::camera::{Camera, SensorDesign};
 use crate::l3::{
-    ColourSamples, IlluminantEntry, LevelMap, NoiseModel, TableKind, camera_correction,
+    ColourLoss, ColourSamples, IlluminantEntry, LevelMap, NoiseModel, TableKind, camera_correction,
 };
 use crate::spectral::{Extrapolation, IsetData, Spectrum, cie_illuminant};
 
@@ -106,7 +106,7 @@ pub fn camera_corrected(
     )?;
     let corrections = maps
         .iter()
-        .map(|m| camera_correction(&m.map, &samples, m.noise.as_ref()))
+        .map(|m| camera_correction(&m.map, &samples, m.noise.as_ref(), ColourLoss::MeanDeltaE))
         .collect::<Result<Vec<_>, _>>()?;
     let t = *corrections.last().ok_or_else(|| {
         TrainError::Invalid("a camera-aware correction needs a colour map".into())
