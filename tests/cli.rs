@@ -800,3 +800,48 @@ fn serve_start_failures_exit_1_with_the_reason() {
     assert_eq!(code, Some(1), "{err}");
     assert!(err.contains("database"), "{err}");
 }
+
+#[test]
+fn eval_colour_classes_predicts_without_a_table() {
+    let tmp = tempfile::tempdir().unwrap();
+    let d = tmp.path();
+    let out_path = d.join("classes.json");
+    let (ok, out, err) = l3(
+        &[
+            "eval",
+            "--colour-classes",
+            "1,6",
+            "--captures",
+            "3",
+            "--out",
+            out_path.to_str().unwrap(),
+        ],
+        d,
+    );
+    assert!(ok, "eval --colour-classes failed: {out}{err}");
+    assert!(out.contains("| chroma classes |"), "{out}");
+    let v: serde_json::Value = serde_json::from_slice(&std::fs::read(&out_path).unwrap()).unwrap();
+    assert_eq!(v["captures"], 3);
+    let rows = v["rows"].as_array().unwrap();
+    assert_eq!(rows.len(), 2);
+    assert_eq!(rows[0]["classes"], 1);
+    for r in rows {
+        for k in ["one_capture", "one_capture_std", "noise_free"] {
+            assert!(r[k].as_f64().is_some_and(f64::is_finite), "{k}: {r}");
+        }
+    }
+    // the classes lower the noise-free error of the default sensor's colour maps
+    assert!(
+        rows[1]["noise_free"].as_f64() < rows[0]["noise_free"].as_f64(),
+        "{v}"
+    );
+    for bad in [
+        &["--colour-classes", "0"][..],
+        &["--colour-classes", "2", "--paper-table"],
+    ] {
+        let mut args = vec!["eval"];
+        args.extend_from_slice(bad);
+        let (ok, _, err) = l3(&args, d);
+        assert!(!ok && !err.is_empty(), "{bad:?} was accepted");
+    }
+}

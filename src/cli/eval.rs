@@ -79,6 +79,13 @@ pub struct EvalArgs {
     /// for each.
     #[arg(long, conflicts_with_all = ["paper_table", "captures"])]
     pub estimate_illuminant: bool,
+    /// Predict, without training, a cross-illuminant table's chart error with
+    /// colour maps per luminance level and per chroma class, for each count
+    /// given (1 is what the trainer fits today): the maps fitted as the trainer
+    /// fits them, the chart's channel means drawn from the sensor's noise model
+    /// over --captures captures (default 16). See the README's "colour classes".
+    #[arg(long, value_delimiter = ',', conflicts_with_all = ["paper_table", "frame", "estimate_illuminant", "table"])]
+    pub colour_classes: Vec<usize>,
     /// The correction an SI table's output gets under the acquisition light:
     /// `colorimetric` (or `t`: the paper's T, from colorimetry alone) or
     /// `camera` (C, fitted per level on the table's colour maps and the sensor under that
@@ -122,6 +129,9 @@ pub fn run(cli: &Cli, a: &EvalArgs) -> Result<(), CliError> {
     }
     if a.estimate_illuminant {
         return run_estimation_study(a, iset.as_ref(), &chart);
+    }
+    if !a.colour_classes.is_empty() {
+        return run_colour_class_study(a, iset.as_ref(), &chart);
     }
     if a.sensor.len() > 1 {
         return Err(CliError::Usage(
@@ -293,15 +303,50 @@ fn run_estimation_study(
         .collect();
     let rows = crate::eval::illuminant_estimation_study(&table, &lights, iset, chart)?;
     println!("{}", crate::eval::estimation_markdown(&rows));
+    write_study(a, "illuminant_estimation.json", &rows)
+}
+
+/// Write a study's JSON to `--out` (a file, or `name` in that folder).
+fn write_study(a: &EvalArgs, name: &str, study: &impl serde::Serialize) -> Result<(), CliError> {
     let out = if a.out.extension().is_some() {
         a.out.clone()
     } else {
-        a.out.join("illuminant_estimation.json")
+        a.out.join(name)
     };
-    let json = serde_json::to_vec_pretty(&rows).map_err(|e| CliError::Usage(e.to_string()))?;
+    let json = serde_json::to_vec_pretty(study).map_err(|e| CliError::Usage(e.to_string()))?;
     write_file(&out, &json)?;
     println!("wrote {}", out.display());
     Ok(())
+}
+
+/// `--colour-classes`: the study for the first `--sensor` under the first
+/// `--illuminant` (Tungsten), printed as markdown and written as JSON.
+fn run_colour_class_study(
+    a: &EvalArgs,
+    iset: Option<&crate::spectral::IsetData>,
+    chart: &ChartSetup,
+) -> Result<(), CliError> {
+    if a.sensor.len() > 1 {
+        return Err(CliError::Usage(
+            "--colour-classes studies one --sensor at a time".into(),
+        ));
+    }
+    let sensor = a.sensor.first().cloned();
+    let design = load_sensor(&sensor, iset)?;
+    let camera = Camera::new(&design, WavelengthGrid::default(), iset)?;
+    let acq = a
+        .illuminant
+        .first()
+        .cloned()
+        .unwrap_or_else(|| "Tungsten".into());
+    let captures = a.captures.map_or(16, usize::from);
+    let study =
+        crate::eval::colour_class_study(&camera, &acq, iset, chart, &a.colour_classes, captures)?;
+    println!(
+        "{}",
+        crate::eval::colour_class_markdown(&design.name, &study)
+    );
+    write_study(a, "colour_classes.json", &study)
 }
 
 /// Table 1 on every `--sensor` (the default sensor when none is given):

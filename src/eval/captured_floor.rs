@@ -36,7 +36,7 @@ use argmin::solver::neldermead::NelderMead;
 use serde::{Deserialize, Serialize};
 
 use super::budget::per_patch;
-use super::report::white_patch_index;
+use super::report::{scored_patches, white_patch_index};
 use super::workflow::{ChartCapture, ChartSetup, simulate_chart};
 use super::{EvalError, interior};
 use crate::camera::Camera;
@@ -76,43 +76,15 @@ struct PatchData {
 
 impl PatchData {
     fn new(camera: &Camera, cap: &ChartCapture) -> Self {
-        let cfa = camera.cfa();
-        let nc = camera.n_channels();
-        let channels = cap
-            .scene
-            .patches
-            .iter()
-            .map(|p| {
-                let (r0, c0, h, w) = interior(p);
-                let mut sum = vec![0f64; nc];
-                let mut n = vec![0usize; nc];
-                for r in r0..r0 + h {
-                    for c in c0..c0 + w {
-                        let k = cfa.channel_at(r, c);
-                        if let (Some(s), Some(v)) =
-                            (sum.get_mut(k), cap.volts.get(r * cap.width + c))
-                        {
-                            *s += f64::from(*v);
-                            n[k] += 1;
-                        }
-                    }
-                }
-                sum.iter()
-                    .zip(&n)
-                    .map(|(s, &k)| if k > 0 { s / k as f64 } else { 0.0 })
-                    .collect()
-            })
+        let channels = interior_channel_means(camera, cap)
+            .into_iter()
+            .map(|(means, _)| means)
             .collect();
         Self {
             channels,
             truth: cap.ideal_d65.clone(),
             white: white_patch_index(&cap.scene.patches, &cap.ideal_d65),
-            scored: cap
-                .scene
-                .patches
-                .iter()
-                .map(|p| p.category != "grey")
-                .collect(),
+            scored: scored_patches(&cap.scene.patches),
         }
     }
 
@@ -128,6 +100,40 @@ impl PatchData {
             .fold((0.0, 0usize), |(s, n), (_, d)| (s + d, n + 1));
         if n == 0 { f64::NAN } else { sum / n as f64 }
     }
+}
+
+/// Per patch of a capture: the mean of each CFA channel over the patch
+/// interior, in volts, and how many pixels of each channel it averages.
+pub(super) fn interior_channel_means(
+    camera: &Camera,
+    cap: &ChartCapture,
+) -> Vec<(Vec<f64>, Vec<usize>)> {
+    let cfa = camera.cfa();
+    let nc = camera.n_channels();
+    cap.scene
+        .patches
+        .iter()
+        .map(|p| {
+            let (r0, c0, h, w) = interior(p);
+            let mut sum = vec![0f64; nc];
+            let mut n = vec![0usize; nc];
+            for r in r0..r0 + h {
+                for c in c0..c0 + w {
+                    let k = cfa.channel_at(r, c);
+                    if let (Some(s), Some(v)) = (sum.get_mut(k), cap.volts.get(r * cap.width + c)) {
+                        *s += f64::from(*v);
+                        n[k] += 1;
+                    }
+                }
+            }
+            let means = sum
+                .iter()
+                .zip(&n)
+                .map(|(s, &k)| if k > 0 { s / k as f64 } else { 0.0 })
+                .collect();
+            (means, n)
+        })
+        .collect()
 }
 
 fn apply(map: &[f64], c: &[f64]) -> Xyz {

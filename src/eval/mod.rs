@@ -3,6 +3,7 @@
 
 mod budget;
 mod captured_floor;
+mod colour_classes;
 mod figure;
 mod illuminant_estimation;
 mod noise_split;
@@ -12,6 +13,9 @@ mod workflow;
 
 pub use budget::{ErrorBudget, error_budget};
 pub use captured_floor::{CapturedFloor, captured_floor};
+pub use colour_classes::{
+    ColourClassRow, ColourClassStudy, colour_class_markdown, colour_class_study,
+};
 pub use figure::report_svg;
 pub use illuminant_estimation::{
     EstimateResult, EstimationRow, STUDY_LIGHTS, estimation_markdown, illuminant_estimation_study,

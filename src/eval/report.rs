@@ -139,6 +139,11 @@ pub fn patch_means(patches: &[Patch], xyz: &[f32], width: usize) -> Vec<Xyz> {
 
 /// The chart's white patch, which both sides are normalised by: the grey
 /// patch with the highest ideal Y (any patch, on a chart without greys).
+/// Which patches a chart's score counts: every patch but the grey strip.
+pub fn scored_patches(patches: &[Patch]) -> Vec<bool> {
+    patches.iter().map(|p| p.category != "grey").collect()
+}
+
 pub fn white_patch_index(patches: &[Patch], ideal: &[Xyz]) -> usize {
     let greys: Vec<usize> = (0..patches.len().min(ideal.len()))
         .filter(|&i| patches[i].category == "grey")

@@ -4,6 +4,7 @@
 
 mod baseline;
 mod camera_correction;
+mod chroma;
 mod classify;
 mod colour_map;
 mod correction;
@@ -20,6 +21,7 @@ mod trainer;
 
 pub use baseline::{ColourMatrix, bilinear_demosaic, render_baseline};
 pub use camera_correction::{LevelMap, camera_correction};
+pub use chroma::{ChromaClasses, chromaticity};
 pub use classify::{MAX_CHANNELS, PatchGeometry, PatchStats, mirror, sat_case_index};
 pub use colour_map::{
     CROSS_AVERAGING_PX, ColourLoss, ColourMapFit, ColourSamples, DEFAULT_AVERAGING_PX, LevelNoise,

@@ -1,0 +1,275 @@
+//! Chroma classes: a partition of a sensor's channel space by the *ratios*
+//! of the channel responses, so that each class can hold its own colour map.
+//!
+//! A linear channel → XYZ map has one error floor per sensor (the filters
+//! are not a linear transform of the colour-matching functions). Splitting
+//! the surfaces by their channel chromaticity (each response over the sum
+//! of the responses, so the class does not depend on exposure) and fitting
+//! a map per class makes the colour piecewise linear, which is what the L3
+//! method does for luminance with its levels. The classes are found by
+//! k-means (k-means++ start from a seeded generator, then Lloyd's
+//! iterations) on the chromaticities of a reflectance set's responses; a
+//! class that ends with fewer than `min_size` members is dropped and its
+//! members reassigned, so every class has enough surfaces to fit a map on.
+//!
+//! Written here rather than taken from a clustering crate: the sets are a
+//! few hundred points of at most [`super::MAX_CHANNELS`] dimensions, the
+//! result must reproduce bit for bit from a seed, and the class of a patch
+//! must be computed by the same few lines everywhere it is needed.
+
+use rand::{RngExt, SeedableRng};
+use rand_chacha::ChaCha8Rng;
+use serde::{Deserialize, Serialize};
+
+use super::L3Error;
+
+/// Lloyd iterations at most (the sets converge in far fewer).
+const MAX_ITERATIONS: usize = 200;
+
+/// The chroma classes of a sensor: one centroid per class, each a
+/// chromaticity (channel responses over their sum).
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct ChromaClasses {
+    pub centroids: Vec<Vec<f64>>,
+}
+
+/// The chromaticity of a channel response: each channel over the sum of
+/// the (non-negative) responses; `None` when nothing responds.
+pub fn chromaticity(channels: &[f64]) -> Option<Vec<f64>> {
+    let clamped: Vec<f64> = channels.iter().map(|v| v.max(0.0)).collect();
+    let sum: f64 = clamped.iter().sum();
+    (sum.is_finite() && sum > 0.0).then(|| clamped.iter().map(|v| v / sum).collect())
+}
+
+fn distance2(a: &[f64], b: &[f64]) -> f64 {
+    a.iter().zip(b).map(|(x, y)| (x - y) * (x - y)).sum()
+}
+
+fn nearest(centroids: &[Vec<f64>], p: &[f64]) -> usize {
+    let mut best = (0, f64::INFINITY);
+    for (i, c) in centroids.iter().enumerate() {
+        let d = distance2(c, p);
+        if d < best.1 {
+            best = (i, d);
+        }
+    }
+    best.0
+}
+
+impl ChromaClasses {
+    /// One class holding every response (a plain linear map).
+    pub fn single(n_channels: usize) -> Self {
+        Self {
+            centroids: vec![vec![1.0 / n_channels.max(1) as f64; n_channels.max(1)]],
+        }
+    }
+
+    pub fn len(&self) -> usize {
+        self.centroids.len()
+    }
+
+    pub fn is_empty(&self) -> bool {
+        self.centroids.is_empty()
+    }
+
+    /// Up to `k` classes of `responses` (channel responses, one per
+    /// surface), each with at least `min_size` members, from `seed`.
+    pub fn fit(
+        responses: &[Vec<f64>],
+        k: usize,
+        min_size: usize,
+        seed: u64,
+    ) -> Result<Self, L3Error> {
+        let points: Vec<Vec<f64>> = responses.iter().filter_map(|r| chromaticity(r)).collect();
+        let nc = points.first().map(Vec::len).unwrap_or(0);
+        if k == 0 || nc == 0 || points.iter().any(|p| p.len() != nc) {
+            return Err(L3Error::InvalidParams(format!(
+                "chroma classes need k ≥ 1 and responses of one length ({k} classes, {} points)",
+                points.len()
+            )));
+        }
+        if points.len() < min_size.max(1) {
+            return Err(L3Error::InvalidParams(format!(
+                "{} responding surfaces cannot make a class of {min_size}",
+                points.len()
+            )));
+        }
+        if k == 1 {
+            return Ok(Self {
+                centroids: vec![mean(&points, &vec![true; points.len()])],
+            });
+        }
+        let mut rng = ChaCha8Rng::seed_from_u64(seed);
+        let mut centroids = plus_plus_start(&points, k.min(points.len()), &mut rng);
+        loop {
+            let assign = lloyd(&points, &mut centroids);
+            let sizes = (0..centroids.len())
+                .map(|c| assign.iter().filter(|&&a| a == c).count())
+                .collect::<Vec<_>>();
+            // drop the smallest class under the minimum, then re-run
+            let small = (0..centroids.len())
+                .filter(|&c| sizes[c] < min_size)
+                .min_by_key(|&c| sizes[c]);
+            match small {
+                Some(c) if centroids.len() > 1 => {
+                    centroids.remove(c);
+                }
+                _ => break,
+            }
+        }
+        Ok(Self { centroids })
+    }
+
+    /// The class of a channel response (class 0 when nothing responds).
+    pub fn classify(&self, channels: &[f64]) -> usize {
+        match chromaticity(channels) {
+            Some(p) if self.centroids.len() > 1 => nearest(&self.centroids, &p),
+            _ => 0,
+        }
+    }
+}
+
+fn mean(points: &[Vec<f64>], keep: &[bool]) -> Vec<f64> {
+    let nc = points.first().map(Vec::len).unwrap_or(0);
+    let mut sum = vec![0.0; nc];
+    let mut n = 0usize;
+    for (p, _) in points.iter().zip(keep).filter(|(_, k)| **k) {
+        for (s, v) in sum.iter_mut().zip(p) {
+            *s += v;
+        }
+        n += 1;
+    }
+    sum.iter().map(|s| s / n.max(1) as f64).collect()
+}
+
+/// k-means++: the first centre at random, each next one drawn with
+/// probability proportional to the squared distance to the nearest centre.
+fn plus_plus_start(points: &[Vec<f64>], k: usize, rng: &mut ChaCha8Rng) -> Vec<Vec<f64>> {
+    let mut centroids = vec![points[rng.random_range(0..points.len())].clone()];
+    while centroids.len() < k {
+        let d: Vec<f64> = points
+            .iter()
+            .map(|p| distance2(p, &centroids[nearest(&centroids, p)]))
+            .collect();
+        let total: f64 = d.iter().sum();
+        if total.is_nan() || total <= 0.0 {
+            break; // every point is a centre already
+        }
+        let mut target = rng.random::<f64>() * total;
+        let mut pick = points.len() - 1;
+        for (i, v) in d.iter().enumerate() {
+            if target < *v {
+                pick = i;
+                break;
+            }
+            target -= v;
+        }
+        centroids.push(points[pick].clone());
+    }
+    centroids
+}
+
+/// Lloyd's iterations until the assignment no longer changes; returns it.
+/// A class left empty keeps its centre (and is dropped by the caller).
+fn lloyd(points: &[Vec<f64>], centroids: &mut [Vec<f64>]) -> Vec<usize> {
+    let mut assign: Vec<usize> = points.iter().map(|p| nearest(centroids, p)).collect();
+    for _ in 0..MAX_ITERATIONS {
+        for (c, centre) in centroids.iter_mut().enumerate() {
+            let keep: Vec<bool> = assign.iter().map(|&a| a == c).collect();
+            if keep.iter().any(|&k| k) {
+                *centre = mean(points, &keep);
+            }
+        }
+        let next: Vec<usize> = points.iter().map(|p| nearest(centroids, p)).collect();
+        if next == assign {
+            break;
+        }
+        assign = next;
+    }
+    assign
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use proptest::prelude::*;
+
+    /// Three well-separated groups of responses, each at several exposures.
+    fn groups() -> Vec<Vec<f64>> {
+        let centres = [[0.7, 0.2, 0.1], [0.1, 0.2, 0.7], [0.3, 0.5, 0.2]];
+        let mut out = Vec::new();
+        for (g, c) in centres.iter().enumerate() {
+            for i in 0..20 {
+                let scale = 0.5 + i as f64 * 0.1;
+                let jitter = 0.01 * ((i * 7 + g) % 5) as f64;
+                out.push(vec![
+                    (c[0] + jitter) * scale,
+                    c[1] * scale,
+                    (c[2] - jitter).max(0.0) * scale,
+                ]);
+            }
+        }
+        out
+    }
+
+    #[test]
+    fn separated_groups_get_one_class_each() {
+        let pts = groups();
+        let classes = ChromaClasses::fit(&pts, 3, 5, 7).unwrap();
+        assert_eq!(classes.len(), 3);
+        for g in 0..3 {
+            let first = classes.classify(&pts[g * 20]);
+            assert!(
+                (0..20).all(|i| classes.classify(&pts[g * 20 + i]) == first),
+                "group {g} split"
+            );
+        }
+        let ids: std::collections::BTreeSet<usize> =
+            (0..3).map(|g| classes.classify(&pts[g * 20])).collect();
+        assert_eq!(ids.len(), 3, "two groups share a class");
+    }
+
+    #[test]
+    fn the_same_seed_gives_the_same_classes() {
+        let pts = groups();
+        assert_eq!(
+            ChromaClasses::fit(&pts, 4, 3, 11).unwrap(),
+            ChromaClasses::fit(&pts, 4, 3, 11).unwrap()
+        );
+    }
+
+    #[test]
+    fn classes_under_the_minimum_size_are_dropped() {
+        let mut pts = groups();
+        pts.truncate(45); // the third group keeps 5 members
+        let classes = ChromaClasses::fit(&pts, 3, 6, 7).unwrap();
+        assert_eq!(classes.len(), 2);
+        assert!(ChromaClasses::fit(&pts, 3, 100, 7).is_err());
+    }
+
+    #[test]
+    fn one_class_and_silent_responses_go_to_class_zero() {
+        let classes = ChromaClasses::fit(&groups(), 1, 1, 7).unwrap();
+        assert_eq!(classes.len(), 1);
+        assert_eq!(classes.classify(&[0.9, 0.05, 0.05]), 0);
+        let three = ChromaClasses::fit(&groups(), 3, 5, 7).unwrap();
+        assert_eq!(three.classify(&[0.0, 0.0, 0.0]), 0);
+        assert_eq!(three.classify(&[f64::NAN; 3]), 0);
+        assert!(ChromaClasses::fit(&[], 2, 1, 7).is_err());
+        assert!(ChromaClasses::fit(&groups(), 0, 1, 7).is_err());
+    }
+
+    proptest! {
+        /// A class depends on the ratios of the responses, not on exposure.
+        #[test]
+        fn classes_do_not_depend_on_exposure(
+            r in 0.01f64..1.0, g in 0.01f64..1.0, b in 0.01f64..1.0, scale in 1e-3f64..1e3,
+        ) {
+            let classes = ChromaClasses::fit(&groups(), 3, 5, 7).unwrap();
+            prop_assert_eq!(
+                classes.classify(&[r, g, b]),
+                classes.classify(&[r * scale, g * scale, b * scale])
+            );
+        }
+    }
+}
