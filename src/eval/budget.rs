@@ -4,12 +4,14 @@
 
 use serde::{Deserialize, Serialize};
 
-use super::workflow::{ChannelSet, ChartSetup, ColourFit, chart_scene, fit_colour_matrix};
+use super::workflow::{
+    ChannelSet, ChartSetup, ColourFit, acquisition_and_d65, chart_scene, fit_colour_matrix,
+};
 use super::{ErrorStats, EvalError, summarize};
 use crate::camera::Camera;
 use crate::colour::{Cmfs, D65_WHITE_XYZ, Xyz, ciede2000, mat3_mul_vec, xyz_to_lab};
 use crate::l3::{ColourMatrix, IlluminantEntry};
-use crate::spectral::{Extrapolation, IlluminantSpec, IsetData, cie_illuminant};
+use crate::spectral::IsetData;
 
 /// ΔE2000 statistics of the error budget's rows.
 #[derive(Clone, Debug, Serialize, Deserialize)]
@@ -69,13 +71,7 @@ pub fn error_budget(
     let (scene, _) = chart_scene(camera, acquisition, iset, setup)?;
     let grid = *camera.grid();
     let cmfs = Cmfs::cie1931(&grid);
-    let acq = IlluminantSpec::parse(acquisition)?
-        .resolve(iset)?
-        .spd
-        .resample(&grid, Extrapolation::Zero);
-    let d65 = cie_illuminant("D65")
-        .ok_or_else(|| EvalError::Invalid("D65 missing".into()))?
-        .resample(&grid, Extrapolation::Zero);
+    let (acq, d65) = acquisition_and_d65(camera, acquisition, iset)?;
     let patches = &scene.patches;
     let include: Vec<bool> = patches.iter().map(|p| p.category != "grey").collect();
     let white = (0..patches.len())

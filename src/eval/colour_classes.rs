@@ -39,14 +39,14 @@ use super::EvalError;
 use super::budget::per_patch;
 use super::captured_floor::interior_channel_means;
 use super::report::{scored_patches, white_patch_index};
-use super::workflow::{ChartSetup, simulate_chart};
+use super::workflow::{ChartSetup, acquisition_and_d65, simulate_chart};
 use crate::camera::Camera;
 use crate::colour::{Cmfs, Xyz};
 use crate::l3::{
     CROSS_AVERAGING_PX, ChromaClasses, ColourLoss, ColourMapFit, ColourMatrix, ColourSamples,
     L3Params, NoiseModel, TableKind, level_maps,
 };
-use crate::spectral::{Extrapolation, IlluminantSpec, IsetData, Spectrum, cie_illuminant};
+use crate::spectral::{IsetData, Spectrum};
 use crate::training::{colour_samples, noise_model};
 
 /// Draws of a patch's classification noise (the patch mean averages pixels
@@ -227,13 +227,7 @@ pub fn colour_class_study(
         ));
     }
     let grid = *camera.grid();
-    let acq = IlluminantSpec::parse(acquisition)?
-        .resolve(iset)?
-        .spd
-        .resample(&grid, Extrapolation::Zero);
-    let d65 = cie_illuminant("D65")
-        .ok_or_else(|| EvalError::Invalid("D65 missing from the built-in data".into()))?
-        .resample(&grid, Extrapolation::Zero);
+    let (acq, d65) = acquisition_and_d65(camera, acquisition, iset)?;
     let refl: Vec<Spectrum> = crate::scene::natural_reflectances(&grid, iset)?
         .into_iter()
         .map(|(_, s)| s)

@@ -102,6 +102,23 @@ impl LightLevel {
     }
 }
 
+/// The acquisition light's and D65's spectra on `camera`'s grid.
+pub(super) fn acquisition_and_d65(
+    camera: &Camera,
+    acquisition: &str,
+    iset: Option<&IsetData>,
+) -> Result<(Spectrum, Spectrum), EvalError> {
+    let grid = *camera.grid();
+    let acq = IlluminantSpec::parse(acquisition)?
+        .resolve(iset)?
+        .spd
+        .resample(&grid, Extrapolation::Zero);
+    let d65 = cie_illuminant("D65")
+        .ok_or_else(|| EvalError::Invalid("D65 missing from the built-in data".into()))?
+        .resample(&grid, Extrapolation::Zero);
+    Ok((acq, d65))
+}
+
 /// The evaluation chart under an acquisition illuminant: Natural-100.
 pub fn chart_scene(
     camera: &Camera,
