@@ -156,6 +156,10 @@ where
         &params.levels,
         f64::from(SYNTH_SWING) - params.saturation_margin_v,
     )?;
+    let geo = match &params.chroma {
+        Some(classes) => geo.with_chroma(classes)?,
+        None => geo,
+    };
     let cancel = AtomicBool::new(false);
     let ctl = TrainControl {
         progress: &|_, _| {},

@@ -660,6 +660,81 @@ fn train_in_shards_gives_the_same_table_file() {
     assert!(!ok && err.contains("6 shards for 5 batches"), "{err}");
 }
 
+/// `l3 train --chroma-classes K` trains a table whose levels are split by
+/// chroma class: the same bytes in shards, and it renders a simulated frame
+/// under another light (the camera-aware correction fitted per band).
+#[test]
+fn train_with_chroma_classes_shards_and_renders() {
+    let tmp = tempfile::tempdir().unwrap();
+    let d = tmp.path();
+    let train = |out: &str, extra: &[&str]| {
+        let mut args = vec![
+            "train",
+            "--illuminants",
+            "D65",
+            "--scenes",
+            "4",
+            "--scene-size",
+            "32",
+            "--levels",
+            "4",
+            "--chroma-classes",
+            "3",
+            "--reproducible",
+            "--out",
+            out,
+        ];
+        args.extend_from_slice(extra);
+        let (ok, stdout, err) = l3(&args, d);
+        assert!(ok, "train {extra:?} failed: {stdout}{err}");
+        (std::fs::read(d.join(out)).unwrap_or_default(), stdout)
+    };
+    let (one, stdout) = train("c.safetensors", &[]);
+    assert!(stdout.contains("× 3 chroma classes ×"), "{stdout}");
+    let (two, _) = train("c2.safetensors", &["--shards", "2", "--shard-dir", "parts"]);
+    assert_eq!(one, two, "2 shards give the single run's bytes");
+    let table = l3::l3::L3Table::load(&d.join("c.safetensors")).unwrap();
+    assert_eq!((table.n_chroma(), table.n_bands()), (3, 12));
+    let sim = d.join("sim");
+    let (ok, out, err) = l3(
+        &[
+            "simulate",
+            "--scene",
+            "macbeth",
+            "--illuminant",
+            "Tungsten",
+            "--out",
+            sim.to_str().unwrap(),
+        ],
+        d,
+    );
+    assert!(ok, "simulate failed: {out}{err}");
+    let png = d.join("c.png");
+    let (ok, out, err) = l3(
+        &[
+            "render",
+            "--table",
+            d.join("c.safetensors").to_str().unwrap(),
+            "--illuminant",
+            "Tungsten",
+            "--in",
+            sim.join("mosaic.raw").to_str().unwrap(),
+            "--out",
+            png.to_str().unwrap(),
+        ],
+        d,
+    );
+    assert!(ok, "render failed: {out}{err}");
+    assert!(image::open(&png).is_ok());
+    for bad in ["0", "33"] {
+        let (ok, _, err) = l3(
+            &["train", "--chroma-classes", bad, "--out", "x.safetensors"],
+            d,
+        );
+        assert!(!ok && err.contains("chroma_classes"), "{bad}: {err}");
+    }
+}
+
 /// `l3 serve --bind ADDR --data-dir DIR` listens where the flags say and keeps its database
 /// in that directory, over the configuration's defaults.
 #[test]

@@ -97,6 +97,10 @@ pub struct EvalArgs {
     pub scenes: usize,
     #[arg(long, default_value_t = 96)]
     pub scene_size: usize,
+    /// Chroma classes of every table trained (with --paper-table; 1: none):
+    /// see `l3 train --chroma-classes`.
+    #[arg(long, default_value_t = 1)]
+    pub chroma_classes: usize,
     /// Output: the ΔE JSON (or, with --paper-table, a folder for JSON + markdown).
     #[arg(long, default_value = "out/eval")]
     pub out: PathBuf,
@@ -371,6 +375,7 @@ fn run_paper_tables(
         scene_size: a.scene_size,
         seed: a.seed,
         chart,
+        chroma_classes: a.chroma_classes,
         ..PaperOptions::default()
     };
     let mut tables = Vec::new();

@@ -68,6 +68,11 @@ pub struct TrainArgs {
     /// squared for an ensemble.
     #[arg(long, value_enum)]
     pub colour_loss: Option<ColourLossArg>,
+    /// Split every level into this many chroma classes, each with its own
+    /// colour maps and kernels (k-means on the training surfaces' channel
+    /// chromaticities; 1: no split). Classes with too few surfaces are dropped.
+    #[arg(long, default_value_t = 1)]
+    pub chroma_classes: usize,
     #[arg(long, default_value = "table.safetensors")]
     pub out: PathBuf,
     /// Train in this many shards (batch ranges), one after the other, each
@@ -122,6 +127,7 @@ pub fn run(cli: &Cli, a: &TrainArgs) -> Result<(), CliError> {
             ColourLossArg::Mean => ColourLoss::MeanDeltaE,
             ColourLossArg::Squared => ColourLoss::SquaredDeltaE,
         }),
+        chroma_classes: a.chroma_classes,
         ..TrainingSpec::default()
     };
     let bar = ProgressBar::new(1000);
@@ -181,7 +187,7 @@ pub fn run(cli: &Cli, a: &TrainArgs) -> Result<(), CliError> {
     let max_cond = reps.iter().map(|r| r.condition).fold(0.0, f64::max);
     let max_norm = reps.iter().map(|r| r.kernel_norm).fold(0.0, f64::max);
     println!(
-        "trained {} table for {} on {} in {:.1} s: {} classes ({} positions × {} levels × {} saturation cases × 2), {} samples",
+        "trained {} table for {} on {} in {:.1} s: {} classes ({} positions × {} levels × {} chroma classes × {} saturation cases × 2), {} samples",
         table.meta.kind,
         design.name,
         table.meta.train_illuminants.join("+"),
@@ -189,6 +195,7 @@ pub fn run(cli: &Cli, a: &TrainArgs) -> Result<(), CliError> {
         table.n_classes(),
         table.n_positions(),
         table.n_levels(),
+        table.n_chroma(),
         table.n_sat_cases(),
         table.meta.summary["samples"]
     );

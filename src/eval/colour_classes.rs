@@ -43,8 +43,8 @@ use super::workflow::{ChartSetup, acquisition_and_d65, simulate_chart};
 use crate::camera::Camera;
 use crate::colour::{Cmfs, Xyz};
 use crate::l3::{
-    CROSS_AVERAGING_PX, ChromaClasses, ColourLoss, ColourMapFit, ColourMatrix, ColourSamples,
-    L3Params, NoiseModel, TableKind, level_maps,
+    CROSS_AVERAGING_PX, ChromaClasses, ColourLoss, ColourMapFit, ColourMatrix, L3Params,
+    MIN_SURFACES_PER_CHANNEL, NoiseModel, TableKind, band_maps,
 };
 use crate::spectral::{IsetData, Spectrum};
 use crate::training::{colour_samples, noise_model};
@@ -55,10 +55,6 @@ const CLASS_DRAWS: usize = 16;
 
 /// The side of the neighbourhood whose chroma classifies a pixel.
 const CLASS_PATCH: usize = 5;
-
-/// The fewest surfaces per channel a chroma class keeps (a class with fewer
-/// is dropped and its surfaces reassigned).
-const MIN_SURFACES_PER_CHANNEL: usize = 4;
 
 /// One row of the study: a number of chroma classes and the chart's error.
 #[derive(Clone, Debug, Serialize, Deserialize)]
@@ -174,32 +170,6 @@ fn chart(
     })
 }
 
-/// The maps of `classes`: per class, one map per level, fitted on the class's samples.
-fn class_maps(
-    samples: &ColourSamples,
-    classes: &ChromaClasses,
-    levels: &[f64],
-    noise: &NoiseModel,
-    swing: f64,
-    fit: &ColourMapFit,
-) -> Result<Vec<Vec<ColourMatrix>>, EvalError> {
-    (0..classes.len())
-        .map(|k| {
-            let idx: Vec<usize> = (0..samples.len())
-                .filter(|&i| classes.classify(&samples.channels[i]) == k)
-                .collect();
-            let sub = ColourSamples {
-                channels: idx.iter().map(|&i| samples.channels[i].clone()).collect(),
-                xyz: idx.iter().map(|&i| samples.xyz[i]).collect(),
-                white: idx.iter().map(|&i| samples.white[i]).collect(),
-                judged_through: Vec::new(),
-                light: Vec::new(),
-            };
-            Ok(level_maps(&sub, levels, noise, swing, fit)?)
-        })
-        .collect()
-}
-
 fn apply(m: &ColourMatrix, c: &[f64]) -> Xyz {
     [0, 1, 2].map(|k| c.iter().zip(&m.m).map(|(v, w)| w[k] * v).sum())
 }
@@ -259,7 +229,7 @@ pub fn colour_class_study(
                 MIN_SURFACES_PER_CHANNEL * nc,
                 setup.seed,
             )?;
-            let maps = class_maps(&samples, &classes, &levels, &noise, swing, &fit)?;
+            let maps = band_maps(&samples, &classes, &levels, &noise, swing, &fit)?;
             let model = Model {
                 chart: &chart,
                 classes: &classes,
@@ -296,7 +266,8 @@ pub fn colour_class_study(
 struct Model<'a> {
     chart: &'a Chart,
     classes: &'a ChromaClasses,
-    maps: &'a [Vec<ColourMatrix>],
+    /// One per band (level × classes + class).
+    maps: &'a [ColourMatrix],
     levels: &'a [f64],
     noise: &'a NoiseModel,
 }
@@ -335,7 +306,7 @@ impl Model<'_> {
                         .map(|(&x, &n)| draw(x, n))
                         .collect();
                     let class = self.classes.classify(&local);
-                    let e = apply(&self.maps[class][level], &mean);
+                    let e = apply(&self.maps[level * self.classes.len() + class], &mean);
                     for k in 0..3 {
                         sum[k] += e[k] / draws as f64;
                     }

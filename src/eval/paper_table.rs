@@ -60,6 +60,13 @@ pub struct PaperOptions {
     /// evaluated; the smallest is the low-light column.
     #[serde(default = "default_exposures")]
     pub exposures: Vec<f64>,
+    /// Chroma classes of every table (1: none; see `src/l3/chroma.rs`).
+    #[serde(default = "one")]
+    pub chroma_classes: usize,
+}
+
+fn one() -> usize {
+    1
 }
 
 fn default_exposures() -> Vec<f64> {
@@ -75,6 +82,7 @@ impl Default for PaperOptions {
             seed: 1,
             chart: ChartSetup::default(),
             exposures: default_exposures(),
+            chroma_classes: 1,
         }
     }
 }
@@ -390,6 +398,7 @@ pub fn run_paper_table(
             seed: opts.seed,
             scenes: opts.scenes,
             scene_size: opts.scene_size,
+            chroma_classes: opts.chroma_classes,
             ..base_training_spec(!opts.chart.noise)
         };
         train_table(design, &spec, iset, &|_, _| {}, &cancel)
@@ -511,6 +520,7 @@ pub fn run_paper_table(
                             &[LevelMap {
                                 map: map.clone(),
                                 noise: None,
+                                chroma: None,
                             }],
                             &corr,
                             iset,

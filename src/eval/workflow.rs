@@ -544,7 +544,7 @@ pub fn linear_table(table: &L3Table, map: &ColourMatrix) -> Result<L3Table, Eval
                 kernel[k * nf + j] = (map.m[c][k] / count[c].max(1.0)) as f32;
             }
         }
-        for l in 0..table.n_levels() {
+        for l in 0..table.n_bands() {
             for s in 0..table.n_sat_cases() {
                 for texture in [false, true] {
                     let cl = table.class_index(pos, l, s, texture);

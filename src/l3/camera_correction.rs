@@ -43,45 +43,47 @@ use nalgebra::{SMatrix, SVector};
 
 use super::colour_map::{delta_e_weights, mean_loss_fit};
 use super::{
-    ColourLoss, ColourMatrix, ColourSamples, L3Error, L3Table, LevelNoise, MAX_MATRIX_ENTRY, Mat3,
-    NoiseModel,
+    ChromaClasses, ColourLoss, ColourMatrix, ColourSamples, L3Error, L3Table, LevelNoise,
+    MAX_MATRIX_ENTRY, Mat3, NoiseModel,
 };
 
 impl L3Table {
-    /// Every level's colour map, darkest first (see [`Self::colour_map_at`]),
+    /// Every band's colour map (every level's, darkest first, split by
+    /// chroma class where the table has them: see [`Self::colour_map_at`]),
     /// with the noise it was fitted for on a sensor with `noise` (none for a
-    /// table whose maps were fitted noise-free).
+    /// table whose maps were fitted noise-free) and its chroma class.
     pub fn level_colour_maps(&self, noise: &NoiseModel) -> Result<Vec<LevelMap>, L3Error> {
         let averaging = self.meta.params.colour_map.and_then(|fit| fit.averaging_px);
-        self.meta
-            .params
-            .levels
-            .iter()
-            .enumerate()
-            .map(|(l, &level_v)| {
+        let kc = self.n_chroma();
+        let chroma = self.meta.params.chroma.as_ref().filter(|c| c.len() > 1);
+        (0..self.n_bands())
+            .map(|band| {
+                let level_v = self.meta.params.levels[band / kc];
                 Ok(LevelMap {
-                    map: self.colour_map_at(l)?,
+                    map: self.colour_map_at(band)?,
                     noise: averaging.map(|averaging_px| LevelNoise {
                         model: *noise,
                         level_v,
                         swing_v: self.meta.voltage_swing,
                         averaging_px,
                     }),
+                    chroma: chroma.map(|c| (c.clone(), band % kc)),
                 })
             })
             .collect()
     }
 
     /// The linear channel → XYZ map this table applies to a uniform,
-    /// unsaturated patch of level `level`: the channel sums of the level's
-    /// flat, unsaturated kernels, averaged over CFA positions. The trainer
-    /// fixes these sums to the level's colour map.
+    /// unsaturated patch of band `level` (a level, or a level's chroma class:
+    /// [`Self::n_bands`]): the channel sums of the band's flat, unsaturated
+    /// kernels, averaged over CFA positions. The trainer fixes these sums to
+    /// the band's colour map.
     pub fn colour_map_at(&self, level: usize) -> Result<ColourMatrix, L3Error> {
         let geo = self.geometry()?;
         let nf = self.n_features();
         let nch = geo.n_channels();
-        if level >= self.n_levels() {
-            return Err(L3Error::Table(format!("the table has no level {level}")));
+        if level >= self.n_bands() {
+            return Err(L3Error::Table(format!("the table has no band {level}")));
         }
         let np = self.n_positions();
         let mut m = vec![[0.0f64; 3]; nch];
@@ -106,6 +108,9 @@ impl L3Table {
 pub struct LevelMap {
     pub map: ColourMatrix,
     pub noise: Option<LevelNoise>,
+    /// The chroma classes of the table and this map's class: the map is
+    /// fitted, and its correction too, on the surfaces of that class only.
+    pub chroma: Option<(ChromaClasses, usize)>,
 }
 
 /// C = argmin Σ ΔE00²(C · map(channels), xyz), to first order, over `samples`: channel

@@ -26,6 +26,13 @@ use super::L3Error;
 /// Lloyd iterations at most (the sets converge in far fewer).
 const MAX_ITERATIONS: usize = 200;
 
+/// The fewest surfaces a class may keep, per sensor channel: a class's
+/// colour map has 3 × channels unknowns per level.
+pub const MIN_SURFACES_PER_CHANNEL: usize = 4;
+
+/// The most chroma classes a table may have.
+pub const MAX_CHROMA_CLASSES: usize = 32;
+
 /// The chroma classes of a sensor: one centroid per class, each a
 /// chromaticity (channel responses over their sum).
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
@@ -118,6 +125,27 @@ impl ChromaClasses {
             }
         }
         Ok(Self { centroids })
+    }
+
+    /// Check a stored set of classes for a sensor of `n_channels`: 1 to
+    /// [`MAX_CHROMA_CLASSES`] centroids of that length, finite.
+    pub fn validate(&self, n_channels: usize) -> Result<(), L3Error> {
+        let n = self.centroids.len();
+        if n == 0 || n > MAX_CHROMA_CLASSES {
+            return Err(L3Error::InvalidParams(format!(
+                "{n} chroma classes (1 to {MAX_CHROMA_CLASSES})"
+            )));
+        }
+        if self
+            .centroids
+            .iter()
+            .any(|c| c.len() != n_channels || c.iter().any(|v| !v.is_finite()))
+        {
+            return Err(L3Error::InvalidParams(format!(
+                "chroma centroids must be {n_channels} finite values each"
+            )));
+        }
+        Ok(())
     }
 
     /// The class of a channel response (class 0 when nothing responds).

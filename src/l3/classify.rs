@@ -40,6 +40,9 @@ pub struct PatchGeometry {
     levels: Vec<f32>,
     /// Midpoints between consecutive levels: a patch goes to the nearest level.
     level_edges: Vec<f32>,
+    /// Chroma class centroids (channel chromaticities); one or none: no
+    /// chroma split (see [`super::chroma`]).
+    chroma: Vec<[f32; MAX_CHANNELS]>,
 }
 
 /// The saturation case a patch with channel mask `mask` uses among `cases`
@@ -153,7 +156,88 @@ impl PatchGeometry {
             sat_threshold: sat_threshold as f32,
             levels: lv,
             level_edges,
+            chroma: Vec::new(),
         })
+    }
+
+    /// This geometry with `classes`' chroma split: every luminance level
+    /// becomes one band per chroma class (band = level × classes + class).
+    pub fn with_chroma(mut self, classes: &super::ChromaClasses) -> Result<Self, L3Error> {
+        classes.validate(self.n_channels)?;
+        self.chroma = if classes.len() > 1 {
+            classes
+                .centroids
+                .iter()
+                .map(|c| {
+                    let mut v = [0f32; MAX_CHANNELS];
+                    for (d, s) in v.iter_mut().zip(c) {
+                        *d = *s as f32;
+                    }
+                    v
+                })
+                .collect()
+        } else {
+            Vec::new()
+        };
+        Ok(self)
+    }
+
+    /// Chroma classes (1 without a chroma split).
+    pub fn n_chroma(&self) -> usize {
+        self.chroma.len().max(1)
+    }
+
+    /// Classification bands: luminance levels × chroma classes.
+    pub fn n_bands(&self) -> usize {
+        self.levels.len() * self.n_chroma()
+    }
+
+    /// The band of a patch: its level's, split by its chroma class.
+    #[inline]
+    pub fn band_of(&self, luminance: f32, means: &[f32; MAX_CHANNELS]) -> usize {
+        let level = self.level_of(luminance);
+        if self.chroma.is_empty() {
+            level
+        } else {
+            level * self.chroma.len() + self.chroma_of(means).0
+        }
+    }
+
+    /// The chroma class of a patch's channel means (each channel, clamped at
+    /// 0, over their sum; class 0 when nothing responds), with how far it is
+    /// from the runner-up: the difference of the squared distances over the
+    /// sum of the means (so a caller can tell a class its rounding cannot
+    /// change).
+    #[inline]
+    pub fn chroma_of(&self, means: &[f32; MAX_CHANNELS]) -> (usize, f32) {
+        if self.chroma.len() < 2 {
+            return (0, f32::INFINITY);
+        }
+        let nc = self.n_channels;
+        let mut sum = 0f32;
+        for &m in &means[..nc] {
+            sum += m.max(0.0);
+        }
+        if !(sum > 0.0 && sum.is_finite()) {
+            return (0, 0.0);
+        }
+        let inv = 1.0 / sum;
+        let (mut best, mut d1, mut d2) = (0usize, f32::INFINITY, f32::INFINITY);
+        for (i, c) in self.chroma.iter().enumerate() {
+            let mut d = 0f32;
+            for ch in 0..nc {
+                let x = means[ch].max(0.0) * inv - c[ch];
+                d += x * x;
+            }
+            if d < d1 {
+                d2 = d1;
+                d1 = d;
+                best = i;
+            } else if d < d2 {
+                d2 = d;
+            }
+        }
+        (best, (d2 - d1) * sum)
     }
 
     pub fn n_positions(&self) -> usize {
@@ -403,5 +487,51 @@ mod tests {
         assert_eq!(p, [5.0, 4.0, 5.0, 1.0, 0.0, 1.0, 5.0, 4.0, 5.0]);
         g.gather(&img, 4, 4, 1, 1, &mut p);
         assert_eq!(p, [0.0, 1.0, 2.0, 4.0, 5.0, 6.0, 8.0, 9.0, 10.0]);
+    }
+
+    fn rgbw_geometry() -> PatchGeometry {
+        let cfa = Cfa::parse("RG/WB").unwrap();
+        PatchGeometry::new(5, &cfa, &[0.01, 0.1, 1.0], 1.79).unwrap()
+    }
+
+    fn means(v: [f32; 4]) -> [f32; MAX_CHANNELS] {
+        let mut m = [0f32; MAX_CHANNELS];
+        m[..4].copy_from_slice(&v);
+        m
+    }
+
+    #[test]
+    fn bands_split_each_level_by_chroma_class() {
+        let classes = crate::l3::ChromaClasses {
+            centroids: vec![vec![0.7, 0.1, 0.1, 0.1], vec![0.1, 0.1, 0.1, 0.7]],
+        };
+        let plain = rgbw_geometry();
+        assert_eq!((plain.n_chroma(), plain.n_bands()), (1, 3));
+        assert_eq!(plain.band_of(0.8, &means([1.0, 0.0, 0.0, 0.0])), 2);
+        let g = rgbw_geometry().with_chroma(&classes).unwrap();
+        assert_eq!((g.n_chroma(), g.n_bands()), (2, 6));
+        let red = means([0.6, 0.1, 0.1, 0.1]);
+        let blue = means([0.1, 0.1, 0.1, 0.6]);
+        assert_eq!(g.band_of(0.8, &red), 4);
+        assert_eq!(g.band_of(0.8, &blue), 5);
+        assert_eq!(g.band_of(0.001, &blue), 1);
+        // the class does not depend on exposure; its margin scales with it
+        let dim = means([0.006, 0.001, 0.001, 0.001]);
+        assert_eq!(g.chroma_of(&dim).0, 0);
+        assert!(g.chroma_of(&dim).1 < g.chroma_of(&red).1);
+        // nothing responds (or noise below zero): class 0, no margin
+        assert_eq!(g.chroma_of(&means([0.0, -0.1, 0.0, 0.0])), (0, 0.0));
+        // a NaN mean (never from finite input) counts as no response
+        assert_eq!(
+            g.chroma_of(&means([f32::NAN, 0.1, 0.1, 0.1])),
+            g.chroma_of(&means([0.0, 0.1, 0.1, 0.1]))
+        );
+        // a single class is no split; centroids of the wrong length are refused
+        let one = crate::l3::ChromaClasses::single(4);
+        assert_eq!(rgbw_geometry().with_chroma(&one).unwrap().n_bands(), 3);
+        let three = crate::l3::ChromaClasses {
+            centroids: vec![vec![0.5, 0.5, 0.0]; 2],
+        };
+        assert!(rgbw_geometry().with_chroma(&three).is_err());
     }
 }

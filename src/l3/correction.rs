@@ -137,7 +137,7 @@ pub struct IlluminantEntry {
     /// fitted on (`crate::training::camera_corrected`).
     #[serde(skip)]
     pub spd: Option<Spectrum>,
-    /// Per table level, the correction a same-illuminant table's classes of that level
+    /// Per table band (level, or level and chroma class), the correction a same-illuminant table's classes of that band
     /// render with, when it has been fitted per level; empty: `t` for every class.
     #[serde(skip)]
     pub level_corrections: Vec<Mat3>,

@@ -51,6 +51,11 @@ const LANES: usize = 8;
 const LUMINANCE_MARGIN: f32 = 2e-5;
 /// Contrast (V) within this of a class threshold is classified by the reference code.
 const CONTRAST_MARGIN: f32 = 1e-5;
+/// A chroma class whose margin over the runner-up ([`PatchGeometry::chroma_of`]:
+/// squared-distance difference × the sum of the means, V) is under this is
+/// classified by the reference code. The phase sums' means differ from the
+/// reference's by rounding (≲1e-6 V), which moves the margin by ≲1.2e-5.
+const CHROMA_MARGIN: f32 = 1e-4;
 
 /// A mosaic to render: volts or integer DN, row-major.
 #[derive(Clone, Copy, Debug)]
@@ -148,7 +153,13 @@ impl KernelSet {
 pub struct FastRenderer {
     geo: PatchGeometry,
     n_features: usize,
-    n_levels: usize,
+    /// Classification bands: levels × chroma classes.
+    n_bands: usize,
+    /// Chroma classes per level (1: no chroma split).
+    n_chroma: usize,
+    /// Per CFA position, the channel of each phase (2×2 CFAs), so the phase
+    /// means give the channel means the chroma class is read from.
+    phase_channels: [[u8; 4]; 4],
     sat_cases: Vec<u32>,
     contrast_thresholds: Vec<f32>,
     /// Per group: do the flat and texture kernels differ?
@@ -434,7 +445,12 @@ impl FastRenderer {
         let xyz = KernelSet::new(kernels.to_vec(), geo.size, n_sat);
         Ok(Self {
             n_features: nf,
-            n_levels: table.n_levels(),
+            n_bands: table.n_bands(),
+            n_chroma: geo.n_chroma(),
+            phase_channels: std::array::from_fn(|pos| {
+                let (pr, pc) = (pos / 2, pos % 2);
+                std::array::from_fn(|p| geo.cfa.channel_at(pr + p / 2, pc + p % 2) as u8)
+            }),
             sat_cases: table.meta.sat_cases.clone(),
             contrast_thresholds: table.contrast_thresholds.clone(),
             contrast_matters,
@@ -467,7 +483,8 @@ impl FastRenderer {
             && self.avx512_available
             && self.options.avx512
             && self.uniform_phases.is_some()
-            && self.n_levels <= WIDE_MAX_LEVELS
+            && self.n_chroma == 1
+            && self.n_bands <= WIDE_MAX_LEVELS
             && matches!(self.geo.size, 3 | 5 | 7)
     }
 
@@ -653,20 +670,41 @@ impl FastRenderer {
     fn classify_exact(&self, patch: &[f32], r: usize, c: usize) -> (usize, usize, bool, bool) {
         let pos = self.geo.position(r, c);
         let s = self.geo.stats(patch, pos);
-        let level = self.geo.level_of(s.luminance);
+        let band = self.geo.band_of(s.luminance, &s.channel_means);
         let (sat, fell_back) = if self.sat_classes && s.sat_mask != 0 {
             sat_case_index(&self.sat_cases, s.sat_mask, &s.channel_means)
         } else {
             (0, false)
         };
-        let group = self.group(pos, level, sat);
+        let group = self.group(pos, band, sat);
         let texture = self.contrast_classes && s.contrast > self.contrast_thresholds[group];
         (group * 2 + texture as usize, sat, fell_back, texture)
     }
 
     #[inline(always)]
-    fn group(&self, pos: usize, level: usize, sat: usize) -> usize {
-        (pos * self.n_levels + level) * self.sat_cases.len() + sat
+    fn group(&self, pos: usize, band: usize, sat: usize) -> usize {
+        (pos * self.n_bands + band) * self.sat_cases.len() + sat
+    }
+
+    /// The band of column `i` of the phase means at CFA position `pos` on
+    /// luminance level `level`; `None` where rounding could change the chroma class.
+    #[inline(always)]
+    fn fast_band(
+        &self,
+        means: &[Vec<f32>; 4],
+        i: usize,
+        pos: usize,
+        level: usize,
+    ) -> Option<usize> {
+        if self.n_chroma == 1 {
+            return Some(level);
+        }
+        let mut ch = [0f32; super::MAX_CHANNELS];
+        for (p, &c) in self.phase_channels[pos].iter().enumerate() {
+            ch[c as usize] = means[p][i];
+        }
+        let (k, margin) = self.geo.chroma_of(&ch);
+        (margin >= CHROMA_MARGIN).then_some(level * self.n_chroma + k)
     }
 
     /// Check the frame and build its converter; f32 input is scanned once for
@@ -1225,18 +1263,21 @@ impl FastRenderer {
                 let cpar = tile.c0 % 2;
                 let (sat, lum) = (&sc.sat[..tw], &sc.lum[..tw]);
                 let (contrast, class) = (&sc.contrast[..tw], &mut sc.class[..tw]);
-                let levels = self.n_levels;
+                let means = &sc.means;
+                let bands = self.n_bands;
                 for i in 0..tw {
-                    let level = if sat[i] {
+                    let pos = rpar * 2 + (cpar + i) % 2;
+                    let band = if sat[i] {
                         None
                     } else {
-                        self.level_lut.level(lum[i])
+                        self.level_lut
+                            .level(lum[i])
+                            .and_then(|level| self.fast_band(means, i, pos, level))
                     };
-                    class[i] = match level {
+                    class[i] = match band {
                         None => NO_CLASS,
-                        Some(level) => {
-                            let pos = rpar * 2 + (cpar + i) % 2;
-                            let group = (pos * levels + level) * n_sat;
+                        Some(band) => {
+                            let group = (pos * bands + band) * n_sat;
                             // +∞ where the contrast does not decide the class
                             let t = thresholds.get(group).copied().unwrap_or(f32::NAN);
                             let cv = contrast[i];
@@ -1326,7 +1367,8 @@ impl FastRenderer {
     ) -> Option<avx512::ClassParams> {
         let u = self.uniform_phases?;
         let src = self.geo.level_edges();
-        if self.n_levels > avx512::MAX_LEVELS || src.len() >= avx512::MAX_LEVELS {
+        if self.n_chroma > 1 || self.n_bands > avx512::MAX_LEVELS || src.len() >= avx512::MAX_LEVELS
+        {
             return None;
         }
         let mut edges = [f32::INFINITY; avx512::MAX_LEVELS];
@@ -1336,9 +1378,9 @@ impl FastRenderer {
         let n_sat = self.sat_cases.len();
         let mut per_pos = [[f32::INFINITY; avx512::MAX_LEVELS]; 4];
         for (pos, t) in per_pos.iter_mut().enumerate() {
-            for (level, v) in t.iter_mut().take(self.n_levels).enumerate() {
+            for (level, v) in t.iter_mut().take(self.n_bands).enumerate() {
                 // NaN (never expected) sends the pixels to the reference path
-                let g = (pos * self.n_levels + level) * n_sat;
+                let g = (pos * self.n_bands + level) * n_sat;
                 *v = thresholds.get(g).copied().unwrap_or(f32::NAN);
             }
         }
@@ -1362,7 +1404,7 @@ impl FastRenderer {
             edges,
             below,
             thresholds: per_pos,
-            n_levels: self.n_levels as u32,
+            n_levels: self.n_bands as u32,
             n_sat: n_sat as u32,
             use_contrast,
             n_classes: u32::try_from(set.paired().len() / set.pstride).ok()?,

@@ -1,6 +1,6 @@
 use serde::{Deserialize, Serialize};
 
-use super::{ColourMapFit, L3Error, RidgeChoice};
+use super::{ChromaClasses, ColourMapFit, L3Error, RidgeChoice};
 
 /// ISET's tuned RGBW luminance levels for a 1.8 V swing (DESIGN.md §5), volts.
 pub const DEFAULT_LEVELS_1V8: [f64; 20] = [
@@ -36,6 +36,11 @@ pub struct L3Params {
     /// when the kernels were learned without them.
     #[serde(default)]
     pub colour_map: Option<ColourMapFit>,
+    /// Chroma classes splitting every level (see [`super::chroma`]); `None`
+    /// (a single class) in tables without a chroma split, whose files do
+    /// not name the field.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub chroma: Option<ChromaClasses>,
 }
 
 impl Default for L3Params {
@@ -52,6 +57,7 @@ impl Default for L3Params {
             ridge: RidgeChoice::Gcv,
             symmetrize_flat: true,
             colour_map: Some(ColourMapFit::default()),
+            chroma: None,
         }
     }
 }
@@ -114,6 +120,9 @@ impl L3Params {
         }
         if let Some(fit) = &self.colour_map {
             fit.validate()?;
+        }
+        if let Some(c) = &self.chroma {
+            c.validate(c.centroids.first().map(Vec::len).unwrap_or(0))?;
         }
         self.ridge.validate()
     }

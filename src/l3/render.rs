@@ -46,9 +46,10 @@ pub fn fuse_kernels(table: &L3Table, m: &[[f64; 3]; 3]) -> Vec<f32> {
 }
 
 /// The kernels `table` renders with under `entry`: each class's kernel times its
-/// level's correction when the entry has one per level, else times `entry.t`.
+/// band's correction when the entry has one per band (per level, split by chroma
+/// class where the table has them), else times `entry.t`.
 pub fn fuse_entry(table: &L3Table, entry: &super::IlluminantEntry) -> Vec<f32> {
-    let nl = table.n_levels();
+    let nl = table.n_bands();
     if entry.level_corrections.len() != nl || nl == 0 {
         return fuse_kernels(table, &entry.t);
     }
@@ -57,7 +58,7 @@ pub fn fuse_entry(table: &L3Table, entry: &super::IlluminantEntry) -> Vec<f32> {
     for (class, k) in table.kernels.chunks_exact(3 * nf).enumerate() {
         out.extend(fuse_matrix(
             k,
-            &entry.level_corrections[table.class_level(class)],
+            &entry.level_corrections[table.class_band(class)],
             nf,
         ));
     }
@@ -188,13 +189,13 @@ fn render_row(
         geo.gather(img, width, height, r, c, &mut patch);
         let pos = geo.position(r, c);
         let s = geo.stats(&patch, pos);
-        let level = geo.level_of(s.luminance);
+        let band = geo.band_of(s.luminance, &s.channel_means);
         let (sat, fell_back) = if sat_on && s.sat_mask != 0 {
             resolve_sat_case(table, s.sat_mask, &s.channel_means)
         } else {
             (0, false)
         };
-        let group = table.group_index(pos, level, sat);
+        let group = table.group_index(pos, band, sat);
         let texture = contrast_on && s.contrast > table.contrast_thresholds[group];
         let class = group * 2 + texture as usize;
         geo.features(&patch, pos, table.meta.sat_cases[sat], &mut feat);

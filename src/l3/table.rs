@@ -188,6 +188,19 @@ impl L3Table {
     pub fn n_levels(&self) -> usize {
         self.meta.params.levels.len()
     }
+    /// Chroma classes per level (1 without a chroma split).
+    pub fn n_chroma(&self) -> usize {
+        self.meta
+            .params
+            .chroma
+            .as_ref()
+            .map_or(1, |c| c.len().max(1))
+    }
+    /// Classification bands: levels × chroma classes (band = level ×
+    /// chroma classes + class).
+    pub fn n_bands(&self) -> usize {
+        self.n_levels() * self.n_chroma()
+    }
     pub fn n_sat_cases(&self) -> usize {
         self.meta.sat_cases.len()
     }
@@ -195,25 +208,31 @@ impl L3Table {
         self.meta.params.patch_size * self.meta.params.patch_size + 1
     }
     pub fn n_classes(&self) -> usize {
-        self.n_positions() * self.n_levels() * self.n_sat_cases() * 2
+        self.n_positions() * self.n_bands() * self.n_sat_cases() * 2
     }
 
-    /// Index of the (position, level, saturation case) group.
+    /// Index of the (position, band, saturation case) group.
     #[inline]
-    pub fn group_index(&self, pos: usize, level: usize, sat: usize) -> usize {
-        (pos * self.n_levels() + level) * self.n_sat_cases() + sat
+    pub fn group_index(&self, pos: usize, band: usize, sat: usize) -> usize {
+        (pos * self.n_bands() + band) * self.n_sat_cases() + sat
     }
 
     /// Index of a class: its group, then flat (0) or texture (1).
     #[inline]
-    pub fn class_index(&self, pos: usize, level: usize, sat: usize, texture: bool) -> usize {
-        self.group_index(pos, level, sat) * 2 + texture as usize
+    pub fn class_index(&self, pos: usize, band: usize, sat: usize, texture: bool) -> usize {
+        self.group_index(pos, band, sat) * 2 + texture as usize
     }
 
-    /// The level of class `class` (the inverse of [`Self::class_index`] for the level).
+    /// The band of class `class` (the inverse of [`Self::class_index`] for the band).
+    #[inline]
+    pub fn class_band(&self, class: usize) -> usize {
+        (class / (2 * self.n_sat_cases().max(1))) % self.n_bands().max(1)
+    }
+
+    /// The luminance level of class `class`.
     #[inline]
     pub fn class_level(&self, class: usize) -> usize {
-        (class / (2 * self.n_sat_cases().max(1))) % self.n_levels().max(1)
+        self.class_band(class) / self.n_chroma()
     }
 
     /// The kernel of class `class`: 3 rows of `n_features`.
@@ -226,13 +245,19 @@ impl L3Table {
     /// A table whose parameters make no geometry is not usable ([`L3Error::Table`]): its
     /// parameters are the table's, not a caller's.
     pub fn geometry(&self) -> Result<PatchGeometry, L3Error> {
-        PatchGeometry::new(
+        let geo = PatchGeometry::new(
             self.meta.params.patch_size,
             &self.meta.cfa,
             &self.meta.params.levels,
             self.meta.saturation_threshold,
         )
-        .map_err(|e| L3Error::Table(e.to_string()))
+        .map_err(|e| L3Error::Table(e.to_string()))?;
+        match &self.meta.params.chroma {
+            Some(c) => geo
+                .with_chroma(c)
+                .map_err(|e| L3Error::Table(e.to_string())),
+            None => Ok(geo),
+        }
     }
 
     /// Bytes of the kernel data (what a per-illuminant table costs).
@@ -296,7 +321,7 @@ impl L3Table {
     pub fn to_bytes(&self) -> Result<Vec<u8>, L3Error> {
         self.validate()?;
         let n_pos = self.n_positions();
-        let (nl, ns, nf) = (self.n_levels(), self.n_sat_cases(), self.n_features());
+        let (nl, ns, nf) = (self.n_bands(), self.n_sat_cases(), self.n_features());
         let nc = self.n_classes();
         let meta_json = serde_json::to_string(&self.meta)
             .map_err(|e| L3Error::Table(format!("metadata: {e}")))?;

@@ -10,9 +10,25 @@ use crate::test_support::{synthetic_frame_with_blocks, train_synthetic_table};
 const BLOCK: usize = 12;
 
 fn train_synthetic(noise: f32) -> L3Table {
+    train_synthetic_with(noise, None)
+}
+
+/// Three chroma classes of the synthetic sensor's `R G W B` responses.
+fn synthetic_chroma() -> ChromaClasses {
+    ChromaClasses {
+        centroids: vec![
+            vec![0.4, 0.15, 0.35, 0.1],
+            vec![0.1, 0.3, 0.3, 0.3],
+            vec![0.2, 0.25, 0.35, 0.2],
+        ],
+    }
+}
+
+fn train_synthetic_with(noise: f32, chroma: Option<ChromaClasses>) -> L3Table {
     let params = L3Params {
         levels: L3Params::levels_for(8, 1.8).unwrap(),
         min_class_samples: 60,
+        chroma,
         ..L3Params::default()
     };
     train_synthetic_table(&params, 48, |i| {
@@ -320,4 +336,115 @@ fn a_canceled_render_stops_with_render_canceled() {
         fast.render_srgb8_until(frame, 64, 64, None, WhiteLevel::Auto, &stop),
         Err(L3Error::RenderCanceled)
     ));
+}
+
+#[test]
+fn a_chroma_split_table_learns_round_trips_and_renders_fast_as_the_reference() {
+    let table = train_synthetic_with(0.0, Some(synthetic_chroma()));
+    assert_eq!((table.n_chroma(), table.n_bands()), (3, 24));
+    assert_eq!(table.n_classes(), 4 * 24 * table.n_sat_cases() * 2);
+    // a linear sensor: every chroma class renders block interiors closely
+    let f = synthetic_frame_with_blocks(999, 48, BLOCK, 0.5, 0.0, (0, 0));
+    let (xyz, _) = render_reference(&table, &table.kernels, &f.volts, 48, 48).unwrap();
+    let mut worst = 0f32;
+    for r in (0..48).filter(|r| (2..10).contains(&(r % 12))) {
+        for c in (0..48).filter(|c| (2..10).contains(&(c % 12))) {
+            for k in 0..3 {
+                let i = (r * 48 + c) * 3 + k;
+                worst = worst.max((xyz[i] - f.xyz[i]).abs());
+            }
+        }
+    }
+    assert!(worst < 0.002, "worst interior error {worst}");
+    // the pixels of the frame fall in more than one chroma class
+    let geo = table.geometry().unwrap();
+    let mut seen = std::collections::BTreeSet::new();
+    let mut patch = vec![0f32; 25];
+    for r in 0..48 {
+        for c in 0..48 {
+            geo.gather(&f.volts, 48, 48, r, c, &mut patch);
+            let s = geo.stats(&patch, geo.position(r, c));
+            seen.insert(geo.band_of(s.luminance, &s.channel_means) % 3);
+        }
+    }
+    assert!(seen.len() > 1, "one chroma class only: {seen:?}");
+    // the chroma classes are part of the file
+    let back = L3Table::from_bytes(&table.to_bytes().unwrap(), "mem").unwrap();
+    assert_eq!(back.meta, table.meta);
+    assert_eq!(back.kernels, table.kernels);
+    // the fast renderer classifies chroma as the reference does
+    let noisy = train_synthetic_with(0.01, Some(synthetic_chroma()));
+    let mut g = synthetic_frame_with_blocks(11, 96, BLOCK, 1.2, 0.02, (0, 0));
+    g.volts[40 * 96 + 40] = 1.8;
+    for simd in [true, false] {
+        let mut fast = FastRenderer::new(&noisy, &noisy.kernels).unwrap();
+        fast.options.simd = simd;
+        assert!(!fast.uses_avx512());
+        let (want, ws) = render_reference(&noisy, &noisy.kernels, &g.volts, 96, 96).unwrap();
+        let (got, gs) = fast
+            .render_xyz(Mosaic::Volts(&g.volts), 96, 96, None)
+            .unwrap();
+        let d = max_abs_diff(&want, &got);
+        assert!(d <= 1e-5, "simd {simd}: max diff {d}");
+        assert_eq!((ws.pixels, ws.texture), (gs.pixels, gs.texture));
+        assert!(gs.exact_path < gs.pixels / 4, "{gs:?}");
+    }
+}
+
+#[test]
+fn saturated_cases_share_their_samples_across_chroma_classes() {
+    let table = train_synthetic_with(0.01, Some(synthetic_chroma()));
+    let nf = table.n_features();
+    let mut checked = 0;
+    for pos in 0..table.n_positions() {
+        for level in 0..table.n_levels() {
+            for sat in 1..table.n_sat_cases() {
+                let first = table.kernel(table.class_index(pos, level * 3, sat, false));
+                for k in 1..3 {
+                    let other = table.kernel(table.class_index(pos, level * 3 + k, sat, false));
+                    assert_eq!(first, other, "position {pos}, level {level}, case {sat}");
+                    checked += 1;
+                }
+            }
+        }
+    }
+    assert!(checked > 0 || table.n_sat_cases() == 1);
+    assert_eq!(table.kernels.len() % (3 * nf), 0);
+}
+
+#[test]
+fn per_band_corrections_fuse_each_class_with_its_bands_matrix() {
+    let table = train_synthetic_with(0.01, Some(synthetic_chroma()));
+    let nb = table.n_bands();
+    let per_band: Vec<Mat3> = (0..nb)
+        .map(|b| {
+            let s = 1.0 + 0.05 * b as f64;
+            [[s, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 2.0 - s * 0.1]]
+        })
+        .collect();
+    let entry = IlluminantEntry {
+        name: "test".into(),
+        t: IDENTITY,
+        white_xy: None,
+        cct: None,
+        source: CorrectionSource::Matrix,
+        spd: None,
+        level_corrections: per_band.clone(),
+    };
+    let fused = fuse_entry(&table, &entry);
+    let nf = table.n_features();
+    let per_class = 2 * table.n_sat_cases();
+    for class in [0, per_class * 4 + 1, table.n_classes() - 1] {
+        let band = table.class_band(class);
+        assert_eq!(table.class_level(class), band / 3);
+        let m = &per_band[band];
+        let k = table.kernel(class);
+        let got = &fused[class * 3 * nf..(class + 1) * 3 * nf];
+        for i in 0..3 {
+            for j in 0..nf {
+                let want: f64 = (0..3).map(|r| m[i][r] * f64::from(k[r * nf + j])).sum();
+                assert!((f64::from(got[i * nf + j]) - want).abs() < 1e-5);
+            }
+        }
+    }
 }

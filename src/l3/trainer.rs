@@ -86,15 +86,22 @@ fn hist_edge(bin: usize) -> f32 {
     10f64.powf(HIST_LO + bin as f64 * (HIST_HI - HIST_LO) / HIST_BINS as f64) as f32
 }
 
+/// The run's class layout: positions × bands (luminance levels × chroma
+/// classes, band = level × chroma classes + class) × saturation.
 struct Dims {
     n_pos: usize,
-    n_levels: usize,
+    n_bands: usize,
+    n_chroma: usize,
     n_masks: usize,
 }
 
 impl Dims {
-    fn pl_mask(&self, pos: usize, level: usize, mask: u32) -> usize {
-        (pos * self.n_levels + level) * self.n_masks + mask as usize
+    fn pl_mask(&self, pos: usize, band: usize, mask: u32) -> usize {
+        (pos * self.n_bands + band) * self.n_masks + mask as usize
+    }
+
+    fn n_levels(&self) -> usize {
+        self.n_bands / self.n_chroma.max(1)
     }
 }
 
@@ -137,12 +144,12 @@ impl TrainSetup<'_> {
             ));
         }
         if let Some(maps) = self.colour_maps
-            && (maps.len() != geo.n_levels() || maps.iter().any(|m| m.m.len() != geo.n_channels()))
+            && (maps.len() != geo.n_bands() || maps.iter().any(|m| m.m.len() != geo.n_channels()))
         {
             return Err(L3Error::InvalidParams(format!(
-                "{} colour maps for {} levels and {} channels",
+                "{} colour maps for {} bands and {} channels",
                 maps.len(),
-                geo.n_levels(),
+                geo.n_bands(),
                 geo.n_channels()
             )));
         }
@@ -152,7 +159,8 @@ impl TrainSetup<'_> {
     fn dims(&self) -> Dims {
         Dims {
             n_pos: self.geo.n_positions(),
-            n_levels: self.geo.n_levels(),
+            n_bands: self.geo.n_bands(),
+            n_chroma: self.geo.n_chroma(),
             n_masks: 1 << self.geo.n_channels(),
         }
     }
@@ -162,7 +170,7 @@ impl TrainSetup<'_> {
         let d = self.dims();
         SurveyShape {
             n_positions: d.n_pos,
-            n_levels: d.n_levels,
+            n_levels: d.n_bands,
             n_masks: d.n_masks,
             bins: HIST_BINS,
         }
@@ -171,7 +179,7 @@ impl TrainSetup<'_> {
     /// Classes of the run for `classes`' saturation cases.
     pub fn n_classes(&self, classes: &Classes) -> usize {
         let d = self.dims();
-        d.n_pos * d.n_levels * classes.n_sat() * 2
+        d.n_pos * d.n_bands * classes.n_sat() * 2
     }
 
     fn check_range(&self, batches: &Range<usize>) -> Result<(), L3Error> {
@@ -312,7 +320,7 @@ where
             let mut s = empty();
             for f in &frames {
                 for_each_patch(geo, f, |pos, st, _patch| {
-                    let level = geo.level_of(st.luminance);
+                    let level = geo.band_of(st.luminance, &st.channel_means);
                     let mask = if params.saturation_classes {
                         st.sat_mask
                     } else {
@@ -363,7 +371,7 @@ pub fn classes_from_survey(setup: &TrainSetup, survey: &SurveyPartial) -> Result
     let total: u64 = survey.count.iter().sum();
     let mut mask_count = vec![0u64; d.n_masks];
     for pos in 0..d.n_pos {
-        for l in 0..d.n_levels {
+        for l in 0..d.n_bands {
             for m in 0..d.n_masks {
                 mask_count[m] += survey.count[d.pl_mask(pos, l, m as u32)];
             }
@@ -378,9 +386,9 @@ pub fn classes_from_survey(setup: &TrainSetup, survey: &SurveyPartial) -> Result
         }
     }
     let n_sat = sat_cases.len();
-    let mut thresholds = vec![0f32; d.n_pos * d.n_levels * n_sat];
+    let mut thresholds = vec![0f32; d.n_pos * d.n_bands * n_sat];
     for pos in 0..d.n_pos {
-        for l in 0..d.n_levels {
+        for l in 0..d.n_bands {
             let mut hs = vec![vec![0u64; HIST_BINS]; n_sat];
             let mut pooled = vec![0u64; HIST_BINS];
             for m in 0..d.n_masks {
@@ -402,7 +410,7 @@ pub fn classes_from_survey(setup: &TrainSetup, survey: &SurveyPartial) -> Result
                 } else {
                     &pooled
                 };
-                thresholds[(pos * d.n_levels + l) * n_sat + c] =
+                thresholds[(pos * d.n_bands + l) * n_sat + c] =
                     quantile_edge(use_h, params.contrast_quantile);
             }
         }
@@ -449,7 +457,7 @@ where
     let nf = geo.n_features();
     let n_sat = classes.n_sat();
     let n_classes = setup.n_classes(classes);
-    if n_sat == 0 || classes.thresholds.len() != d.n_pos * d.n_levels * n_sat {
+    if n_sat == 0 || classes.thresholds.len() != d.n_pos * d.n_bands * n_sat {
         return Err(L3Error::InvalidParams(format!(
             "{} thresholds for {n_sat} saturation cases",
             classes.thresholds.len()
@@ -463,14 +471,14 @@ where
         for f in &frames {
             ticker.check()?;
             for_each_patch(geo, f, |pos, st, patch| {
-                let level = geo.level_of(st.luminance);
+                let level = geo.band_of(st.luminance, &st.channel_means);
                 let mask = if params.saturation_classes {
                     st.sat_mask
                 } else {
                     0
                 };
                 let case = sat_case_index(&classes.sat_cases, mask, &st.channel_means).0;
-                let group = (pos * d.n_levels + level) * n_sat + case;
+                let group = (pos * d.n_bands + level) * n_sat + case;
                 let texture = params.contrast_classes && st.contrast > classes.thresholds[group];
                 let class = group * 2 + texture as usize;
                 geo.features(patch, pos, classes.sat_cases[case], &mut feat);
@@ -558,9 +566,39 @@ pub fn solve_learned(
     })
 }
 
-/// Index of class (position, level, case, texture).
-fn class_index(d: &Dims, n_sat: usize, pos: usize, l: usize, c: usize, t: usize) -> usize {
-    ((pos * d.n_levels + l) * n_sat + c) * 2 + t
+/// Index of class (position, band, case, texture).
+fn class_index(d: &Dims, n_sat: usize, pos: usize, b: usize, c: usize, t: usize) -> usize {
+    ((pos * d.n_bands + b) * n_sat + c) * 2 + t
+}
+
+/// Give every chroma class of a saturated case the samples of all of them
+/// at its (position, level): a clipped channel's mean no longer tells the
+/// colour, and split K ways the saturated cases starve (rgbw-iset, 6
+/// classes: kernels filled from far levels with norms up to 1.4e3). Their
+/// kernels are then those of a table without chroma classes.
+fn pool_saturated_chroma(d: &Dims, n_sat: usize, grams: &mut [Gram]) {
+    let kc = d.n_chroma.max(1);
+    if kc == 1 {
+        return;
+    }
+    for pos in 0..d.n_pos {
+        for l in 0..d.n_levels() {
+            for c in 1..n_sat {
+                for t in 0..2 {
+                    let ids: Vec<usize> = (0..kc)
+                        .map(|k| class_index(d, n_sat, pos, l * kc + k, c, t))
+                        .collect();
+                    let mut sum = grams[ids[0]].clone();
+                    for &i in &ids[1..] {
+                        sum.merge(&grams[i]);
+                    }
+                    for &i in &ids {
+                        grams[i] = sum.clone();
+                    }
+                }
+            }
+        }
+    }
 }
 
 /// Add to every flat class the mirror images of its samples, where the
@@ -572,7 +610,7 @@ fn symmetrize_flat(geo: &PatchGeometry, d: &Dims, n_sat: usize, grams: &mut [Gra
         if syms.len() < 2 {
             continue;
         }
-        for l in 0..d.n_levels {
+        for l in 0..d.n_bands {
             for c in 0..n_sat {
                 let k = class_index(d, n_sat, pos, l, c, 0);
                 if grams[k].count() == 0 {
@@ -590,7 +628,8 @@ fn symmetrize_flat(geo: &PatchGeometry, d: &Dims, n_sat: usize, grams: &mut [Gra
 
 /// Stage 3: the samples a class is solved from, and the level they were
 /// borrowed from (−1 for its own). A class with fewer than `need` samples
-/// merges its neighbouring levels, nearest first; one with none at any level
+/// merges its neighbouring levels of its chroma class, nearest first
+/// (`band` is level × chroma classes + chroma class); one with none at any level
 /// takes the other contrast class; a saturation case this position never
 /// saw borrows the case it falls back to, with this case's saturated
 /// channels zeroed (exactly the features those samples would have here).
@@ -601,24 +640,27 @@ fn fill(
     classes: &Classes,
     grams: &mut [Gram],
     pos: usize,
-    l: usize,
+    band: usize,
     c: usize,
     t_src: usize,
     need: u64,
 ) -> (Gram, i32) {
     let n_sat = classes.n_sat();
     let nf = geo.n_features();
-    let ci = |l: usize, c: usize, t: usize| class_index(d, n_sat, pos, l, c, t);
+    let (n_levels, kc) = (d.n_levels(), d.n_chroma.max(1));
+    let (l, chroma) = (band / kc, band % kc);
+    // class of level `l` in this chroma class
+    let ci = |l: usize, c: usize, t: usize| class_index(d, n_sat, pos, l * kc + chroma, c, t);
     let mut g = grams[ci(l, c, t_src)].clone();
     let mut filled_from = -1i32;
     let neighbours = |step: usize| {
         [l as isize - step as isize, (l + step) as isize]
             .into_iter()
-            .filter(|&nl| nl >= 0 && (nl as usize) < d.n_levels)
+            .filter(|&nl| nl >= 0 && (nl as usize) < n_levels)
             .map(|nl| nl as usize)
     };
     let mut step = 1;
-    while g.count() < need && step < d.n_levels {
+    while g.count() < need && step < n_levels {
         for nl in neighbours(step) {
             let src = ci(nl, c, t_src);
             if grams[src].count() > 0 {
@@ -631,7 +673,7 @@ fn fill(
         step += 1;
     }
     let mut step = 0;
-    while g.count() == 0 && step < d.n_levels {
+    while g.count() == 0 && step < n_levels {
         for nl in neighbours(step) {
             let other = ci(nl, c, 1 - t_src);
             if g.count() == 0 && grams[other].count() > 0 {
@@ -651,7 +693,7 @@ fn fill(
         let zero: Vec<usize> = (0..nf - 1)
             .filter(|&k| sat_cases[c] & (1 << chans[k]) != 0)
             .collect();
-        'levels: for step in 0..d.n_levels {
+        'levels: for step in 0..n_levels {
             for nl in neighbours(step) {
                 for tt in [t_src, 1 - t_src] {
                     let src = ci(nl, fb, tt);
@@ -665,6 +707,21 @@ fn fill(
                 }
             }
         }
+    }
+    // a chroma class never seen at any level of this case: the nearest
+    // level of the other chroma classes, pooled
+    let mut step = 0;
+    while g.count() == 0 && kc > 1 && step < n_levels {
+        for nl in neighbours(step) {
+            for other in (0..kc).filter(|&k| k != chroma) {
+                let src = class_index(d, n_sat, pos, nl * kc + other, c, t_src);
+                if grams[src].count() > 0 {
+                    g.merge(&grams[src]);
+                    filled_from = nl as i32;
+                }
+            }
+        }
+        step += 1;
     }
     (g, filled_from)
 }
@@ -698,8 +755,9 @@ fn solve_classes(
 ) -> Result<(Vec<f32>, Vec<ClassReport>), L3Error> {
     let nf = geo.n_features();
     let n_sat = classes.n_sat();
-    let n_classes = d.n_pos * d.n_levels * n_sat * 2;
+    let n_classes = d.n_pos * d.n_bands * n_sat * 2;
     let raw_counts: Vec<u64> = grams.iter().map(|g| g.count()).collect();
+    pool_saturated_chroma(d, n_sat, &mut grams);
     if params.symmetrize_flat {
         symmetrize_flat(geo, d, n_sat, &mut grams);
     }
@@ -713,7 +771,7 @@ fn solve_classes(
     let mut kernels = vec![0f32; n_classes * 3 * nf];
     let mut reports = Vec::with_capacity(n_classes);
     for pos in 0..d.n_pos {
-        for l in 0..d.n_levels {
+        for l in 0..d.n_bands {
             for c in 0..n_sat {
                 for t in 0..2 {
                     let k = class_index(d, n_sat, pos, l, c, t);
@@ -725,10 +783,10 @@ fn solve_classes(
                         fill(geo, d, classes, &mut grams, pos, l, c, t_src, need);
                     if g.count() == 0 {
                         return Err(L3Error::Table(format!(
-                            "class (position {pos}, level {l}, case {c}) has no samples at any level"
+                            "class (position {pos}, band {l}, case {c}) has no samples at any level"
                         )));
                     }
-                    let level_v = geo.levels()[l] as f64;
+                    let level_v = geo.levels()[l / d.n_chroma.max(1)] as f64;
                     let con = match colour_maps {
                         Some(maps) if c == 0 => Some(colour_constraint(geo, pos, &maps[l])),
                         _ => None,
@@ -737,7 +795,7 @@ fn solve_classes(
                         solve_with(&mut g, params.ridge, noise.variance(level_v), con.as_ref())
                             .map_err(|e| {
                                 L3Error::Table(format!(
-                                    "class (position {pos}, level {l}, case {c}, texture {t}): {e}"
+                                    "class (position {pos}, band {l}, case {c}, texture {t}): {e}"
                                 ))
                             })?;
                     for (dst, src) in kernels[k * 3 * nf..(k + 1) * 3 * nf]

@@ -6,7 +6,8 @@
 
 use crate::camera::{Camera, SensorDesign};
 use crate::l3::{
-    ColourLoss, ColourSamples, IlluminantEntry, LevelMap, NoiseModel, TableKind, camera_correction,
+    ColourLoss, ColourSamples, IlluminantEntry, LevelMap, MIN_SURFACES_PER_CHANNEL, NoiseModel,
+    TableKind, camera_correction,
 };
 use crate::spectral::{Extrapolation, IsetData, Spectrum, cie_illuminant};
 
@@ -68,8 +69,8 @@ pub fn colour_samples(
 }
 
 /// `entry` with its T replaced by the camera-aware correction C of a
-/// same-illuminant table whose colour maps are `maps` (one per level, the
-/// brightest last, each with the noise it was fitted for:
+/// same-illuminant table whose colour maps are `maps` (one per band, the
+/// brightest level last, each with the noise it was fitted for:
 /// [`crate::l3::L3Table::level_colour_maps`]; or one map every level shares),
 /// fitted on the natural reflectances under the entry's light (see
 /// `crate::l3::camera_correction`). `t` is the brightest level's C; with
@@ -106,7 +107,17 @@ pub fn camera_corrected(
     )?;
     let corrections = maps
         .iter()
-        .map(|m| camera_correction(&m.map, &samples, m.noise.as_ref(), ColourLoss::MeanDeltaE))
+        .map(|m| {
+            // a chroma class's map is corrected on the surfaces the class
+            // holds under this light (all of them if too few stay in it)
+            let class_samples = m.chroma.as_ref().and_then(|(classes, k)| {
+                let idx = samples.in_chroma_class(classes, *k);
+                (idx.len() >= MIN_SURFACES_PER_CHANNEL * samples.n_channels())
+                    .then(|| samples.subset(&idx))
+            });
+            let fit_on = class_samples.as_ref().unwrap_or(&samples);
+            camera_correction(&m.map, fit_on, m.noise.as_ref(), ColourLoss::MeanDeltaE)
+        })
         .collect::<Result<Vec<_>, _>>()?;
     let t = *corrections.last().ok_or_else(|| {
         TrainError::Invalid("a camera-aware correction needs a colour map".into())

@@ -19,11 +19,11 @@ use sha2::{Digest, Sha256};
 
 use crate::camera::{Camera, CameraError, NoiseSwitches, SensorDesign, mosaic};
 use crate::l3::{
-    Classes, ColourMatrix, GramPartial, IlluminantRegistry, L3Error, L3Params, L3Table, Learned,
-    NoiseModel, PatchGeometry, RidgeChoice, ShardSpec, SurveyPartial, TABLE_FORMAT_VERSION,
-    TableKind, TableMeta, TrainControl, TrainSetup, TrainingFrame, accumulate_batches,
-    classes_from_survey, learn, level_maps, merge_partials, merge_surveys, package, plan_shards,
-    solve_learned, survey_batches,
+    ChromaClasses, Classes, ColourMatrix, GramPartial, IlluminantRegistry, L3Error, L3Params,
+    L3Table, Learned, MIN_SURFACES_PER_CHANNEL, NoiseModel, PatchGeometry, RidgeChoice, ShardSpec,
+    SurveyPartial, TABLE_FORMAT_VERSION, TableKind, TableMeta, TrainControl, TrainSetup,
+    TrainingFrame, accumulate_batches, band_maps, classes_from_survey, learn, level_maps,
+    merge_partials, merge_surveys, package, plan_shards, solve_learned, survey_batches,
 };
 use crate::scene::SceneError;
 use crate::spectral::{
@@ -102,6 +102,12 @@ pub struct TrainingSpec {
     /// [`crate::l3::ColourLoss`]); absent: [`TrainingSpec::colour_loss`].
     #[serde(default)]
     pub colour_loss: Option<crate::l3::ColourLoss>,
+    /// Chroma classes splitting every level (k-means on the training
+    /// reflectances' channel chromaticities, each class with its own colour
+    /// maps and kernels: see `src/l3/chroma.rs`); 1: no split. Classes left
+    /// with too few surfaces are dropped, so a table may hold fewer.
+    #[serde(default = "default_chroma_classes", skip_serializing_if = "is_one")]
+    pub chroma_classes: usize,
 }
 
 fn default_kind() -> TableKind {
@@ -128,6 +134,12 @@ fn default_true() -> bool {
 fn default_luminance() -> f64 {
     100.0
 }
+fn default_chroma_classes() -> usize {
+    1
+}
+fn is_one(n: &usize) -> bool {
+    *n == 1
+}
 
 impl Default for TrainingSpec {
     fn default() -> Self {
@@ -145,6 +157,7 @@ impl Default for TrainingSpec {
             mean_luminance: default_luminance(),
             colour_averaging_px: None,
             colour_loss: None,
+            chroma_classes: default_chroma_classes(),
         }
     }
 }
@@ -177,6 +190,13 @@ impl TrainingSpec {
         }
         if !(self.mean_luminance.is_finite() && self.mean_luminance > 0.0) {
             return bad(format!("mean_luminance {}", self.mean_luminance));
+        }
+        if !(1..=crate::l3::MAX_CHROMA_CLASSES).contains(&self.chroma_classes) {
+            return bad(format!(
+                "chroma_classes {} (1 to {})",
+                self.chroma_classes,
+                crate::l3::MAX_CHROMA_CLASSES
+            ));
         }
         Ok(())
     }
@@ -277,9 +297,9 @@ impl TrainingRun {
         let grid = WavelengthGrid::default();
         let camera = Camera::new(design, grid, iset)?;
         let swing = design.voltage_swing_v;
-        let params = spec.params(swing)?;
+        let mut params = spec.params(swing)?;
         let sat_threshold = swing - params.saturation_margin_v;
-        let geo = PatchGeometry::new(
+        let mut geo = PatchGeometry::new(
             params.patch_size,
             camera.cfa(),
             &params.levels,
@@ -304,8 +324,8 @@ impl TrainingRun {
             NoiseSwitches::none()
         };
         let nm = noise_model(design);
-        let maps = match &params.colour_map {
-            Some(fit) => {
+        let maps = match params.colour_map {
+            Some(ref fit) => {
                 let spds: Vec<_> = illuminants.iter().map(|(_, s)| s.clone()).collect();
                 let refl: Vec<_> = crate::scene::natural_reflectances(&grid, iset)
                     .map_err(|e| TrainError::Invalid(e.to_string()))?
@@ -323,7 +343,20 @@ impl TrainingRun {
                             .extend(std::iter::repeat_n(t, refl.len()));
                     }
                 }
-                Some(level_maps(&samples, &params.levels, &nm, swing, fit)?)
+                if spec.chroma_classes > 1 {
+                    let classes = ChromaClasses::fit(
+                        &samples.channels,
+                        spec.chroma_classes,
+                        MIN_SURFACES_PER_CHANNEL * camera.n_channels(),
+                        spec.seed,
+                    )?;
+                    geo = geo.with_chroma(&classes)?;
+                    let maps = band_maps(&samples, &classes, &params.levels, &nm, swing, fit)?;
+                    params.chroma = Some(classes);
+                    Some(maps)
+                } else {
+                    Some(level_maps(&samples, &params.levels, &nm, swing, fit)?)
+                }
             }
             None => None,
         };
