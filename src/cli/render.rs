@@ -307,12 +307,13 @@ fn report(
     stats: &RenderStats,
 ) {
     println!(
-        "rendered {w}×{h} with {} under {illuminant} ({} renderer) in {ms:.1} ms ({:.1} Mpix/s): {} saturated, {} texture pixels; wrote {}",
+        "rendered {w}×{h} with {} under {illuminant} ({} renderer) in {ms:.1} ms ({:.1} Mpix/s): {} saturated, {} texture pixels, {} classified by the reference code; wrote {}",
         table.display(),
         a.renderer,
         (w * h) as f64 / ms / 1e3,
         stats.saturated,
         stats.texture,
+        stats.exact_path,
         a.out.display()
     );
 }

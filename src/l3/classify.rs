@@ -43,6 +43,8 @@ pub struct PatchGeometry {
     /// Chroma class centroids (channel chromaticities); one or none: no
     /// chroma split (see [`super::chroma`]).
     chroma: Vec<[f32; MAX_CHANNELS]>,
+    /// Per class, its score's weights ([`Self::chroma_coefficients`]).
+    chroma_coef: Vec<[f32; MAX_CHANNELS]>,
 }
 
 /// The saturation case a patch with channel mask `mask` uses among `cases`
@@ -157,6 +159,7 @@ impl PatchGeometry {
             levels: lv,
             level_edges,
             chroma: Vec::new(),
+            chroma_coef: Vec::new(),
         })
     }
 
@@ -179,6 +182,19 @@ impl PatchGeometry {
         } else {
             Vec::new()
         };
+        let nc = self.n_channels;
+        self.chroma_coef = self
+            .chroma
+            .iter()
+            .map(|c| {
+                let norm2: f32 = c[..nc].iter().map(|v| v * v).sum();
+                let mut a = [0f32; MAX_CHANNELS];
+                for ch in 0..nc {
+                    a[ch] = norm2 - 2.0 * c[ch];
+                }
+                a
+            })
+            .collect();
         Ok(self)
     }
 
@@ -204,40 +220,43 @@ impl PatchGeometry {
     }
 
     /// The chroma class of a patch's channel means (each channel, clamped at
-    /// 0, over their sum; class 0 when nothing responds), with how far it is
-    /// from the runner-up: the difference of the squared distances over the
-    /// sum of the means (so a caller can tell a class its rounding cannot
-    /// change).
+    /// 0, over their sum: the nearest centroid; class 0 when nothing
+    /// responds), with how far it is from the runner-up: the difference of
+    /// the squared distances times the sum of the means (so a caller can tell
+    /// a class its rounding cannot change).
+    ///
+    /// With `x = m / Σm`, `|x − c|² = |x|² + score(c) / Σm` where
+    /// `score(c) = Σ_ch m_ch (|c|² − 2 c_ch)`: the class is the centroid of
+    /// the lowest score and the margin is the gap to the next, linear in the
+    /// means and free of the division ([`Self::chroma_coefficients`]).
     #[inline]
     pub fn chroma_of(&self, means: &[f32; MAX_CHANNELS]) -> (usize, f32) {
         if self.chroma.len() < 2 {
             return (0, f32::INFINITY);
         }
         let nc = self.n_channels;
-        let mut sum = 0f32;
-        for &m in &means[..nc] {
-            sum += m.max(0.0);
-        }
-        if !(sum > 0.0 && sum.is_finite()) {
-            return (0, 0.0);
-        }
-        let inv = 1.0 / sum;
-        let (mut best, mut d1, mut d2) = (0usize, f32::INFINITY, f32::INFINITY);
-        for (i, c) in self.chroma.iter().enumerate() {
-            let mut d = 0f32;
+        let (mut best, mut s1, mut s2) = (0usize, f32::INFINITY, f32::INFINITY);
+        for (k, a) in self.chroma_coef.iter().enumerate() {
+            let mut score = 0f32;
             for ch in 0..nc {
-                let x = means[ch].max(0.0) * inv - c[ch];
-                d += x * x;
+                score += a[ch] * means[ch].max(0.0);
             }
-            if d < d1 {
-                d2 = d1;
-                d1 = d;
-                best = i;
-            } else if d < d2 {
-                d2 = d;
+            if score < s1 {
+                s2 = s1;
+                s1 = score;
+                best = k;
+            } else if score < s2 {
+                s2 = score;
             }
         }
-        (best, (d2 - d1) * sum)
+        let gap = s2 - s1;
+        if gap.is_nan() { (0, 0.0) } else { (best, gap) }
+    }
+
+    /// Per chroma class, the weights of its score (`|c|² − 2 c_ch` per
+    /// channel, see [`Self::chroma_of`]); empty without a chroma split.
+    pub fn chroma_coefficients(&self) -> &[[f32; MAX_CHANNELS]] {
+        &self.chroma_coef
     }
 
     pub fn n_positions(&self) -> usize {

@@ -223,6 +223,19 @@ struct Scratch {
     lin: [Vec<f32>; 3],
     patch: Vec<f32>,
     feat: Vec<f32>,
+    chroma: ChromaScratch,
+}
+
+/// A tile row's chroma classes ([`FastRenderer::chroma_row`]).
+#[derive(Default)]
+struct ChromaScratch {
+    /// Channel means per channel (clamped at 0), from the phase means.
+    means: Vec<Vec<f32>>,
+    score: Vec<f32>,
+    /// The lowest and second-lowest class score, and the lowest's class.
+    s1: Vec<f32>,
+    s2: Vec<f32>,
+    best: Vec<u32>,
 }
 
 /// How a row of linear outputs (three planes) becomes the output row.
@@ -686,25 +699,57 @@ impl FastRenderer {
         (pos * self.n_bands + band) * self.sat_cases.len() + sat
     }
 
-    /// The band of column `i` of the phase means at CFA position `pos` on
-    /// luminance level `level`; `None` where rounding could change the chroma class.
-    #[inline(always)]
-    fn fast_band(
+    /// The chroma class of every pixel of a tile row (`tw` columns, row parity
+    /// `rpar`, first column's parity `cpar`) from its phase means, as
+    /// [`PatchGeometry::chroma_of`] computes it, a class (all pixels) at a time
+    /// so that the loops vectorise.
+    fn chroma_row(
         &self,
         means: &[Vec<f32>; 4],
-        i: usize,
-        pos: usize,
-        level: usize,
-    ) -> Option<usize> {
-        if self.n_chroma == 1 {
-            return Some(level);
+        (rpar, cpar): (usize, usize),
+        tw: usize,
+        cs: &mut ChromaScratch,
+    ) {
+        let nc = self.geo.n_channels();
+        cs.means.resize_with(nc, Vec::new);
+        for v in cs.means.iter_mut() {
+            resize(v, tw);
         }
-        let mut ch = [0f32; super::MAX_CHANNELS];
-        for (p, &c) in self.phase_channels[pos].iter().enumerate() {
-            ch[c as usize] = means[p][i];
+        for par in 0..2 {
+            // pixels of this column parity sit at CFA position `pos`
+            let pos = rpar * 2 + (cpar + par) % 2;
+            for (p, &ch) in self.phase_channels[pos].iter().enumerate() {
+                let (dst, src) = (&mut cs.means[ch as usize][..tw], &means[p][..tw]);
+                for i in (par..tw).step_by(2) {
+                    dst[i] = src[i].max(0.0);
+                }
+            }
         }
-        let (k, margin) = self.geo.chroma_of(&ch);
-        (margin >= CHROMA_MARGIN).then_some(level * self.n_chroma + k)
+        for v in [&mut cs.score, &mut cs.s1, &mut cs.s2] {
+            resize(v, tw);
+        }
+        cs.s1[..tw].fill(f32::INFINITY);
+        cs.s2[..tw].fill(f32::INFINITY);
+        cs.best.clear();
+        cs.best.resize(tw, 0);
+        for (k, a) in self.geo.chroma_coefficients().iter().enumerate() {
+            let score = &mut cs.score[..tw];
+            score.fill(0.0);
+            for (ch, m) in cs.means.iter().enumerate() {
+                let w = a[ch];
+                for (s, &v) in score.iter_mut().zip(&m[..tw]) {
+                    *s += w * v;
+                }
+            }
+            let (s1, s2, best) = (&mut cs.s1[..tw], &mut cs.s2[..tw], &mut cs.best[..tw]);
+            for i in 0..tw {
+                let v = score[i];
+                let lower = v < s1[i];
+                s2[i] = s2[i].min(s1[i].max(v));
+                best[i] = if lower { k as u32 } else { best[i] };
+                s1[i] = s1[i].min(v);
+            }
+        }
     }
 
     /// Check the frame and build its converter; f32 input is scanned once for
@@ -1263,16 +1308,26 @@ impl FastRenderer {
                 let cpar = tile.c0 % 2;
                 let (sat, lum) = (&sc.sat[..tw], &sc.lum[..tw]);
                 let (contrast, class) = (&sc.contrast[..tw], &mut sc.class[..tw]);
-                let means = &sc.means;
+                let kc = self.n_chroma;
+                if kc > 1 {
+                    self.chroma_row(&sc.means, (rpar, cpar), tw, &mut sc.chroma);
+                }
+                let cs = &sc.chroma;
                 let bands = self.n_bands;
                 for i in 0..tw {
                     let pos = rpar * 2 + (cpar + i) % 2;
                     let band = if sat[i] {
                         None
                     } else {
-                        self.level_lut
-                            .level(lum[i])
-                            .and_then(|level| self.fast_band(means, i, pos, level))
+                        self.level_lut.level(lum[i]).and_then(|level| {
+                            if kc == 1 {
+                                Some(level)
+                            } else {
+                                // near a chroma boundary: the reference path
+                                (cs.s2[i] - cs.s1[i] >= CHROMA_MARGIN)
+                                    .then(|| level * kc + cs.best[i] as usize)
+                            }
+                        })
                     };
                     class[i] = match band {
                         None => NO_CLASS,
