@@ -16,7 +16,8 @@
 //! - the storage comparison;
 //! - the camera-aware correction: a D65 table under the fluorescent lamp
 //!   with C against T, and with one C per level against the brightest
-//!   level's C alone at a tenth of the exposure (on rgbw-ar0132at).
+//!   level's C alone at a tenth of the exposure (on rgbw-ar0132at);
+//! - with chroma classes, the targets on I_Tun and SI_Tun+T.
 //!
 //! `l3 eval --paper-table --sensor config/sensors/rgbw-iset.toml` runs the
 //! full version, under fluorescent too.
@@ -241,4 +242,77 @@ fn per_level_camera_correction_serves_a_d65_table_in_dim_light() {
         levels < 4.5 && levels * 1.5 < top,
         "per level {levels}, brightest {top}"
     );
+}
+
+/// Chroma classes (`chroma_classes`, 8 asked, 6 kept on this sensor) take
+/// the paper's sensor under the targets under tungsten, where one
+/// class sat on the linear floor (2.67 and 2.86 on this capture, 2.77 and
+/// 3.02 over 16): I_Tun ≤ 2.7 and SI_Tun+T ≤ 2.95 (2.06 and 2.46 here), in
+/// the paper's order, with every kernel norm under 100.
+#[test]
+fn chroma_classes_take_the_papers_sensor_under_its_targets() {
+    use l3::camera::Camera;
+    use l3::eval::{Method, evaluate_method};
+    use l3::l3::{IlluminantRegistry, TableKind};
+    use l3::spectral::WavelengthGrid;
+    use l3::training::{TrainingSpec, train_table};
+
+    let sensor = concat!(env!("CARGO_MANIFEST_DIR"), "/config/sensors/rgbw-iset.toml");
+    let design = SensorDesign::load(sensor, None).unwrap();
+    let cancel = std::sync::atomic::AtomicBool::new(false);
+    let train = |kind| {
+        let spec = TrainingSpec {
+            kind,
+            illuminants: vec!["Tungsten".into()],
+            seed: 1,
+            scenes: 48,
+            scene_size: 96,
+            chroma_classes: 8,
+            ..TrainingSpec::default()
+        };
+        train_table(&design, &spec, None, &|_, _| {}, &cancel).unwrap()
+    };
+    let (cross, si) = (
+        train(TableKind::CrossIlluminant),
+        train(TableKind::SameIlluminant),
+    );
+    let grid = WavelengthGrid::default();
+    let camera = Camera::new(&design, grid, None).unwrap();
+    let t = IlluminantRegistry::with_defaults(grid, None)
+        .unwrap()
+        .resolve("Tungsten", None)
+        .unwrap();
+    let mean = |table: &l3::l3::L3Table, name: &str| {
+        let m = Method::Table(table);
+        evaluate_method(
+            &camera,
+            &m,
+            name,
+            "Tungsten",
+            &t,
+            None,
+            &ChartSetup::default(),
+        )
+        .unwrap()
+        .summary
+        .mean
+    };
+    let (i_tun, si_tun) = (mean(&cross, "I_Tun"), mean(&si, "SI_Tun"));
+    println!(
+        "rgbw-iset with {} chroma classes: I_Tun {i_tun:.2}, SI_Tun+T {si_tun:.2}",
+        cross.n_chroma()
+    );
+    assert!(cross.n_chroma() > 1 && si.n_chroma() > 1);
+    assert!(
+        i_tun <= 2.7 && si_tun <= 2.95 && i_tun <= si_tun,
+        "{i_tun} {si_tun}"
+    );
+    for table in [&cross, &si] {
+        let worst = table
+            .reports
+            .iter()
+            .map(|r| r.kernel_norm)
+            .fold(0.0, f64::max);
+        assert!(worst <= 100.0, "max kernel norm {worst}");
+    }
 }
