@@ -38,12 +38,9 @@ fn l3(args: &[&str], dir: &Path) -> (bool, String, String) {
     )
 }
 
-#[test]
-fn simulate_train_render_eval() {
-    let tmp = tempfile::tempdir().unwrap();
-    let d = tmp.path();
-    let sim = d.join("sim");
-    let (ok, out, err) = l3(
+/// `l3 simulate` of the Macbeth chart under tungsten (seed 3) into `out`.
+fn simulate_macbeth(d: &Path, out: &Path) {
+    let (ok, stdout, err) = l3(
         &[
             "simulate",
             "--scene",
@@ -53,11 +50,19 @@ fn simulate_train_render_eval() {
             "--seed",
             "3",
             "--out",
-            sim.to_str().unwrap(),
+            out.to_str().unwrap(),
         ],
         d,
     );
-    assert!(ok, "simulate failed: {out}{err}");
+    assert!(ok, "simulate failed: {stdout}{err}");
+}
+
+#[test]
+fn simulate_train_render_eval() {
+    let tmp = tempfile::tempdir().unwrap();
+    let d = tmp.path();
+    let sim = d.join("sim");
+    simulate_macbeth(d, &sim);
     for f in [
         "mosaic.raw",
         "mosaic.json",
@@ -96,21 +101,7 @@ fn simulate_train_render_eval() {
     assert!(info.as_shot_neutral.unwrap().contains(&1.0));
     // same seed → same bytes
     let sim2 = d.join("sim2");
-    let (ok, _, _) = l3(
-        &[
-            "simulate",
-            "--scene",
-            "macbeth",
-            "--illuminant",
-            "Tungsten",
-            "--seed",
-            "3",
-            "--out",
-            sim2.to_str().unwrap(),
-        ],
-        d,
-    );
-    assert!(ok);
+    simulate_macbeth(d, &sim2);
     assert_eq!(
         std::fs::read(sim.join("mosaic.raw")).unwrap(),
         std::fs::read(sim2.join("mosaic.raw")).unwrap()
@@ -696,19 +687,7 @@ fn train_with_chroma_classes_shards_and_renders() {
     let table = l3::l3::L3Table::load(&d.join("c.safetensors")).unwrap();
     assert_eq!((table.n_chroma(), table.n_bands()), (3, 12));
     let sim = d.join("sim");
-    let (ok, out, err) = l3(
-        &[
-            "simulate",
-            "--scene",
-            "macbeth",
-            "--illuminant",
-            "Tungsten",
-            "--out",
-            sim.to_str().unwrap(),
-        ],
-        d,
-    );
-    assert!(ok, "simulate failed: {out}{err}");
+    simulate_macbeth(d, &sim);
     let png = d.join("c.png");
     let (ok, out, err) = l3(
         &[
