@@ -589,30 +589,33 @@ fn bad_arguments_are_clear_errors() {
     assert!(!ok && err.contains("exposure"), "{err}");
 }
 
+/// `l3 train <base> --reproducible --out <out> <extra>` in `d`, which must
+/// succeed: the table file's bytes and the command's output.
+fn train_reproducibly(d: &Path, base: &[&str], out: &str, extra: &[&str]) -> (Vec<u8>, String) {
+    let mut args = vec!["train"];
+    args.extend_from_slice(base);
+    args.extend_from_slice(&["--reproducible", "--out", out]);
+    args.extend_from_slice(extra);
+    let (ok, stdout, err) = l3(&args, d);
+    assert!(ok, "train {extra:?} failed: {stdout}{err}");
+    (std::fs::read(d.join(out)).unwrap_or_default(), stdout)
+}
+
 #[test]
 fn train_in_shards_gives_the_same_table_file() {
     let tmp = tempfile::tempdir().unwrap();
     let d = tmp.path();
-    let train = |out: &str, extra: &[&str]| {
-        let mut args = vec![
-            "train",
-            "--illuminants",
-            "D65,Tungsten",
-            "--scenes",
-            "5",
-            "--scene-size",
-            "32",
-            "--levels",
-            "6",
-            "--reproducible",
-            "--out",
-            out,
-        ];
-        args.extend_from_slice(extra);
-        let (ok, stdout, err) = l3(&args, d);
-        assert!(ok, "train {extra:?} failed: {stdout}{err}");
-        (std::fs::read(d.join(out)).unwrap_or_default(), stdout)
-    };
+    let base = [
+        "--illuminants",
+        "D65,Tungsten",
+        "--scenes",
+        "5",
+        "--scene-size",
+        "32",
+        "--levels",
+        "6",
+    ];
+    let train = |out: &str, extra: &[&str]| train_reproducibly(d, &base, out, extra);
     let (one, _) = train("one.safetensors", &[]);
     let (two, stdout) = train(
         "two.safetensors",
@@ -658,28 +661,19 @@ fn train_in_shards_gives_the_same_table_file() {
 fn train_with_chroma_classes_shards_and_renders() {
     let tmp = tempfile::tempdir().unwrap();
     let d = tmp.path();
-    let train = |out: &str, extra: &[&str]| {
-        let mut args = vec![
-            "train",
-            "--illuminants",
-            "D65",
-            "--scenes",
-            "4",
-            "--scene-size",
-            "32",
-            "--levels",
-            "4",
-            "--chroma-classes",
-            "3",
-            "--reproducible",
-            "--out",
-            out,
-        ];
-        args.extend_from_slice(extra);
-        let (ok, stdout, err) = l3(&args, d);
-        assert!(ok, "train {extra:?} failed: {stdout}{err}");
-        (std::fs::read(d.join(out)).unwrap_or_default(), stdout)
-    };
+    let base = [
+        "--illuminants",
+        "D65",
+        "--scenes",
+        "4",
+        "--scene-size",
+        "32",
+        "--levels",
+        "4",
+        "--chroma-classes",
+        "3",
+    ];
+    let train = |out: &str, extra: &[&str]| train_reproducibly(d, &base, out, extra);
     let (one, stdout) = train("c.safetensors", &[]);
     assert!(stdout.contains("× 3 chroma classes ×"), "{stdout}");
     let (two, _) = train("c2.safetensors", &["--shards", "2", "--shard-dir", "parts"]);
