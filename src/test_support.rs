@@ -21,6 +21,18 @@ pub const SYNTH_SENSOR: [[f32; 3]; 4] = [
     [0.0, -0.1, 0.9],
 ];
 
+/// The paper's RGBW sensor on the default wavelength grid, from the built-in data.
+pub fn paper_camera() -> crate::camera::Camera {
+    match crate::camera::Camera::new(
+        &crate::camera::SensorDesign::paper_default(),
+        WavelengthGrid::default(),
+        None,
+    ) {
+        Ok(c) => c,
+        Err(e) => panic!("the paper's sensor does not build: {e}"),
+    }
+}
+
 /// The synthetic sensor's voltage swing.
 pub const SYNTH_SWING: f32 = 1.8;
 

@@ -52,14 +52,7 @@ fn textured_scene(rows: usize, cols: usize) -> Scene {
     }
 }
 
-fn paper_camera() -> Camera {
-    Camera::new(
-        &SensorDesign::paper_default(),
-        WavelengthGrid::default(),
-        None,
-    )
-    .unwrap()
-}
+use l3::test_support::paper_camera;
 
 /// Mean and (population) variance of the pixels of `frame` under channel `ch`.
 fn channel_stats(frame: &Array2<f32>, cfa: &Cfa, ch: usize) -> (f64, f64, usize) {

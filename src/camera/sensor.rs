@@ -727,14 +727,7 @@ fn poisson(lambda: f64, well: f64, rng: &mut ChaCha8Rng) -> f64 {
 mod tests {
     use super::*;
 
-    fn camera() -> Camera {
-        Camera::new(
-            &SensorDesign::paper_default(),
-            WavelengthGrid::default(),
-            None,
-        )
-        .unwrap()
-    }
+    use crate::test_support::paper_camera as camera;
 
     #[test]
     fn fixed_patterns_are_positional_and_have_their_sigma() {

@@ -349,17 +349,7 @@ pub fn colour_class_markdown(sensor: &str, s: &ColourClassStudy) -> String {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::camera::SensorDesign;
-    use crate::spectral::WavelengthGrid;
-
-    fn camera() -> Camera {
-        Camera::new(
-            &SensorDesign::paper_default(),
-            WavelengthGrid::default(),
-            None,
-        )
-        .unwrap()
-    }
+    use crate::test_support::paper_camera as camera;
 
     #[test]
     fn neighbourhood_counts_cover_the_patch() {
