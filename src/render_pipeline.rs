@@ -22,7 +22,7 @@ use crate::l3::{
     WhiteLevel, fuse_entry, xyz_to_srgb8, xyz_to_srgb16,
 };
 use crate::spectral::{IsetData, WavelengthGrid};
-use crate::training::{TrainError, camera_corrected, noise_model};
+use crate::training::{TrainError, camera_corrected, noise_model, with_neutral};
 
 /// Largest preview downscale factor.
 pub const MAX_PREVIEW: usize = 16;
@@ -229,14 +229,18 @@ impl FromStr for CorrectionMode {
 /// The correction `table` renders with under `entry` in `mode`: `entry` itself, or, for a
 /// same-illuminant table with a sensor description in [`CorrectionMode::Camera`] under a
 /// light whose spectrum is known, `entry` with C in place of T (fitted on the table's sensor, built-in curves or
-/// `iset`'s).
+/// `iset`'s). For a table whose chroma classes balance by the light, the entry also gets the
+/// sensor's neutral under a light whose spectrum is known ([`IlluminantEntry::neutral`]).
 pub fn correction_for(
     table: &L3Table,
     entry: &IlluminantEntry,
     mode: CorrectionMode,
     iset: Option<&IsetData>,
 ) -> Result<IlluminantEntry, PipelineError> {
-    if mode == CorrectionMode::Colorimetric || uses_own_kernels(table) || entry.spd.is_none() {
+    let known = entry.spd.is_some();
+    let camera_aware = known && mode == CorrectionMode::Camera && !uses_own_kernels(table);
+    let balances = known && table.chroma_balances();
+    if !camera_aware && !balances {
         return Ok(entry.clone());
     }
     let design = match table.sensor_design() {
@@ -246,12 +250,16 @@ pub fn correction_for(
         Err(e) => return Err(e.into()),
     };
     let camera = Camera::new(&design, WavelengthGrid::default(), iset).map_err(TrainError::from)?;
-    Ok(camera_corrected(
-        &camera,
-        &table.level_colour_maps(&noise_model(&design))?,
-        entry,
-        iset,
-    )?)
+    if camera_aware {
+        Ok(camera_corrected(
+            &camera,
+            &table.level_colour_maps(&noise_model(&design))?,
+            entry,
+            iset,
+        )?)
+    } else {
+        Ok(with_neutral(&camera, entry)?)
+    }
 }
 
 /// The XYZ kernels `table` renders with under `entry`.
@@ -321,7 +329,13 @@ enum Pixels {
 impl RenderPipeline {
     /// Prepares `table` for `entry` (kernel selection: [`kernels_for`]).
     pub fn new(table: &L3Table, entry: &IlluminantEntry) -> Result<Self, L3Error> {
-        Self::with_kernels(table, &kernels_for(table, entry))
+        Ok(Self {
+            renderer: FastRenderer::under_light(
+                table,
+                &kernels_for(table, entry),
+                entry.neutral.as_deref(),
+            )?,
+        })
     }
 
     /// Prepares `table` with explicit XYZ kernels.

@@ -113,6 +113,7 @@ pub fn synthetic_frame_with_blocks(
         volts,
         xyz,
         cfa_shift: shift,
+        neutral: None,
     }
 }
 

@@ -160,6 +160,7 @@ fn zero_samples_is_an_error() {
             volts: vec![],
             xyz: vec![],
             cfa_shift: (0, 0),
+            neutral: None,
         }])
     })
     .err()
@@ -174,6 +175,7 @@ fn zero_samples_is_an_error() {
             volts: vec![0.1; 10],
             xyz: vec![0.1; 30],
             cfa_shift: (0, 0),
+            neutral: None,
         }])
     })
     .err()
@@ -370,6 +372,7 @@ fn camera_frames(
                 volts: volts.into_raw_vec_and_offset().0,
                 xyz: xyz_rates.iter().map(|v| v * exposure as f32).collect(),
                 cfa_shift: (dr, dc),
+                neutral: None,
             }
         })
         .collect()

@@ -422,7 +422,9 @@ impl ChartCase {
         iset: Option<&IsetData>,
         opts: &BenchOptions,
     ) -> Result<Self, BenchError> {
-        let correction = registry.resolve(acquisition, iset)?;
+        // the camera's neutral under the light, which balanced chroma classes need
+        let correction =
+            crate::training::with_neutral(camera, &registry.resolve(acquisition, iset)?)?;
         let full = simulate_chart(camera, acquisition, iset, &opts.chart)?;
         let low_setup = LightLevel::ExposureFactor(opts.low_light_factor).apply(&opts.chart)?;
         let low = simulate_chart(camera, acquisition, iset, &low_setup)?;

@@ -9,8 +9,8 @@ use crate::io::{
     encode_tiff_rgb16, read_mosaic,
 };
 use crate::l3::{
-    IlluminantRegistry, L3Table, Mosaic, RenderStats, TableKind, WhiteLevel, render_reference,
-    white_y, xyz_to_srgb8, xyz_to_srgb16,
+    IlluminantRegistry, L3Table, Mosaic, RenderStats, TableKind, WhiteLevel,
+    render_reference_under, white_y, xyz_to_srgb8, xyz_to_srgb16,
 };
 use crate::render_pipeline::{
     CorrectionMode, OutputFormat, PipelineError, RenderOptions, RenderPipeline, check_preview,
@@ -242,8 +242,14 @@ pub fn run(cli: &Cli, a: &RenderArgs) -> Result<(), CliError> {
                     "--region and --preview need the fast renderer".into(),
                 ));
             }
-            let (xyz, stats) =
-                render_reference(&table, &kernels_for(&table, &entry), &volts, w, h)?;
+            let (xyz, stats) = render_reference_under(
+                &table,
+                &kernels_for(&table, &entry),
+                entry.neutral.as_deref(),
+                &volts,
+                w,
+                h,
+            )?;
             let wy = || white_y(&xyz, w, h, white);
             let bytes = match format {
                 OutputFormat::Png => encode_png_rgb8(w, h, &xyz_to_srgb8(&xyz, wy()), opts.png)?,

@@ -69,8 +69,8 @@ pub struct TrainArgs {
     #[arg(long, value_enum)]
     pub colour_loss: Option<ColourLossArg>,
     /// Split every level into this many chroma classes, each with its own
-    /// colour maps and kernels (k-means on the training surfaces' channel
-    /// chromaticities; 1: no split). Classes with too few surfaces are dropped.
+    /// colour maps and kernels (k-means on the training surfaces' white-balanced
+    /// channel chromaticities; 1: no split). Classes with too few surfaces are dropped.
     #[arg(long, default_value_t = 1)]
     pub chroma_classes: usize,
     #[arg(long, default_value = "table.safetensors")]

@@ -223,8 +223,10 @@ pub fn colour_class_study(
     let rows = class_counts
         .iter()
         .map(|&k| {
-            let classes = ChromaClasses::fit(
+            let classes = ChromaClasses::fit_balanced(
                 &samples.channels,
+                &samples.light,
+                &samples.neutral,
                 k,
                 MIN_SURFACES_PER_CHANNEL * nc,
                 setup.seed,

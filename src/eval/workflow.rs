@@ -312,7 +312,9 @@ pub fn evaluate_method(
     evaluate_capture(camera, &cap, method, method_name, correction, setup)
 }
 
-/// Evaluate `method` on an already simulated chart.
+/// Evaluate `method` on an already simulated chart. A table whose chroma
+/// classes balance by the light gets `camera`'s neutral under the
+/// correction's light, as a renderer told that light would.
 pub fn evaluate_capture(
     camera: &Camera,
     cap: &ChartCapture,
@@ -321,6 +323,14 @@ pub fn evaluate_capture(
     correction: &IlluminantEntry,
     setup: &ChartSetup,
 ) -> Result<DeltaEReport, EvalError> {
+    let balanced;
+    let correction = match method {
+        Method::Table(t) if t.chroma_balances() && correction.neutral.is_none() => {
+            balanced = crate::training::with_neutral(camera, correction)?;
+            &balanced
+        }
+        _ => correction,
+    };
     let started = std::time::Instant::now();
     let xyz = render_method(
         method,

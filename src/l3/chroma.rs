@@ -12,6 +12,18 @@
 //! class that ends with fewer than `min_size` members is dropped and its
 //! members reassigned, so every class has enough surfaces to fit a map on.
 //!
+//! The chromaticity is taken *white-balanced*: each channel over the
+//! camera's response to a white surface under the light (the neutral a raw
+//! file records as AsShotNeutral). A grey then has one chromaticity under
+//! every light, so a table's classes mean the same surfaces under the light
+//! it renders under as under the light it was trained under. Classified on
+//! the raw ratios, every surface shifts toward the light's colour: under
+//! tungsten a D65 table's greys fell into its orange class and got that
+//! class's map, which the illuminant correction T cannot undo (rgbw-ar0132at
+//! SI_D65+T under tungsten 2.69 ΔE2000 with one class, 4.10 with eight
+//! classes on raw ratios). The table keeps a reference neutral
+//! ([`ChromaClasses::white`]) for a light nobody names.
+//!
 //! Written here rather than taken from a clustering crate: the sets are a
 //! few hundred points of at most [`super::MAX_CHANNELS`] dimensions, the
 //! result must reproduce bit for bit from a seed, and the class of a patch
@@ -34,10 +46,62 @@ pub const MIN_SURFACES_PER_CHANNEL: usize = 4;
 pub const MAX_CHROMA_CLASSES: usize = 32;
 
 /// The chroma classes of a sensor: one centroid per class, each a
-/// chromaticity (channel responses over their sum).
+/// chromaticity (white-balanced channel responses over their sum).
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct ChromaClasses {
     pub centroids: Vec<Vec<f64>>,
+    /// The neutral (channel responses to white, largest 1) the responses are
+    /// balanced by when the light is not known: the training light's, or the
+    /// geometric mean of an ensemble's. `None` in tables whose classes were
+    /// fitted on raw ratios: they classify every light unbalanced.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub white: Option<Vec<f64>>,
+}
+
+/// `neutral` scaled so its largest channel is 1, or an error naming what is
+/// wrong with it (a neutral must be positive and finite in every channel).
+pub fn normalised_neutral(neutral: &[f64]) -> Result<Vec<f64>, L3Error> {
+    let max = neutral.iter().copied().fold(0.0, f64::max);
+    if neutral.is_empty() || !neutral.iter().all(|v| v.is_finite() && *v > 0.0) || max <= 0.0 {
+        return Err(L3Error::InvalidInput(format!(
+            "a light's neutral must be positive and finite in every channel, got {neutral:?}"
+        )));
+    }
+    Ok(neutral.iter().map(|v| v / max).collect())
+}
+
+/// The channel-wise geometric mean of `neutrals` (each normalised), itself
+/// normalised: the reference neutral of an ensemble of lights.
+pub fn mean_neutral(neutrals: &[Vec<f64>]) -> Result<Vec<f64>, L3Error> {
+    let normed = neutrals
+        .iter()
+        .map(|n| normalised_neutral(n))
+        .collect::<Result<Vec<_>, _>>()?;
+    let nc = normed.first().map(Vec::len).unwrap_or(0);
+    if nc == 0 || normed.iter().any(|n| n.len() != nc) {
+        return Err(L3Error::InvalidInput(
+            "neutrals of one length are needed for a mean".into(),
+        ));
+    }
+    let logs: Vec<f64> = (0..nc)
+        .map(|ch| {
+            let s: f64 = normed.iter().map(|n| n[ch].ln()).sum();
+            (s / normed.len() as f64).exp()
+        })
+        .collect();
+    normalised_neutral(&logs)
+}
+
+/// `channels` white-balanced by `neutral` (each channel over the light's
+/// response to white); unchanged without a neutral or with one of another
+/// length.
+pub fn balanced(channels: &[f64], neutral: Option<&[f64]>) -> Vec<f64> {
+    match neutral {
+        Some(n) if n.len() == channels.len() => {
+            channels.iter().zip(n).map(|(c, w)| c / w).collect()
+        }
+        _ => channels.to_vec(),
+    }
 }
 
 /// The chromaticity of a channel response: each channel over the sum of
@@ -68,6 +132,7 @@ impl ChromaClasses {
     pub fn single(n_channels: usize) -> Self {
         Self {
             centroids: vec![vec![1.0 / n_channels.max(1) as f64; n_channels.max(1)]],
+            white: None,
         }
     }
 
@@ -80,7 +145,42 @@ impl ChromaClasses {
     }
 
     /// Up to `k` classes of `responses` (channel responses, one per
-    /// surface), each with at least `min_size` members, from `seed`.
+    /// surface, each lit by the light whose neutral is `neutrals[light[i]]`),
+    /// each with at least `min_size` members, from `seed`. The classes are
+    /// of white-balanced chromaticities; their reference neutral is the
+    /// lights' mean ([`mean_neutral`]).
+    pub fn fit_balanced(
+        responses: &[Vec<f64>],
+        light: &[usize],
+        neutrals: &[Vec<f64>],
+        k: usize,
+        min_size: usize,
+        seed: u64,
+    ) -> Result<Self, L3Error> {
+        let normed = neutrals
+            .iter()
+            .map(|n| normalised_neutral(n))
+            .collect::<Result<Vec<_>, _>>()?;
+        let balanced_responses = responses
+            .iter()
+            .enumerate()
+            .map(|(i, r)| {
+                let n = normed
+                    .get(light.get(i).copied().unwrap_or(0))
+                    .ok_or_else(|| {
+                        L3Error::InvalidInput(format!("response {i} is lit by an unknown light"))
+                    })?;
+                Ok(balanced(r, Some(n)))
+            })
+            .collect::<Result<Vec<_>, L3Error>>()?;
+        let mut classes = Self::fit(&balanced_responses, k, min_size, seed)?;
+        classes.white = Some(mean_neutral(&normed)?);
+        Ok(classes)
+    }
+
+    /// Up to `k` classes of `responses` (channel responses, one per
+    /// surface, taken as they are), each with at least `min_size` members,
+    /// from `seed`.
     pub fn fit(
         responses: &[Vec<f64>],
         k: usize,
@@ -104,6 +204,7 @@ impl ChromaClasses {
         if k == 1 {
             return Ok(Self {
                 centroids: vec![mean(&points, &vec![true; points.len()])],
+                white: None,
             });
         }
         let mut rng = ChaCha8Rng::seed_from_u64(seed);
@@ -124,7 +225,10 @@ impl ChromaClasses {
                 _ => break,
             }
         }
-        Ok(Self { centroids })
+        Ok(Self {
+            centroids,
+            white: None,
+        })
     }
 
     /// Check a stored set of classes for a sensor of `n_channels`: 1 to
@@ -145,11 +249,39 @@ impl ChromaClasses {
                 "chroma centroids must be {n_channels} finite values each"
             )));
         }
+        if let Some(w) = &self.white {
+            if w.len() != n_channels {
+                return Err(L3Error::InvalidParams(format!(
+                    "the chroma classes' neutral has {} values for {n_channels} channels",
+                    w.len()
+                )));
+            }
+            normalised_neutral(w).map_err(|e| L3Error::InvalidParams(e.to_string()))?;
+        }
         Ok(())
     }
 
-    /// The class of a channel response (class 0 when nothing responds).
+    /// The neutral a response under a light of neutral `light` is balanced
+    /// by: `light` itself, the reference ([`Self::white`]) when the light is
+    /// not known, none for classes of raw ratios.
+    pub fn neutral_for<'a>(&'a self, light: Option<&'a [f64]>) -> Option<&'a [f64]> {
+        self.white.as_ref()?;
+        light.or(self.white.as_deref())
+    }
+
+    /// The class of a channel response under the light of neutral `light`
+    /// (`None`: the reference light); class 0 when nothing responds.
+    pub fn classify_under(&self, channels: &[f64], light: Option<&[f64]>) -> usize {
+        self.classify_raw(&balanced(channels, self.neutral_for(light)))
+    }
+
+    /// The class of a channel response under the reference light (class 0
+    /// when nothing responds).
     pub fn classify(&self, channels: &[f64]) -> usize {
+        self.classify_under(channels, None)
+    }
+
+    fn classify_raw(&self, channels: &[f64]) -> usize {
         match chromaticity(channels) {
             Some(p) if self.centroids.len() > 1 => nearest(&self.centroids, &p),
             _ => 0,
@@ -287,7 +419,67 @@ mod tests {
         assert!(ChromaClasses::fit(&groups(), 0, 1, 7).is_err());
     }
 
+    #[test]
+    fn balanced_classes_put_a_surface_in_one_class_under_every_light() {
+        let d65 = vec![0.8, 1.0, 0.9];
+        let lamp = vec![1.0, 0.6, 0.25];
+        // the groups' surfaces seen under both lights
+        let surfaces = groups();
+        let mut responses = Vec::new();
+        let mut light = Vec::new();
+        for (l, n) in [&d65, &lamp].into_iter().enumerate() {
+            for s in &surfaces {
+                responses.push(s.iter().zip(n.iter()).map(|(a, b)| a * b).collect());
+                light.push(l);
+            }
+        }
+        let neutrals = vec![d65.clone(), lamp.clone()];
+        let classes = ChromaClasses::fit_balanced(&responses, &light, &neutrals, 3, 5, 7).unwrap();
+        assert_eq!(classes.len(), 3);
+        let n = surfaces.len();
+        for i in 0..n {
+            assert_eq!(
+                classes.classify_under(&responses[i], Some(&d65)),
+                classes.classify_under(&responses[n + i], Some(&lamp)),
+                "surface {i}"
+            );
+        }
+        // the reference is the lights' geometric mean, largest channel 1
+        let white = classes.white.clone().unwrap();
+        let expect = [
+            (0.8f64 * 1.0).sqrt(),
+            (1.0f64 * 0.6).sqrt(),
+            (0.9f64 * 0.25).sqrt(),
+        ];
+        let max = expect.iter().copied().fold(0.0, f64::max);
+        for (w, e) in white.iter().zip(expect) {
+            assert!((w - e / max).abs() < 1e-12);
+        }
+        assert!(classes.validate(3).is_ok());
+        // a light's neutral must respond in every channel
+        assert!(
+            ChromaClasses::fit_balanced(&responses, &light, &[d65, vec![1.0, 0.0, 0.2]], 3, 5, 7)
+                .is_err()
+        );
+        assert!(ChromaClasses::fit_balanced(&responses, &light, &neutrals[..1], 3, 5, 7).is_err());
+    }
+
     proptest! {
+        /// Balanced, a class does not depend on the light's neutral.
+        #[test]
+        fn balanced_classes_do_not_depend_on_the_light(
+            r in 0.01f64..1.0, g in 0.01f64..1.0, b in 0.01f64..1.0,
+            nr in 0.05f64..1.0, ng in 0.05f64..1.0, nb in 0.05f64..1.0,
+        ) {
+            let mut classes = ChromaClasses::fit(&groups(), 3, 5, 7).unwrap();
+            classes.white = Some(vec![1.0, 0.7, 0.4]);
+            let n = [nr, ng, nb];
+            prop_assert_eq!(
+                classes.classify_under(&[r, g, b], Some(&[1.0, 1.0, 1.0])),
+                classes.classify_under(&[r * nr, g * ng, b * nb], Some(&n))
+            );
+        }
+
         /// A class depends on the ratios of the responses, not on exposure.
         #[test]
         fn classes_do_not_depend_on_exposure(

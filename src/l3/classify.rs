@@ -1,5 +1,7 @@
 //! Patch geometry and per-pixel class statistics (DESIGN.md §5).
 
+use std::borrow::Cow;
+
 use crate::camera::Cfa;
 
 use super::L3Error;
@@ -45,6 +47,9 @@ pub struct PatchGeometry {
     chroma: Vec<[f32; MAX_CHANNELS]>,
     /// Per class, its score's weights ([`Self::chroma_coefficients`]).
     chroma_coef: Vec<[f32; MAX_CHANNELS]>,
+    /// Whether the classes are of white-balanced chromaticities (see
+    /// [`super::chroma`]), so that the light changes the scores.
+    chroma_balanced: bool,
 }
 
 /// The saturation case a patch with channel mask `mask` uses among `cases`
@@ -160,11 +165,14 @@ impl PatchGeometry {
             level_edges,
             chroma: Vec::new(),
             chroma_coef: Vec::new(),
+            chroma_balanced: false,
         })
     }
 
     /// This geometry with `classes`' chroma split: every luminance level
-    /// becomes one band per chroma class (band = level × classes + class).
+    /// becomes one band per chroma class (band = level × classes + class),
+    /// classified under the classes' reference light ([`Self::under_light`]
+    /// for another).
     pub fn with_chroma(mut self, classes: &super::ChromaClasses) -> Result<Self, L3Error> {
         classes.validate(self.n_channels)?;
         self.chroma = if classes.len() > 1 {
@@ -182,20 +190,48 @@ impl PatchGeometry {
         } else {
             Vec::new()
         };
+        self.chroma_balanced = classes.white.is_some();
+        self.chroma_coef = self.chroma_scores(classes.white.as_deref());
+        Ok(self)
+    }
+
+    /// This geometry classifying chroma under the light whose neutral (the
+    /// channel responses to white) is `light`: the classes' balance divides
+    /// each channel by it. Borrowed when nothing changes (no split, classes
+    /// of raw ratios, or no light named).
+    pub fn under_light(&self, light: Option<&[f64]>) -> Result<Cow<'_, Self>, L3Error> {
+        let Some(light) = light.filter(|_| self.chroma_balanced && !self.chroma.is_empty()) else {
+            return Ok(Cow::Borrowed(self));
+        };
+        if light.len() != self.n_channels {
+            return Err(L3Error::InvalidInput(format!(
+                "a neutral of {} channels for a sensor of {}",
+                light.len(),
+                self.n_channels
+            )));
+        }
+        let n = super::chroma::normalised_neutral(light)?;
+        let mut g = self.clone();
+        g.chroma_coef = self.chroma_scores(Some(&n));
+        Ok(Cow::Owned(g))
+    }
+
+    /// Per class, the weights of its score on the channel means balanced by
+    /// `neutral` (see [`Self::chroma_of`]): `(|c|² − 2 c_ch) / neutral_ch`.
+    fn chroma_scores(&self, neutral: Option<&[f64]>) -> Vec<[f32; MAX_CHANNELS]> {
         let nc = self.n_channels;
-        self.chroma_coef = self
-            .chroma
+        self.chroma
             .iter()
             .map(|c| {
                 let norm2: f32 = c[..nc].iter().map(|v| v * v).sum();
                 let mut a = [0f32; MAX_CHANNELS];
                 for ch in 0..nc {
-                    a[ch] = norm2 - 2.0 * c[ch];
+                    let gain = neutral.and_then(|n| n.get(ch)).map_or(1.0, |w| 1.0 / *w);
+                    a[ch] = ((norm2 - 2.0 * c[ch]) as f64 * gain) as f32;
                 }
                 a
             })
-            .collect();
-        Ok(self)
+            .collect()
     }
 
     /// Chroma classes (1 without a chroma split).
@@ -220,10 +256,11 @@ impl PatchGeometry {
     }
 
     /// The chroma class of a patch's channel means (each channel, clamped at
-    /// 0, over their sum: the nearest centroid; class 0 when nothing
-    /// responds), with how far it is from the runner-up: the difference of
-    /// the squared distances times the sum of the means (so a caller can tell
-    /// a class its rounding cannot change).
+    /// 0 and balanced by the light's neutral, over their sum: the nearest
+    /// centroid; class 0 when nothing responds), with how far it is from the
+    /// runner-up: the difference of the squared distances times the sum of
+    /// the balanced means (so a caller can tell a class its rounding cannot
+    /// change). The balance is folded into the scores' weights.
     ///
     /// With `x = m / Σm`, `|x − c|² = |x|² + score(c) / Σm` where
     /// `score(c) = Σ_ch m_ch (|c|² − 2 c_ch)`: the class is the centroid of
@@ -523,6 +560,7 @@ mod tests {
     fn bands_split_each_level_by_chroma_class() {
         let classes = crate::l3::ChromaClasses {
             centroids: vec![vec![0.7, 0.1, 0.1, 0.1], vec![0.1, 0.1, 0.1, 0.7]],
+            white: None,
         };
         let plain = rgbw_geometry();
         assert_eq!((plain.n_chroma(), plain.n_bands()), (1, 3));
@@ -550,7 +588,41 @@ mod tests {
         assert_eq!(rgbw_geometry().with_chroma(&one).unwrap().n_bands(), 3);
         let three = crate::l3::ChromaClasses {
             centroids: vec![vec![0.5, 0.5, 0.0]; 2],
+            white: None,
         };
         assert!(rgbw_geometry().with_chroma(&three).is_err());
+        // classes of raw ratios ignore the light
+        let lamp = [1.0, 0.5, 0.2, 0.8];
+        assert!(matches!(
+            g.under_light(Some(&lamp)).unwrap(),
+            Cow::Borrowed(_)
+        ));
+    }
+
+    #[test]
+    fn balanced_classes_follow_the_light() {
+        // a reddish and a bluish class, balanced by a neutral light
+        let classes = crate::l3::ChromaClasses {
+            centroids: vec![vec![0.4, 0.2, 0.2, 0.2], vec![0.2, 0.2, 0.4, 0.2]],
+            white: Some(vec![1.0; 4]),
+        };
+        let g = rgbw_geometry().with_chroma(&classes).unwrap();
+        // under a warm lamp a surface's responses are its balanced ones times
+        // the lamp's neutral, whatever the scale of the neutral
+        let lamp = [1.0, 0.55, 0.2, 0.7];
+        let warm = g.under_light(Some(&lamp)).unwrap();
+        let doubled = g.under_light(Some(&lamp.map(|v| v * 2.0))).unwrap();
+        let bluish = [0.25, 0.25, 0.45, 0.25];
+        let under_lamp = means(std::array::from_fn(|ch| bluish[ch] * lamp[ch] as f32));
+        assert_eq!(g.chroma_of(&means(bluish)).0, 1);
+        assert_eq!(warm.chroma_of(&under_lamp).0, 1);
+        assert_eq!(doubled.chroma_of(&under_lamp).0, 1);
+        // read unbalanced, the lamp's shift moves it to the other class
+        assert_eq!(g.chroma_of(&under_lamp).0, 0);
+        // no light named: the reference light; a bad neutral is refused
+        assert!(matches!(g.under_light(None).unwrap(), Cow::Borrowed(_)));
+        assert!(g.under_light(Some(&[1.0, 0.0, 1.0, 1.0])).is_err());
+        assert!(g.under_light(Some(&[1.0, 1.0, 1.0])).is_err());
+        assert!(g.under_light(Some(&[1.0, f64::NAN, 1.0, 1.0])).is_err());
     }
 }

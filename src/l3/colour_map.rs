@@ -84,6 +84,10 @@ pub struct ColourSamples {
     /// Per sample, the index of the illuminant it is lit by (empty: one
     /// light), so that a loss can weigh every light of an ensemble alike.
     pub light: Vec<usize>,
+    /// Per illuminant (by [`Self::light`]'s index), the sensor's channel
+    /// responses to white under it: what chroma classes balance by
+    /// ([`super::chroma`]). Empty: the classes' reference light.
+    pub neutral: Vec<Vec<f64>>,
 }
 
 impl ColourSamples {
@@ -114,13 +118,21 @@ impl ColourSamples {
             } else {
                 indices.iter().map(|&i| self.light[i]).collect()
             },
+            neutral: self.neutral.clone(),
         }
     }
 
-    /// The indices of the samples `classes` puts in chroma class `k`.
+    /// The neutral of sample `i`'s light, when known.
+    pub fn neutral_of(&self, i: usize) -> Option<&[f64]> {
+        let light = self.light.get(i).copied().unwrap_or(0);
+        self.neutral.get(light).map(Vec::as_slice)
+    }
+
+    /// The indices of the samples `classes` puts in chroma class `k`, each
+    /// balanced by its light's neutral.
     pub fn in_chroma_class(&self, classes: &ChromaClasses, k: usize) -> Vec<usize> {
         (0..self.len())
-            .filter(|&i| classes.classify(&self.channels[i]) == k)
+            .filter(|&i| classes.classify_under(&self.channels[i], self.neutral_of(i)) == k)
             .collect()
     }
 
@@ -694,6 +706,7 @@ mod tests {
         }
         let classes = ChromaClasses {
             centroids: vec![vec![0.55, 0.35, 0.1], vec![0.1, 0.35, 0.55]],
+            white: None,
         };
         let picked: Vec<usize> = (0..2)
             .map(|k| s.in_chroma_class(&classes, k).len())

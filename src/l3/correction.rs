@@ -141,6 +141,12 @@ pub struct IlluminantEntry {
     /// render with, when it has been fitted per level; empty: `t` for every class.
     #[serde(skip)]
     pub level_corrections: Vec<Mat3>,
+    /// A table's sensor's channel responses to white under this light, when
+    /// they have been worked out for the table it renders with: what its
+    /// chroma classes balance by (`crate::l3::chroma`); `None`, their
+    /// reference light.
+    #[serde(skip)]
+    pub neutral: Option<Vec<f64>>,
 }
 
 /// The registry: illuminant name → T. D65 is always present (identity).
@@ -180,6 +186,7 @@ impl IlluminantRegistry {
                 source: CorrectionSource::Builtin,
                 spd: Some(r.d65.clone()),
                 level_corrections: Vec::new(),
+                neutral: None,
             },
         );
         Ok(r)
@@ -306,6 +313,7 @@ impl IlluminantRegistry {
             source,
             spd: Some(spd.clone()),
             level_corrections: Vec::new(),
+            neutral: None,
         })
     }
 
@@ -346,6 +354,7 @@ impl IlluminantRegistry {
             source: CorrectionSource::Matrix,
             spd: None,
             level_corrections: Vec::new(),
+            neutral: None,
         })
     }
 

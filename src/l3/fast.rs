@@ -424,8 +424,19 @@ impl Source<'_> {
 
 impl FastRenderer {
     /// Prepare `table` with `kernels` (its own, or fused with a correction matrix
-    /// by [`fuse_kernels`](super::fuse_kernels)).
+    /// by [`fuse_kernels`](super::fuse_kernels)), its chroma classes under their
+    /// reference light.
     pub fn new(table: &L3Table, kernels: &[f32]) -> Result<Self, L3Error> {
+        Self::under_light(table, kernels, None)
+    }
+
+    /// [`Self::new`] with the chroma classes balanced by `light`, the neutral
+    /// (channel responses to white) of the light the mosaics are taken under.
+    pub fn under_light(
+        table: &L3Table,
+        kernels: &[f32],
+        light: Option<&[f64]>,
+    ) -> Result<Self, L3Error> {
         if kernels.len() != table.kernels.len() {
             return Err(L3Error::KernelMismatch {
                 got: kernels.len(),
@@ -435,7 +446,7 @@ impl FastRenderer {
         if kernels.iter().any(|v| !v.is_finite()) {
             return Err(L3Error::Table("a kernel weight is not finite".into()));
         }
-        let geo = table.geometry()?;
+        let geo = table.geometry_under(light)?;
         let nf = table.n_features();
         let n_groups = table.n_classes() / 2;
         let contrast_matters = (0..n_groups)

@@ -43,7 +43,10 @@ pub use output::{
 };
 pub use params::{DEFAULT_LEVELS_1V8, L3Params};
 pub use partial_format::PARTIAL_FORMAT_VERSION;
-pub use render::{RenderStats, fuse_entry, fuse_kernels, render_reference, resolve_sat_case};
+pub use render::{
+    RenderStats, fuse_entry, fuse_kernels, render_reference, render_reference_under,
+    resolve_sat_case,
+};
 pub use shards::{
     ClassSums, Classes, GramPartial, Node, ShardSpec, SurveyPartial, SurveyShape, cover,
     merge_partials, merge_surveys, plan_shards,

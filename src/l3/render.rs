@@ -88,11 +88,26 @@ pub fn resolve_sat_case(table: &L3Table, mask: u32, means: &[f32]) -> (usize, bo
 }
 
 /// Render a mosaic in volts (`width × height`, row-major) to interleaved XYZ
-/// with `kernels` (the table's own or fused ones). Non-finite input is an
-/// error; values outside [0, swing] are clamped and counted.
+/// with `kernels` (the table's own or fused ones), any chroma classes under
+/// their reference light. Non-finite input is an error; values outside
+/// [0, swing] are clamped and counted.
 pub fn render_reference(
     table: &L3Table,
     kernels: &[f32],
+    volts: &[f32],
+    width: usize,
+    height: usize,
+) -> Result<(Vec<f32>, RenderStats), L3Error> {
+    render_reference_under(table, kernels, None, volts, width, height)
+}
+
+/// [`render_reference`] with the chroma classes balanced by `light`, the
+/// neutral (channel responses to white) of the light the mosaic is taken
+/// under; `None`, the classes' reference light.
+pub fn render_reference_under(
+    table: &L3Table,
+    kernels: &[f32],
+    light: Option<&[f64]>,
     volts: &[f32],
     width: usize,
     height: usize,
@@ -133,7 +148,7 @@ pub fn render_reference(
             }
         })
         .collect();
-    let geo = table.geometry()?;
+    let geo = table.geometry_under(light)?;
     let mut out = vec![0f32; width * height * 3];
     let stats = out
         .par_chunks_mut(width * 3)

@@ -241,6 +241,23 @@ impl L3Table {
         &self.kernels[class * n..(class + 1) * n]
     }
 
+    /// Whether the table's chroma classes balance by the light they classify
+    /// under ([`super::chroma`]): a split with a reference neutral.
+    pub fn chroma_balances(&self) -> bool {
+        self.meta
+            .params
+            .chroma
+            .as_ref()
+            .is_some_and(|c| c.len() > 1 && c.white.is_some())
+    }
+
+    /// Patch geometry for classification with this table under the light whose neutral
+    /// (channel responses to white) is `light`: the chroma classes balance by it
+    /// ([`PatchGeometry::under_light`]); `None`, the classes' reference light.
+    pub fn geometry_under(&self, light: Option<&[f64]>) -> Result<PatchGeometry, L3Error> {
+        Ok(self.geometry()?.under_light(light)?.into_owned())
+    }
+
     /// Patch geometry for classification with this table.
     /// A table whose parameters make no geometry is not usable ([`L3Error::Table`]): its
     /// parameters are the table's, not a caller's.

@@ -21,6 +21,7 @@ fn synthetic_chroma() -> ChromaClasses {
             vec![0.1, 0.3, 0.3, 0.3],
             vec![0.2, 0.25, 0.35, 0.2],
         ],
+        white: Some(vec![1.0; 4]),
     }
 }
 
@@ -102,6 +103,7 @@ fn per_level_corrections_fuse_each_class_with_its_levels_matrix() {
         source: CorrectionSource::Matrix,
         spd: None,
         level_corrections: Vec::new(),
+        neutral: None,
     };
     // without per-level corrections: T everywhere
     assert_eq!(fuse_entry(&table, &entry), fuse_kernels(&table, &t));
@@ -376,19 +378,31 @@ fn a_chroma_split_table_learns_round_trips_and_renders_fast_as_the_reference() {
     let noisy = train_synthetic_with(0.01, Some(synthetic_chroma()));
     let mut g = synthetic_frame_with_blocks(11, 96, BLOCK, 1.2, 0.02, (0, 0));
     g.volts[40 * 96 + 40] = 1.8;
-    for simd in [true, false] {
-        let mut fast = FastRenderer::new(&noisy, &noisy.kernels).unwrap();
-        fast.options.simd = simd;
-        assert!(!fast.uses_avx512());
-        let (want, ws) = render_reference(&noisy, &noisy.kernels, &g.volts, 96, 96).unwrap();
-        let (got, gs) = fast
-            .render_xyz(Mosaic::Volts(&g.volts), 96, 96, None)
-            .unwrap();
-        let d = max_abs_diff(&want, &got);
-        assert!(d <= 1e-5, "simd {simd}: max diff {d}");
-        assert_eq!((ws.pixels, ws.texture), (gs.pixels, gs.texture));
-        assert!(gs.exact_path < gs.pixels / 4, "{gs:?}");
+    // under the reference light and under another one, whose neutral moves
+    // pixels between classes
+    let lamp = [1.0, 0.7, 0.9, 0.45];
+    let mut outputs = Vec::new();
+    for light in [None, Some(&lamp[..])] {
+        for simd in [true, false] {
+            let mut fast = FastRenderer::under_light(&noisy, &noisy.kernels, light).unwrap();
+            fast.options.simd = simd;
+            assert!(!fast.uses_avx512());
+            let (want, ws) =
+                render_reference_under(&noisy, &noisy.kernels, light, &g.volts, 96, 96).unwrap();
+            let (got, gs) = fast
+                .render_xyz(Mosaic::Volts(&g.volts), 96, 96, None)
+                .unwrap();
+            let d = max_abs_diff(&want, &got);
+            assert!(d <= 1e-5, "light {light:?}, simd {simd}: max diff {d}");
+            assert_eq!((ws.pixels, ws.texture), (gs.pixels, gs.texture));
+            assert!(gs.exact_path < gs.pixels / 4, "{gs:?}");
+            outputs.push(want);
+        }
     }
+    assert!(
+        max_abs_diff(&outputs[0], &outputs[2]) > 1e-3,
+        "the light changed nothing"
+    );
 }
 
 #[test]
@@ -430,6 +444,7 @@ fn per_band_corrections_fuse_each_class_with_its_bands_matrix() {
         source: CorrectionSource::Matrix,
         spd: None,
         level_corrections: per_band.clone(),
+        neutral: None,
     };
     let fused = fuse_entry(&table, &entry);
     let nf = table.n_features();

@@ -42,6 +42,10 @@ pub struct TrainingFrame {
     pub xyz: Vec<f32>,
     /// Pixel (r, c) sits under the base CFA's (r + dr, c + dc) filter.
     pub cfa_shift: (usize, usize),
+    /// The sensor's channel responses to white under the frame's light, which
+    /// chroma classes balance by ([`PatchGeometry::under_light`]); `None`: the
+    /// classes' reference light.
+    pub neutral: Option<Vec<f64>>,
 }
 
 /// Progress and cancellation hooks of a training run.
@@ -319,7 +323,8 @@ where
             let frames = frame(i)?;
             let mut s = empty();
             for f in &frames {
-                for_each_patch(geo, f, |pos, st, _patch| {
+                let geo = geo.under_light(f.neutral.as_deref())?;
+                for_each_patch(&geo, f, |pos, st, _patch| {
                     let level = geo.band_of(st.luminance, &st.channel_means);
                     let mask = if params.saturation_classes {
                         st.sat_mask
@@ -470,7 +475,8 @@ where
         let mut feat = vec![0f32; nf];
         for f in &frames {
             ticker.check()?;
-            for_each_patch(geo, f, |pos, st, patch| {
+            let geo = geo.under_light(f.neutral.as_deref())?;
+            for_each_patch(&geo, f, |pos, st, patch| {
                 let level = geo.band_of(st.luminance, &st.channel_means);
                 let mask = if params.saturation_classes {
                     st.sat_mask

@@ -64,6 +64,7 @@ pub fn colour_samples(
             out.white.push(target_white.map(|v| v / norm));
             out.light.push(light);
         }
+        out.neutral.push(wc.to_vec());
     }
     Ok(out)
 }
@@ -122,13 +123,36 @@ pub fn camera_corrected(
     let t = *corrections.last().ok_or_else(|| {
         TrainError::Invalid("a camera-aware correction needs a colour map".into())
     })?;
-    Ok(IlluminantEntry {
-        t,
-        level_corrections: if corrections.len() > 1 {
-            corrections
-        } else {
-            Vec::new()
+    with_neutral(
+        camera,
+        &IlluminantEntry {
+            t,
+            level_corrections: if corrections.len() > 1 {
+                corrections
+            } else {
+                Vec::new()
+            },
+            ..entry.clone()
         },
+    )
+}
+
+/// `entry` with `camera`'s neutral under its light (the channel responses to
+/// a white surface, [`IlluminantEntry::neutral`]), which a table's chroma
+/// classes balance by; unchanged for an entry with no spectrum.
+pub fn with_neutral(
+    camera: &Camera,
+    entry: &IlluminantEntry,
+) -> Result<IlluminantEntry, TrainError> {
+    let neutral = match &entry.spd {
+        Some(spd) => {
+            let white = Spectrum::constant(*camera.grid(), 1.0);
+            Some(camera.reflectance_response(&white, spd)?.0.to_vec())
+        }
+        None => entry.neutral.clone(),
+    };
+    Ok(IlluminantEntry {
+        neutral,
         ..entry.clone()
     })
 }

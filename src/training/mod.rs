@@ -32,7 +32,7 @@ use crate::spectral::{
 };
 
 pub use crate::scene::training_reflectances;
-pub use colour_samples::{camera_corrected, colour_samples, noise_model};
+pub use colour_samples::{camera_corrected, colour_samples, noise_model, with_neutral};
 pub use scenes::TrainingScenes;
 
 /// Errors of a training run.
@@ -282,6 +282,8 @@ pub struct TrainingRun {
     noise: NoiseSwitches,
     nm: NoiseModel,
     maps: Option<Vec<ColourMatrix>>,
+    /// Per training illuminant, the sensor's channel responses to white.
+    neutrals: Vec<Vec<f64>>,
     run_key: String,
 }
 
@@ -316,6 +318,11 @@ impl TrainingRun {
         let d65 = cie_illuminant("D65")
             .ok_or_else(|| TrainError::Invalid("D65 missing".into()))?
             .resample(&grid, Extrapolation::Zero);
+        let white = Spectrum::constant(grid, 1.0);
+        let neutrals = illuminants
+            .iter()
+            .map(|(_, spd)| Ok(camera.reflectance_response(&white, spd)?.0.to_vec()))
+            .collect::<Result<Vec<_>, TrainError>>()?;
         let scenes =
             TrainingScenes::new(grid, iset, spec.seed, spec.scene_size, spec.mean_luminance)?;
         let noise = if spec.noise {
@@ -344,8 +351,10 @@ impl TrainingRun {
                     }
                 }
                 if spec.chroma_classes > 1 {
-                    let classes = ChromaClasses::fit(
+                    let classes = ChromaClasses::fit_balanced(
                         &samples.channels,
+                        &samples.light,
+                        &samples.neutral,
                         spec.chroma_classes,
                         MIN_SURFACES_PER_CHANNEL * camera.n_channels(),
                         spec.seed,
@@ -376,6 +385,7 @@ impl TrainingRun {
             noise,
             nm,
             maps,
+            neutrals,
             run_key,
         })
     }
@@ -579,6 +589,11 @@ impl TrainingRun {
                     volts: volts.into_raw_vec_and_offset().0,
                     xyz: xyz_rates.iter().map(|v| v * t).collect(),
                     cfa_shift: (dr, dc),
+                    neutral: self
+                        .params
+                        .chroma
+                        .as_ref()
+                        .map(|_| self.neutrals[i].clone()),
                 });
             }
         }
