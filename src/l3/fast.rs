@@ -713,8 +713,41 @@ impl FastRenderer {
     /// The chroma class of every pixel of a tile row (`tw` columns, row parity
     /// `rpar`, first column's parity `cpar`) from its phase means, as
     /// [`PatchGeometry::chroma_of`] computes it, a class (all pixels) at a time
-    /// so that the loops vectorise.
-    fn chroma_row(
+    /// so that the loops vectorise: with AVX2 when the tile runs with it
+    /// (`SIMD`), kept out of line so that one-class tables do not carry it.
+    #[inline(never)]
+    fn chroma_row<const SIMD: bool>(
+        &self,
+        means: &[Vec<f32>; 4],
+        parity: (usize, usize),
+        tw: usize,
+        cs: &mut ChromaScratch,
+    ) {
+        #[cfg(target_arch = "x86_64")]
+        if SIMD {
+            // SAFETY: the tile runs with `SIMD` only where AVX2 and FMA were detected
+            unsafe { self.chroma_row_avx2(means, parity, tw, cs) };
+            return;
+        }
+        self.chroma_row_body(means, parity, tw, cs);
+    }
+
+    #[cfg(target_arch = "x86_64")]
+    #[target_feature(enable = "avx2,fma")]
+    unsafe fn chroma_row_avx2(
+        &self,
+        means: &[Vec<f32>; 4],
+        parity: (usize, usize),
+        tw: usize,
+        cs: &mut ChromaScratch,
+    ) {
+        self.chroma_row_body(means, parity, tw, cs);
+    }
+
+    /// [`Self::chroma_row`]'s loops; separate multiplies and adds (no fused
+    /// ones), so every instruction set gives the reference's scores.
+    #[inline(always)]
+    fn chroma_row_body(
         &self,
         means: &[Vec<f32>; 4],
         (rpar, cpar): (usize, usize),
@@ -1321,7 +1354,7 @@ impl FastRenderer {
                 let (contrast, class) = (&sc.contrast[..tw], &mut sc.class[..tw]);
                 let kc = self.n_chroma;
                 if kc > 1 {
-                    self.chroma_row(&sc.means, (rpar, cpar), tw, &mut sc.chroma);
+                    self.chroma_row::<SIMD>(&sc.means, (rpar, cpar), tw, &mut sc.chroma);
                 }
                 let cs = &sc.chroma;
                 let bands = self.n_bands;
