@@ -680,6 +680,27 @@ fn train_with_chroma_classes_shards_and_renders() {
     assert_eq!(one, two, "2 shards give the single run's bytes");
     let table = l3::l3::L3Table::load(&d.join("c.safetensors")).unwrap();
     assert_eq!((table.n_chroma(), table.n_bands()), (3, 12));
+    // the classes balance by the light: the table keeps its training light's
+    // neutral, the sensor's response to white under D65 (largest channel 1)
+    let design = table.sensor_design().unwrap();
+    let camera = l3::camera::Camera::new(&design, table.meta.grid, None).unwrap();
+    let d65 = l3::spectral::cie_illuminant("D65").unwrap();
+    let white = camera.white_response(&d65).unwrap();
+    let max = white.iter().copied().fold(0.0, f64::max);
+    let stored = table
+        .meta
+        .params
+        .chroma
+        .as_ref()
+        .unwrap()
+        .white
+        .clone()
+        .unwrap();
+    assert!(table.chroma_balances());
+    assert_eq!(stored.len(), white.len());
+    for (s, w) in stored.iter().zip(&white) {
+        assert!((s - w / max).abs() < 1e-9, "{stored:?} against {white:?}");
+    }
     let sim = d.join("sim");
     simulate_macbeth(d, &sim);
     let png = d.join("c.png");
