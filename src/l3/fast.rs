@@ -501,14 +501,13 @@ impl FastRenderer {
     }
 
     /// Whether the AVX-512 kernels will be used (2×2 CFAs with one channel per
-    /// phase, patch 3, 5 or 7, at most 32 levels).
+    /// phase, patch 3, 5 or 7). A table with chroma classes or more than 32
+    /// levels is classified by the AVX2 code and its kernels applied with AVX-512.
     pub fn uses_avx512(&self) -> bool {
         self.uses_simd()
             && self.avx512_available
             && self.options.avx512
             && self.uniform_phases.is_some()
-            && self.n_chroma == 1
-            && self.n_bands <= WIDE_MAX_LEVELS
             && matches!(self.geo.size, 3 | 5 | 7)
     }
 
@@ -1390,7 +1389,36 @@ impl FastRenderer {
                     };
                 }
             }
-            // 5. apply
+            // 5. apply: with the AVX-512 kernel step where the tile runs with it but its
+            // classification could not take the table (chroma classes, many levels)
+            #[cfg(target_arch = "x86_64")]
+            if WIDE {
+                let rows = &sc.buf[y * stride..];
+                let (patch, feat) = (&mut sc.patch, &mut sc.feat);
+                let work = WideRow {
+                    rows,
+                    stride,
+                    tw,
+                    r,
+                    c0: tile.c0,
+                };
+                let applied = self.apply_classes_wide::<P>(
+                    set,
+                    &work,
+                    &sc.class,
+                    &mut sc.offsets,
+                    &mut sc.lin,
+                    (patch, feat),
+                    &mut st,
+                );
+                if applied {
+                    let out_row = &mut band[y * row_len + offset..(y + 1) * row_len];
+                    // SAFETY: `WIDE` tiles run in `tile_avx512`, where the CPU has the features
+                    unsafe { sink.finish_row_wide(out_row, &sc.lin, tw) };
+                    st.pixels += tw as u64;
+                    continue;
+                }
+            }
             let out_row = &mut band[y * row_len + offset..(y + 1) * row_len];
             let rows = &sc.buf[y * stride..];
             let [l0, l1, l2] = &mut sc.lin;
@@ -1415,6 +1443,65 @@ impl FastRenderer {
             st.pixels += tw as u64;
         }
         st
+    }
+
+    /// The AVX-512 kernel step over a tile row whose classes (`class`, [`NO_CLASS`]
+    /// for the reference path) the portable code found: each pixel's kernels by its
+    /// class's offset in the paired layout, then the reference path's pixels. Only
+    /// from `WIDE` tiles. Returns `false`, having written nothing to the output, when
+    /// the kernel step refuses its arguments.
+    #[cfg(target_arch = "x86_64")]
+    #[inline(always)]
+    #[allow(clippy::too_many_arguments)]
+    fn apply_classes_wide<const P: usize>(
+        &self,
+        set: &KernelSet,
+        work: &WideRow<'_>,
+        class: &[u32],
+        offsets: &mut [u32],
+        lin: &mut [Vec<f32>; 3],
+        (patch, feat): (&mut Vec<f32>, &mut Vec<f32>),
+        st: &mut RenderStats,
+    ) -> bool {
+        let tw = work.tw;
+        let mut texture = 0u64;
+        let padded = offsets.len().min(tw.div_ceil(16) * 16);
+        for (i, o) in offsets[..padded].iter_mut().enumerate() {
+            let c = class.get(i).copied().filter(|_| i < tw).unwrap_or(NO_CLASS);
+            *o = if c == NO_CLASS {
+                0
+            } else {
+                texture += u64::from(c & 1);
+                // an offset past the kernels is refused by the kernel step
+                u32::try_from(c as usize * set.pstride).unwrap_or(u32::MAX)
+            };
+        }
+        let [l0, l1, l2] = lin;
+        // SAFETY: `WIDE` tiles run in `tile_avx512`, where the CPU has the features; the
+        // kernel step checks the lengths and offsets of what it touches
+        let applied = unsafe {
+            avx512::apply_kernels::<P>(
+                work.rows,
+                work.stride,
+                offsets,
+                tw,
+                set.paired(),
+                set.pstride,
+                [&mut l0[..], &mut l1[..], &mut l2[..]],
+            )
+        };
+        if !applied {
+            return false;
+        }
+        st.texture += texture;
+        for i in (0..tw).filter(|&i| class[i] == NO_CLASS) {
+            let rc = (work.r, work.c0 + i);
+            let v = self.exact_pixel(set, work.rows, work.stride, i, rc, patch, feat, st);
+            l0[i] = v[0];
+            l1[i] = v[1];
+            l2[i] = v[2];
+        }
+        true
     }
 
     /// The reference path for the pixel at column `i` of a tile row (frame pixel
@@ -1669,6 +1756,17 @@ impl LevelLut {
     }
 }
 
+/// One tile row for the AVX-512 kernel step: the padded input rows under it,
+/// their stride, its width and where it starts in the frame.
+#[cfg(target_arch = "x86_64")]
+struct WideRow<'a> {
+    rows: &'a [f32],
+    stride: usize,
+    tw: usize,
+    r: usize,
+    c0: usize,
+}
+
 #[derive(Clone, Copy, Debug)]
 struct Tile {
     r0: usize,
@@ -1845,12 +1943,6 @@ enum Isa {
     Avx2,
     Avx512,
 }
-
-/// The most luminance levels the AVX-512 classification handles.
-#[cfg(target_arch = "x86_64")]
-const WIDE_MAX_LEVELS: usize = avx512::MAX_LEVELS;
-#[cfg(not(target_arch = "x86_64"))]
-const WIDE_MAX_LEVELS: usize = 0;
 
 fn avx512_available() -> bool {
     #[cfg(target_arch = "x86_64")]
