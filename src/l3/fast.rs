@@ -1402,15 +1402,18 @@ impl FastRenderer {
                     r,
                     c0: tile.c0,
                 };
-                let applied = self.apply_classes_wide::<P>(
-                    set,
-                    &work,
-                    &sc.class,
-                    &mut sc.offsets,
-                    &mut sc.lin,
-                    (patch, feat),
-                    &mut st,
-                );
+                // SAFETY: `WIDE` tiles run in `tile_avx512`, where the CPU has the features
+                let applied = unsafe {
+                    self.apply_classes_wide::<P>(
+                        set,
+                        &work,
+                        &sc.class,
+                        &mut sc.offsets,
+                        &mut sc.lin,
+                        (patch, feat),
+                        &mut st,
+                    )
+                };
                 if applied {
                     let out_row = &mut band[y * row_len + offset..(y + 1) * row_len];
                     // SAFETY: `WIDE` tiles run in `tile_avx512`, where the CPU has the features
@@ -1449,11 +1452,16 @@ impl FastRenderer {
     /// for the reference path) the portable code found: each pixel's kernels by its
     /// class's offset in the paired layout, then the reference path's pixels. Only
     /// from `WIDE` tiles. Returns `false`, having written nothing to the output, when
-    /// the kernel step refuses its arguments.
+    /// the kernel step refuses its arguments. Out of line (one call per row), so
+    /// the tiles the AVX-512 classification takes do not carry it.
+    ///
+    /// # Safety
+    /// The CPU must have AVX-512 F, VL and DQ, AVX2 and FMA.
     #[cfg(target_arch = "x86_64")]
-    #[inline(always)]
+    #[inline(never)]
+    #[target_feature(enable = "avx512f,avx512vl,avx512dq,avx2,fma")]
     #[allow(clippy::too_many_arguments)]
-    fn apply_classes_wide<const P: usize>(
+    unsafe fn apply_classes_wide<const P: usize>(
         &self,
         set: &KernelSet,
         work: &WideRow<'_>,
@@ -1477,8 +1485,8 @@ impl FastRenderer {
             };
         }
         let [l0, l1, l2] = lin;
-        // SAFETY: `WIDE` tiles run in `tile_avx512`, where the CPU has the features; the
-        // kernel step checks the lengths and offsets of what it touches
+        // SAFETY: the caller has the features; the kernel step checks the lengths and
+        // offsets of what it touches
         let applied = unsafe {
             avx512::apply_kernels::<P>(
                 work.rows,
