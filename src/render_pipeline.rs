@@ -263,9 +263,9 @@ pub fn correction_for(
 }
 
 /// The XYZ kernels `table` renders with under `entry`.
-pub fn kernels_for(table: &L3Table, entry: &IlluminantEntry) -> Vec<f32> {
+pub fn kernels_for(table: &L3Table, entry: &IlluminantEntry) -> Result<Vec<f32>, L3Error> {
     if uses_own_kernels(table) {
-        table.kernels.clone()
+        Ok(table.kernels.clone())
     } else {
         fuse_entry(table, entry)
     }
@@ -332,7 +332,7 @@ impl RenderPipeline {
         Ok(Self {
             renderer: FastRenderer::under_light(
                 table,
-                &kernels_for(table, entry),
+                &kernels_for(table, entry)?,
                 entry.neutral.as_deref(),
             )?,
         })

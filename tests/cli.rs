@@ -697,6 +697,11 @@ fn train_with_chroma_classes_shards_and_renders() {
         .clone()
         .unwrap();
     assert!(table.chroma_balances());
+    // a same-illuminant table keeps the maps over every class for other lights' T
+    let transfer = table.meta.params.transfer_maps.as_ref().unwrap();
+    assert_eq!(transfer.len(), table.n_levels());
+    assert!(transfer.iter().all(|m| m.n_channels == white.len()));
+    assert!(table.transfers_to("Tungsten") && !table.transfers_to("d65"));
     assert_eq!(stored.len(), white.len());
     for (s, w) in stored.iter().zip(&white) {
         assert!((s - w / max).abs() < 1e-9, "{stored:?} against {white:?}");
@@ -720,6 +725,25 @@ fn train_with_chroma_classes_shards_and_renders() {
     );
     assert!(ok, "render failed: {out}{err}");
     assert!(image::open(&png).is_ok());
+    // through T under that light: the transfer kernels
+    let (ok, out, err) = l3(
+        &[
+            "render",
+            "--table",
+            d.join("c.safetensors").to_str().unwrap(),
+            "--illuminant",
+            "Tungsten",
+            "--correction",
+            "colorimetric",
+            "--in",
+            sim.join("mosaic.raw").to_str().unwrap(),
+            "--out",
+            d.join("t.png").to_str().unwrap(),
+        ],
+        d,
+    );
+    assert!(ok, "render through T failed: {out}{err}");
+    assert!(image::open(d.join("t.png")).is_ok());
     for bad in ["0", "33"] {
         let (ok, _, err) = l3(
             &["train", "--chroma-classes", bad, "--out", "x.safetensors"],

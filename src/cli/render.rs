@@ -177,13 +177,7 @@ pub fn run(cli: &Cli, a: &RenderArgs) -> Result<(), CliError> {
         iset.as_ref(),
     )?;
     let illuminant = format!("{} (from {source})", entry.name);
-    if table.meta.kind == TableKind::CrossIlluminant
-        && !table
-            .meta
-            .train_illuminants
-            .iter()
-            .any(|n| n.eq_ignore_ascii_case(&entry.name))
-    {
+    if table.meta.kind == TableKind::CrossIlluminant && !table.trained_under(&entry.name) {
         eprintln!(
             "warning: cross-illuminant table trained for {} used for {}",
             table.meta.train_illuminants.join("+"),
@@ -244,7 +238,7 @@ pub fn run(cli: &Cli, a: &RenderArgs) -> Result<(), CliError> {
             }
             let (xyz, stats) = render_reference_under(
                 &table,
-                &kernels_for(&table, &entry),
+                &kernels_for(&table, &entry)?,
                 entry.neutral.as_deref(),
                 &volts,
                 w,

@@ -71,6 +71,8 @@ pub struct TrainArgs {
     /// Split every level into this many chroma classes, each with its own
     /// colour maps and kernels (k-means on the training surfaces' white-balanced
     /// channel chromaticities; 1: no split). Classes with too few surfaces are dropped.
+    /// A same-illuminant table also keeps each level's map over every class, which its
+    /// kernels take under a light it was not trained on through T.
     #[arg(long, default_value_t = 1)]
     pub chroma_classes: usize,
     #[arg(long, default_value = "table.safetensors")]

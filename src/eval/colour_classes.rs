@@ -44,7 +44,7 @@ use crate::camera::Camera;
 use crate::colour::{Cmfs, Xyz};
 use crate::l3::{
     CROSS_AVERAGING_PX, ChromaClasses, ColourLoss, ColourMapFit, ColourMatrix, L3Params,
-    MIN_SURFACES_PER_CHANNEL, NoiseModel, TableKind, band_maps,
+    MIN_SURFACES_PER_CHANNEL, NoiseModel, TableKind, band_maps, level_maps,
 };
 use crate::spectral::{IsetData, Spectrum};
 use crate::training::{colour_samples, noise_model};
@@ -231,7 +231,8 @@ pub fn colour_class_study(
                 MIN_SURFACES_PER_CHANNEL * nc,
                 setup.seed,
             )?;
-            let maps = band_maps(&samples, &classes, &levels, &noise, swing, &fit)?;
+            let pooled = level_maps(&samples, &levels, &noise, swing, &fit)?;
+            let maps = band_maps(&samples, &classes, &pooled, &levels, &noise, swing, &fit)?;
             let model = Model {
                 chart: &chart,
                 classes: &classes,

@@ -541,6 +541,8 @@ pub fn linear_table(table: &L3Table, map: &ColourMatrix) -> Result<L3Table, Eval
         )));
     }
     let mut out = table.clone();
+    // one map in every class: nothing for another light to move its kernels to
+    out.meta.params.transfer_maps = None;
     for pos in 0..table.n_positions() {
         let chans = geo.channels_of(pos);
         let mut count = vec![0f64; nch];

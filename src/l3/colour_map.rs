@@ -345,8 +345,8 @@ pub fn level_maps(
 
 /// One colour map per band (level × chroma classes + class, see
 /// [`super::chroma`]): each level's map fitted on each chroma class's
-/// samples, with a ridge ([`PRIOR_WEIGHT`]) toward the level's map over every
-/// sample. A class's surfaces span a narrow cone of channel space, so on its
+/// samples, with a ridge ([`PRIOR_WEIGHT`]) toward `pooled`, the level's map over every
+/// sample ([`level_maps`] on the same samples). A class's surfaces span a narrow cone of channel space, so on its
 /// own a class map is free in the directions across the cone and takes large,
 /// noisy weights there; the ridge leaves those directions to the pooled map.
 /// Measured on cross tables under tungsten (8 classes asked, 16 captures, one
@@ -358,6 +358,7 @@ pub fn level_maps(
 pub fn band_maps(
     samples: &ColourSamples,
     classes: &ChromaClasses,
+    pooled: &[ColourMatrix],
     levels: &[f64],
     noise: &NoiseModel,
     swing: f64,
@@ -365,14 +366,20 @@ pub fn band_maps(
 ) -> Result<Vec<ColourMatrix>, L3Error> {
     fit.validate()?;
     samples.check()?;
-    let pooled = level_maps(samples, levels, noise, swing, fit)?;
+    if pooled.len() != levels.len() {
+        return Err(L3Error::InvalidParams(format!(
+            "{} pooled maps for {} levels",
+            pooled.len(),
+            levels.len()
+        )));
+    }
     let per_class = (0..classes.len().max(1))
         .map(|k| {
             let sub = samples.subset(&samples.in_chroma_class(classes, k));
             let nc = sub.check()?;
             levels
                 .iter()
-                .zip(&pooled)
+                .zip(pooled)
                 .map(|(&level, prior)| level_map(&sub, nc, level, noise, swing, fit, Some(prior)))
                 .collect::<Result<Vec<_>, L3Error>>()
         })
@@ -718,8 +725,10 @@ mod tests {
             loss: ColourLoss::SquaredDeltaE,
         };
         let levels = [0.05, 1.0];
-        let maps = band_maps(&s, &classes, &levels, &noise(), 1.8, &fit).unwrap();
+        let pooled = level_maps(&s, &levels, &noise(), 1.8, &fit).unwrap();
+        let maps = band_maps(&s, &classes, &pooled, &levels, &noise(), 1.8, &fit).unwrap();
         assert_eq!(maps.len(), 4);
+        assert!(band_maps(&s, &classes, &pooled[..1], &levels, &noise(), 1.8, &fit).is_err());
         let error = |m: &ColourMatrix, idx: &[usize]| {
             idx.iter()
                 .map(|&i| {
@@ -734,7 +743,6 @@ mod tests {
                 })
                 .sum::<f64>()
         };
-        let pooled = level_maps(&s, &levels, &noise(), 1.8, &fit).unwrap();
         for k in 0..2 {
             let idx = s.in_chroma_class(&classes, k);
             for (l, pooled) in pooled.iter().enumerate() {

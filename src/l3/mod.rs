@@ -18,6 +18,7 @@ mod render;
 mod shards;
 mod table;
 mod trainer;
+mod transfer;
 
 pub use baseline::{ColourMatrix, bilinear_demosaic, render_baseline};
 pub use camera_correction::{LevelMap, camera_correction};

@@ -1,6 +1,6 @@
 use serde::{Deserialize, Serialize};
 
-use super::{ChromaClasses, ColourMapFit, L3Error, RidgeChoice};
+use super::{ChromaClasses, ColourMapFit, ColourMatrix, L3Error, RidgeChoice};
 
 /// ISET's tuned RGBW luminance levels for a 1.8 V swing (DESIGN.md §5), volts.
 pub const DEFAULT_LEVELS_1V8: [f64; 20] = [
@@ -41,6 +41,13 @@ pub struct L3Params {
     /// not name the field.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub chroma: Option<ChromaClasses>,
+    /// Per level, the colour map fitted over every chroma class at once (the
+    /// map a table without a chroma split holds), kept by same-illuminant
+    /// tables with chroma classes: under a light such a table was not trained
+    /// on and corrected by T, its unsaturated kernels' channel sums are moved
+    /// to these maps ([`super::L3Table::transfer_kernels`]). `None` otherwise.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub transfer_maps: Option<Vec<ColourMatrix>>,
 }
 
 impl Default for L3Params {
@@ -58,6 +65,7 @@ impl Default for L3Params {
             symmetrize_flat: true,
             colour_map: Some(ColourMapFit::default()),
             chroma: None,
+            transfer_maps: None,
         }
     }
 }
@@ -123,6 +131,21 @@ impl L3Params {
         }
         if let Some(c) = &self.chroma {
             c.validate(c.centroids.first().map(Vec::len).unwrap_or(0))?;
+        }
+        if let Some(maps) = &self.transfer_maps {
+            if maps.len() != self.levels.len() {
+                return bad(format!(
+                    "{} transfer maps for {} levels",
+                    maps.len(),
+                    self.levels.len()
+                ));
+            }
+            if maps
+                .iter()
+                .any(|m| m.m.len() != m.n_channels || m.m.iter().flatten().any(|v| !v.is_finite()))
+            {
+                return bad("transfer maps must be finite channel → XYZ maps".into());
+            }
         }
         self.ridge.validate()
     }

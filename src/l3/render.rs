@@ -47,11 +47,18 @@ pub fn fuse_kernels(table: &L3Table, m: &[[f64; 3]; 3]) -> Vec<f32> {
 
 /// The kernels `table` renders with under `entry`: each class's kernel times its
 /// band's correction when the entry has one per band (per level, split by chroma
-/// class where the table has them), else times `entry.t`.
-pub fn fuse_entry(table: &L3Table, entry: &super::IlluminantEntry) -> Vec<f32> {
+/// class where the table has them), else times `entry.t`: the table's own kernels, or,
+/// for a chroma-split table under a light it was not trained on, its
+/// [transfer kernels](L3Table::transfer_kernels).
+pub fn fuse_entry(table: &L3Table, entry: &super::IlluminantEntry) -> Result<Vec<f32>, L3Error> {
     let nl = table.n_bands();
     if entry.level_corrections.len() != nl || nl == 0 {
-        return fuse_kernels(table, &entry.t);
+        if table.transfers_to(&entry.name)
+            && let Some(k) = table.transfer_kernels()?
+        {
+            return Ok(fuse_matrix(&k, &entry.t, table.n_features()));
+        }
+        return Ok(fuse_kernels(table, &entry.t));
     }
     let nf = table.n_features();
     let mut out = Vec::with_capacity(table.kernels.len());
@@ -62,7 +69,7 @@ pub fn fuse_entry(table: &L3Table, entry: &super::IlluminantEntry) -> Vec<f32> {
             nf,
         ));
     }
-    out
+    Ok(out)
 }
 
 /// `M·K` for every class's 3 output rows of `n_features` weights (f64 sums).

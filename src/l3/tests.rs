@@ -106,12 +106,18 @@ fn per_level_corrections_fuse_each_class_with_its_levels_matrix() {
         neutral: None,
     };
     // without per-level corrections: T everywhere
-    assert_eq!(fuse_entry(&table, &entry), fuse_kernels(&table, &t));
+    assert_eq!(
+        fuse_entry(&table, &entry).unwrap(),
+        fuse_kernels(&table, &t)
+    );
     // a list that does not match the table's levels is not used
     entry.level_corrections = per_level[..nl - 1].to_vec();
-    assert_eq!(fuse_entry(&table, &entry), fuse_kernels(&table, &t));
+    assert_eq!(
+        fuse_entry(&table, &entry).unwrap(),
+        fuse_kernels(&table, &t)
+    );
     entry.level_corrections = per_level.clone();
-    let fused = fuse_entry(&table, &entry);
+    let fused = fuse_entry(&table, &entry).unwrap();
     let nf = table.n_features();
     for pos in 0..table.n_positions() {
         for (level, m) in per_level.iter().enumerate() {
@@ -450,7 +456,7 @@ fn per_band_corrections_fuse_each_class_with_its_bands_matrix() {
         level_corrections: per_band.clone(),
         neutral: None,
     };
-    let fused = fuse_entry(&table, &entry);
+    let fused = fuse_entry(&table, &entry).unwrap();
     let nf = table.n_features();
     let per_class = 2 * table.n_sat_cases();
     for class in [0, per_class * 4 + 1, table.n_classes() - 1] {
@@ -466,4 +472,109 @@ fn per_band_corrections_fuse_each_class_with_its_bands_matrix() {
             }
         }
     }
+}
+
+#[test]
+fn transfer_kernels_carry_the_pooled_maps_to_a_light_the_table_was_not_trained_on() {
+    let mut table = train_synthetic_with(0.01, Some(synthetic_chroma()));
+    let t = [[1.1, 0.05, -0.1], [0.02, 0.98, 0.01], [-0.03, 0.04, 1.4]];
+    let mut entry = IlluminantEntry {
+        name: "Lamp".into(),
+        t,
+        white_xy: None,
+        cct: None,
+        source: CorrectionSource::Matrix,
+        spd: None,
+        level_corrections: Vec::new(),
+        neutral: None,
+    };
+    // without transfer maps every light gets the table's own kernels
+    assert!(table.transfer_kernels().unwrap().is_none());
+    assert!(!table.transfers_to("Lamp"));
+    assert_eq!(
+        fuse_entry(&table, &entry).unwrap(),
+        fuse_kernels(&table, &t)
+    );
+    // maps that differ from every class's own: class 0's, scaled
+    let maps: Vec<ColourMatrix> = (0..table.n_levels())
+        .map(|l| {
+            let mut m = table.colour_map_at(l * 3).unwrap();
+            m.m.iter_mut().flatten().for_each(|v| *v *= 1.1);
+            m
+        })
+        .collect();
+    table.meta.params.transfer_maps = Some(maps.clone());
+    table.validate().unwrap();
+    let moved_kernels = table.transfer_kernels().unwrap().unwrap();
+    let mut moved = table.clone();
+    moved.kernels = moved_kernels.clone();
+    let geo = table.geometry().unwrap();
+    let nf = table.n_features();
+    for band in 0..table.n_bands() {
+        // on a uniform patch every chroma class applies its level's map
+        let got = moved.colour_map_at(band).unwrap();
+        for (g, w) in got
+            .m
+            .iter()
+            .flatten()
+            .zip(maps[band / 3].m.iter().flatten())
+        {
+            assert!((g - w).abs() < 1e-5, "band {band}: {g} against {w}");
+        }
+        for pos in 0..table.n_positions() {
+            for sat in 0..table.n_sat_cases() {
+                for texture in [false, true] {
+                    let class = table.class_index(pos, band, sat, texture);
+                    let (old, new) = (table.kernel(class), moved.kernel(class));
+                    if sat > 0 {
+                        assert_eq!(old, new, "a saturated case moved");
+                        continue;
+                    }
+                    for k in 0..3 {
+                        // the intercept stays, and so does each channel's spatial shape:
+                        // one step per channel
+                        assert_eq!(old[k * nf + nf - 1], new[k * nf + nf - 1]);
+                        let mut step = vec![None; geo.n_channels()];
+                        for (j, &c) in geo.channels_of(pos).iter().enumerate() {
+                            let d = new[k * nf + j] - old[k * nf + j];
+                            let s = step[c as usize].get_or_insert(d);
+                            assert!((*s - d).abs() < 1e-5, "class {class}: {s} against {d}");
+                        }
+                    }
+                }
+            }
+        }
+    }
+    // a light the table was not trained on, through T: the transfer kernels
+    assert!(table.transfers_to("Lamp"));
+    assert_eq!(
+        fuse_entry(&table, &entry).unwrap(),
+        fuse_kernels(&moved, &t)
+    );
+    // its own light (named in any case): its own kernels
+    entry.name = "SYNTHETIC".into();
+    assert!(table.trained_under("SYNTHETIC") && !table.transfers_to("SYNTHETIC"));
+    assert_eq!(
+        fuse_entry(&table, &entry).unwrap(),
+        fuse_kernels(&table, &t)
+    );
+    // a correction fitted per band on the table (C) keeps the class kernels
+    entry.name = "Lamp".into();
+    entry.level_corrections = vec![t; table.n_bands()];
+    assert_eq!(
+        fuse_entry(&table, &entry).unwrap(),
+        fuse_kernels(&table, &t)
+    );
+    // the maps are part of the file, and checked on load
+    let back = L3Table::from_bytes(&table.to_bytes().unwrap(), "mem").unwrap();
+    assert_eq!(back.meta.params.transfer_maps, Some(maps.clone()));
+    let mut short = table.clone();
+    short.meta.params.transfer_maps = Some(maps[1..].to_vec());
+    assert!(short.validate().is_err());
+    let mut nan = table.clone();
+    nan.meta.params.transfer_maps = Some(maps);
+    if let Some(m) = nan.meta.params.transfer_maps.as_mut() {
+        m[0].m[0][0] = f64::NAN;
+    }
+    assert!(nan.validate().is_err());
 }

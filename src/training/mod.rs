@@ -350,6 +350,7 @@ impl TrainingRun {
                             .extend(std::iter::repeat_n(t, refl.len()));
                     }
                 }
+                let pooled = level_maps(&samples, &params.levels, &nm, swing, fit)?;
                 if spec.chroma_classes > 1 {
                     let classes = ChromaClasses::fit_balanced(
                         &samples.channels,
@@ -360,11 +361,15 @@ impl TrainingRun {
                         spec.seed,
                     )?;
                     geo = geo.with_chroma(&classes)?;
-                    let maps = band_maps(&samples, &classes, &params.levels, &nm, swing, fit)?;
+                    let maps =
+                        band_maps(&samples, &classes, &pooled, &params.levels, &nm, swing, fit)?;
                     params.chroma = Some(classes);
+                    if spec.kind == TableKind::SameIlluminant {
+                        params.transfer_maps = Some(pooled);
+                    }
                     Some(maps)
                 } else {
-                    Some(level_maps(&samples, &params.levels, &nm, swing, fit)?)
+                    Some(pooled)
                 }
             }
             None => None,
