@@ -139,8 +139,14 @@ fn sensor_sweep_runs_every_sensor_in_one_go() {
     let names: Vec<&str> = sweep.reports.iter().map(|r| r.sensor.as_str()).collect();
     assert_eq!(names, ["rgbw-iset", "bayer-nikon-d5100"]);
     for r in &sweep.reports {
-        // default + I tables, 3 baselines, copy; no skips in a sweep
-        assert_eq!(r.configs.len(), 6, "{}", r.sensor);
+        // default + I tables, each with 1 and 8 chroma classes, 3 baselines, copy; no
+        // skips in a sweep
+        assert_eq!(r.configs.len(), 8, "{}", r.sensor);
+        assert!(
+            r.configs.iter().any(|c| c.name == "I tables, 8 chroma classes"),
+            "{}",
+            r.sensor
+        );
         assert!(r.skips.is_empty());
         for c in r
             .configs
@@ -157,12 +163,12 @@ fn sensor_sweep_runs_every_sensor_in_one_go() {
         }
     }
     let md = std::fs::read_to_string(out_dir.join("sensors.md")).unwrap();
-    // 2 sensors × 2 L3 configurations × 2 lights
+    // 2 sensors × 4 L3 configurations × 2 lights
     let rows = md
         .lines()
         .filter(|l| l.starts_with("| rgbw-iset |") || l.starts_with("| bayer-nikon-d5100 |"))
         .count();
-    assert_eq!(rows, 8, "{md}");
+    assert_eq!(rows, 16, "{md}");
     // every row of the summary table has as many cells as its header
     let table: Vec<&str> = md
         .lines()
@@ -170,6 +176,6 @@ fn sensor_sweep_runs_every_sensor_in_one_go() {
         .take_while(|l| l.starts_with('|'))
         .collect();
     let cells = |l: &str| l.matches('|').count();
-    assert!(table.len() == 10, "{md}");
+    assert!(table.len() == 18, "{md}");
     assert!(table.iter().all(|l| cells(l) == cells(table[0])), "{md}");
 }

@@ -16,7 +16,7 @@ use crate::eval::{
     ChannelSet, ChartCapture, ChartSetup, ColourFit, LightLevel, fit_colour_matrix, simulate_chart,
 };
 use crate::l3::{
-    ColourMatrix, IlluminantEntry, IlluminantRegistry, L3Table, TableKind, fuse_kernels,
+    ColourMatrix, IlluminantEntry, IlluminantRegistry, L3Table, TableKind, fuse_entry,
 };
 use crate::scene::{DeadLeavesParams, SceneOptions, dead_leaves, training_reflectances};
 use crate::spectral::{IlluminantSpec, IsetData, WavelengthGrid};
@@ -41,6 +41,13 @@ pub struct L3Config {
     pub contrast_classes: bool,
     pub saturation_classes: bool,
     pub tables: TableChoice,
+    /// Chroma classes per level (`TrainingSpec::chroma_classes`; 1: no split).
+    #[serde(default = "one")]
+    pub chroma_classes: usize,
+}
+
+fn one() -> usize {
+    1
 }
 
 impl L3Config {
@@ -53,6 +60,7 @@ impl L3Config {
             contrast_classes: true,
             saturation_classes: true,
             tables: TableChoice::SiEnsemble,
+            chroma_classes: 1,
         }
     }
 
@@ -75,6 +83,22 @@ pub fn default_sweep() -> Vec<L3Config> {
         L3Config::with("no contrast classes", |c| c.contrast_classes = false),
         L3Config::with("no saturation classes", |c| c.saturation_classes = false),
         L3Config::with("I tables", |c| c.tables = TableChoice::CrossPerIlluminant),
+        L3Config::with("4 chroma classes", |c| c.chroma_classes = 4),
+        L3Config::with("8 chroma classes", |c| c.chroma_classes = 8),
+    ]
+}
+
+/// The configurations of the sensor sweep: the default and the I tables,
+/// each with one and with 8 chroma classes.
+fn sensor_sweep_configs() -> Vec<L3Config> {
+    vec![
+        L3Config::default_config(),
+        L3Config::with("I tables", |c| c.tables = TableChoice::CrossPerIlluminant),
+        L3Config::with("8 chroma classes", |c| c.chroma_classes = 8),
+        L3Config::with("I tables, 8 chroma classes", |c| {
+            c.tables = TableChoice::CrossPerIlluminant;
+            c.chroma_classes = 8;
+        }),
     ]
 }
 
@@ -557,6 +581,7 @@ fn training_spec(
         scene_size: o.scene_size,
         contrast_classes: c.contrast_classes,
         saturation_classes: c.saturation_classes,
+        chroma_classes: c.chroma_classes,
         ..TrainingSpec::default()
     }
 }
@@ -655,7 +680,7 @@ pub fn run_bench(
                 for case in &cases {
                     per_case.push((
                         0,
-                        fuse_kernels(&tables[0], &case.correction.t),
+                        fuse_entry(&tables[0], &case.correction)?,
                         format!("SI_{}+T", ills.join("+")),
                     ));
                 }
@@ -808,10 +833,7 @@ pub fn run_sensor_sweep(
     }
     let started = Instant::now();
     let mut o = opts.clone();
-    o.configs = default_sweep()
-        .into_iter()
-        .filter(|c| *c == L3Config::default_config() || c.tables == TableChoice::CrossPerIlluminant)
-        .collect();
+    o.configs = sensor_sweep_configs();
     o.skips = false;
     let reports = designs
         .iter()
@@ -846,7 +868,7 @@ mod tests {
         o.configs.push(o.configs[0].clone());
         assert!(o.validate().is_err());
         let sweep = default_sweep();
-        assert_eq!(sweep.len(), 8);
+        assert_eq!(sweep.len(), 10);
         // one change at a time from the default
         let d = &sweep[0];
         for c in &sweep[1..] {
@@ -856,8 +878,16 @@ mod tests {
                 c.contrast_classes != d.contrast_classes,
                 c.saturation_classes != d.saturation_classes,
                 c.tables != d.tables,
+                c.chroma_classes != d.chroma_classes,
             ];
             assert_eq!(changes.iter().filter(|&&x| x).count(), 1, "{}", c.name);
         }
+        // the sensor sweep: the default and the I tables, with and without chroma classes
+        let sensors = sensor_sweep_configs();
+        assert_eq!(sensors[0], *d);
+        assert!(sensors.iter().all(|c| c.patch_size == d.patch_size && c.levels == d.levels));
+        let kinds: Vec<_> = sensors.iter().map(|c| (c.tables, c.chroma_classes)).collect();
+        assert_eq!(kinds.len(), 4);
+        assert!(kinds.contains(&(TableChoice::CrossPerIlluminant, 8)));
     }
 }
