@@ -51,11 +51,18 @@ const LANES: usize = 8;
 const LUMINANCE_MARGIN: f32 = 2e-5;
 /// Contrast (V) within this of a class threshold is classified by the reference code.
 const CONTRAST_MARGIN: f32 = 1e-5;
-/// A chroma class whose margin over the runner-up ([`PatchGeometry::chroma_of`]:
-/// squared-distance difference × the sum of the means, V) is under this is
-/// classified by the reference code. The phase sums' means differ from the
-/// reference's by rounding (≲1e-6 V), which moves the margin by ≲1.2e-5.
-const CHROMA_MARGIN: f32 = 1e-4;
+/// A chroma class whose margin over the runner-up ([`PatchGeometry::chroma_of`]'s
+/// score gap) is under this fraction of the pixel's score scale, `Σ_ch max_k |a_k,ch| ·
+/// mean_ch`, is classified by the reference code. The means are sums of at most 25
+/// non-negative values (a 9×9 patch's largest phase), scaled: each path's rounding is
+/// under 24 · 2⁻²⁴ ≈ 1.4e-6 of the mean, so the two paths' scores differ by ≲4e-6 of
+/// the scale (with the scores' own rounding), a fifth of the margin. The margin is
+/// relative because the error is: an absolute one (1e-4 V) sent dark pixels near a
+/// class boundary to the reference code.
+const CHROMA_MARGIN: f32 = 2e-5;
+/// The smallest chroma margin (V): pixels this close to black are classified by the
+/// reference code.
+const CHROMA_MARGIN_FLOOR: f32 = 1e-9;
 
 /// A mosaic to render: volts or integer DN, row-major.
 #[derive(Clone, Copy, Debug)]
@@ -160,6 +167,8 @@ pub struct FastRenderer {
     /// Per CFA position, the channel of each phase (2×2 CFAs), so the phase
     /// means give the channel means the chroma class is read from.
     phase_channels: [[u8; 4]; 4],
+    /// Per channel, the largest chroma score weight in magnitude (see [`CHROMA_MARGIN`]).
+    chroma_scale: Vec<f32>,
     sat_cases: Vec<u32>,
     contrast_thresholds: Vec<f32>,
     /// Per group: do the flat and texture kernels differ?
@@ -232,6 +241,8 @@ struct ChromaScratch {
     /// Channel means per channel (clamped at 0), from the phase means.
     means: Vec<Vec<f32>>,
     score: Vec<f32>,
+    /// Each pixel's score scale (see [`CHROMA_MARGIN`]).
+    scale: Vec<f32>,
     /// The lowest and second-lowest class score, and the lowest's class.
     s1: Vec<f32>,
     s2: Vec<f32>,
@@ -475,6 +486,14 @@ impl FastRenderer {
                 let (pr, pc) = (pos / 2, pos % 2);
                 std::array::from_fn(|p| geo.cfa.channel_at(pr + p / 2, pc + p % 2) as u8)
             }),
+            chroma_scale: (0..geo.n_channels())
+                .map(|ch| {
+                    geo.chroma_coefficients()
+                        .iter()
+                        .map(|a| a[ch].abs())
+                        .fold(0.0, f32::max)
+                })
+                .collect(),
             sat_cases: table.meta.sat_cases.clone(),
             contrast_thresholds: table.contrast_thresholds.clone(),
             contrast_matters,
@@ -768,8 +787,15 @@ impl FastRenderer {
                 }
             }
         }
-        for v in [&mut cs.score, &mut cs.s1, &mut cs.s2] {
+        for v in [&mut cs.score, &mut cs.scale, &mut cs.s1, &mut cs.s2] {
             resize(v, tw);
+        }
+        let scale = &mut cs.scale[..tw];
+        scale.fill(0.0);
+        for (m, &w) in cs.means.iter().zip(&self.chroma_scale) {
+            for (s, &v) in scale.iter_mut().zip(&m[..tw]) {
+                *s += w * v;
+            }
         }
         cs.s1[..tw].fill(f32::INFINITY);
         cs.s2[..tw].fill(f32::INFINITY);
@@ -1367,7 +1393,8 @@ impl FastRenderer {
                                 Some(level)
                             } else {
                                 // near a chroma boundary: the reference path
-                                (cs.s2[i] - cs.s1[i] >= CHROMA_MARGIN)
+                                let margin = CHROMA_MARGIN * cs.scale[i] + CHROMA_MARGIN_FLOOR;
+                                (cs.s2[i] - cs.s1[i] >= margin)
                                     .then(|| level * kc + cs.best[i] as usize)
                             }
                         })

@@ -413,6 +413,15 @@ fn a_chroma_split_table_learns_round_trips_and_renders_fast_as_the_reference() {
         max_abs_diff(&outputs[0], &outputs[3]) > 1e-3,
         "the light changed nothing"
     );
+    // a dark frame (about 1 mV): the chroma margin scales with the signal, so its pixels
+    // stay on the fast path, and agree with the reference
+    let dark: Vec<f32> = g.volts.iter().map(|v| v * 1e-3).collect();
+    let fast = FastRenderer::new(&noisy, &noisy.kernels).unwrap();
+    let (want, _) = render_reference(&noisy, &noisy.kernels, &dark, 96, 96).unwrap();
+    let (got, gs) = fast.render_xyz(Mosaic::Volts(&dark), 96, 96, None).unwrap();
+    let d = max_abs_diff(&want, &got);
+    assert!(d <= 1e-6, "dark frame: max diff {d}");
+    assert!(gs.exact_path < gs.pixels / 10, "dark frame: {gs:?}");
 }
 
 #[test]
