@@ -143,7 +143,9 @@ fn sensor_sweep_runs_every_sensor_in_one_go() {
         // skips in a sweep
         assert_eq!(r.configs.len(), 8, "{}", r.sensor);
         assert!(
-            r.configs.iter().any(|c| c.name == "I tables, 8 chroma classes"),
+            r.configs
+                .iter()
+                .any(|c| c.name == "I tables, 8 chroma classes"),
             "{}",
             r.sensor
         );

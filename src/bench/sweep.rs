@@ -885,8 +885,15 @@ mod tests {
         // the sensor sweep: the default and the I tables, with and without chroma classes
         let sensors = sensor_sweep_configs();
         assert_eq!(sensors[0], *d);
-        assert!(sensors.iter().all(|c| c.patch_size == d.patch_size && c.levels == d.levels));
-        let kinds: Vec<_> = sensors.iter().map(|c| (c.tables, c.chroma_classes)).collect();
+        assert!(
+            sensors
+                .iter()
+                .all(|c| c.patch_size == d.patch_size && c.levels == d.levels)
+        );
+        let kinds: Vec<_> = sensors
+            .iter()
+            .map(|c| (c.tables, c.chroma_classes))
+            .collect();
         assert_eq!(kinds.len(), 4);
         assert!(kinds.contains(&(TableChoice::CrossPerIlluminant, 8)));
     }
