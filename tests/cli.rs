@@ -708,42 +708,28 @@ fn train_with_chroma_classes_shards_and_renders() {
     }
     let sim = d.join("sim");
     simulate_macbeth(d, &sim);
-    let png = d.join("c.png");
-    let (ok, out, err) = l3(
-        &[
+    let table = d.join("c.safetensors");
+    let mosaic = sim.join("mosaic.raw");
+    // with C (the default), and through T under that light: the transfer kernels
+    for (correction, out_name) in [("camera", "c.png"), ("colorimetric", "t.png")] {
+        let png = d.join(out_name);
+        let args = [
             "render",
             "--table",
-            d.join("c.safetensors").to_str().unwrap(),
-            "--illuminant",
-            "Tungsten",
-            "--in",
-            sim.join("mosaic.raw").to_str().unwrap(),
-            "--out",
-            png.to_str().unwrap(),
-        ],
-        d,
-    );
-    assert!(ok, "render failed: {out}{err}");
-    assert!(image::open(&png).is_ok());
-    // through T under that light: the transfer kernels
-    let (ok, out, err) = l3(
-        &[
-            "render",
-            "--table",
-            d.join("c.safetensors").to_str().unwrap(),
+            table.to_str().unwrap(),
             "--illuminant",
             "Tungsten",
             "--correction",
-            "colorimetric",
+            correction,
             "--in",
-            sim.join("mosaic.raw").to_str().unwrap(),
+            mosaic.to_str().unwrap(),
             "--out",
-            d.join("t.png").to_str().unwrap(),
-        ],
-        d,
-    );
-    assert!(ok, "render through T failed: {out}{err}");
-    assert!(image::open(d.join("t.png")).is_ok());
+            png.to_str().unwrap(),
+        ];
+        let (ok, out, err) = l3(&args, d);
+        assert!(ok, "render with {correction} failed: {out}{err}");
+        assert!(image::open(&png).is_ok());
+    }
     for bad in ["0", "33"] {
         let (ok, _, err) = l3(
             &["train", "--chroma-classes", bad, "--out", "x.safetensors"],

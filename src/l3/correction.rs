@@ -149,6 +149,24 @@ pub struct IlluminantEntry {
     pub neutral: Option<Vec<f64>>,
 }
 
+impl IlluminantEntry {
+    /// A correction given only as a matrix `t` (XYZ under the light → XYZ under D65): no
+    /// spectrum, so no per-level correction and no neutral. Unchecked
+    /// ([`IlluminantRegistry::insert_matrix`] checks).
+    pub fn from_matrix(name: &str, t: Mat3) -> Self {
+        Self {
+            name: name.to_string(),
+            t,
+            white_xy: None,
+            cct: None,
+            source: CorrectionSource::Matrix,
+            spd: None,
+            level_corrections: Vec::new(),
+            neutral: None,
+        }
+    }
+}
+
 /// The registry: illuminant name → T. D65 is always present (identity).
 #[derive(Clone, Debug)]
 pub struct IlluminantRegistry {
@@ -346,16 +364,7 @@ impl IlluminantRegistry {
         if m.determinant().abs() < 1e-9 {
             return Err(L3Error::InvalidInput("matrix is singular".into()));
         }
-        self.put(IlluminantEntry {
-            name: name.to_string(),
-            t,
-            white_xy: None,
-            cct: None,
-            source: CorrectionSource::Matrix,
-            spd: None,
-            level_corrections: Vec::new(),
-            neutral: None,
-        })
+        self.put(IlluminantEntry::from_matrix(name, t))
     }
 
     /// Register a blackbody (below 4000 K) or CIE daylight (from 4000 K) by CCT.

@@ -95,16 +95,7 @@ fn per_level_corrections_fuse_each_class_with_its_levels_matrix() {
         })
         .collect();
     let t = [[1.1, 0.05, -0.1], [0.02, 0.98, 0.01], [-0.03, 0.04, 1.4]];
-    let mut entry = IlluminantEntry {
-        name: "test".into(),
-        t,
-        white_xy: None,
-        cct: None,
-        source: CorrectionSource::Matrix,
-        spd: None,
-        level_corrections: Vec::new(),
-        neutral: None,
-    };
+    let mut entry = IlluminantEntry::from_matrix("test", t);
     // without per-level corrections: T everywhere
     assert_eq!(
         fuse_entry(&table, &entry).unwrap(),
@@ -456,14 +447,8 @@ fn per_band_corrections_fuse_each_class_with_its_bands_matrix() {
         })
         .collect();
     let entry = IlluminantEntry {
-        name: "test".into(),
-        t: IDENTITY,
-        white_xy: None,
-        cct: None,
-        source: CorrectionSource::Matrix,
-        spd: None,
         level_corrections: per_band.clone(),
-        neutral: None,
+        ..IlluminantEntry::from_matrix("test", IDENTITY)
     };
     let fused = fuse_entry(&table, &entry).unwrap();
     let nf = table.n_features();
@@ -487,16 +472,7 @@ fn per_band_corrections_fuse_each_class_with_its_bands_matrix() {
 fn transfer_kernels_carry_the_pooled_maps_to_a_light_the_table_was_not_trained_on() {
     let mut table = train_synthetic_with(0.01, Some(synthetic_chroma()));
     let t = [[1.1, 0.05, -0.1], [0.02, 0.98, 0.01], [-0.03, 0.04, 1.4]];
-    let mut entry = IlluminantEntry {
-        name: "Lamp".into(),
-        t,
-        white_xy: None,
-        cct: None,
-        source: CorrectionSource::Matrix,
-        spd: None,
-        level_corrections: Vec::new(),
-        neutral: None,
-    };
+    let mut entry = IlluminantEntry::from_matrix("Lamp", t);
     // without transfer maps every light gets the table's own kernels
     assert!(table.transfer_kernels().unwrap().is_none());
     assert!(!table.transfers_to("Lamp"));
