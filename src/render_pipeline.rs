@@ -350,6 +350,11 @@ impl RenderPipeline {
         &self.renderer
     }
 
+    /// The fast renderer behind the pipeline, taken out of it.
+    pub fn into_renderer(self) -> FastRenderer {
+        self.renderer
+    }
+
     /// Renders `mosaic` (`width × height`) to `format` under `opts`. Stops between bands of
     /// rows once `cancel` is set ([`L3Error::RenderCanceled`]).
     pub fn render(

@@ -4,9 +4,10 @@
 
 use crate::camera::Cfa;
 use crate::l3::{
-    ColourMatrix, FastRenderer, Frame, L3Error, L3Table, Mosaic, WhiteLevel, render_baseline,
-    xyz_to_srgb8,
+    ColourMatrix, FastRenderer, Frame, IlluminantEntry, L3Error, L3Table, Mosaic, WhiteLevel,
+    render_baseline, xyz_to_srgb8,
 };
+use crate::render_pipeline::RenderPipeline;
 
 /// Name of the L3 renderer the wrappers call (recorded in the JSON).
 pub const RENDERER: &str = "fast";
@@ -15,10 +16,12 @@ pub const RENDERER: &str = "fast";
 /// sRGB output: no per-frame white estimate in the timed path.
 pub const BENCH_WHITE_Y: f64 = 1.0;
 
-/// L3: the table with `kernels` (its own or fused) prepared for rendering
-/// (done once per table and illuminant, as the service caches it).
-pub fn prepare(table: &L3Table, kernels: &[f32]) -> Result<FastRenderer, L3Error> {
-    FastRenderer::new(table, kernels)
+/// L3: the table prepared for rendering under `entry` as the service and `l3 render`
+/// prepare it ([`RenderPipeline::new`]: its own kernels or fused with the light's
+/// correction, chroma classes balanced by the light's neutral), once per table and
+/// illuminant.
+pub fn prepare(table: &L3Table, entry: &IlluminantEntry) -> Result<FastRenderer, L3Error> {
+    Ok(RenderPipeline::new(table, entry)?.into_renderer())
 }
 
 /// L3: mosaic volts → interleaved XYZ.

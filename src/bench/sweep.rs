@@ -15,9 +15,7 @@ use crate::camera::{Camera, NoiseSwitches, SensorDesign, mosaic};
 use crate::eval::{
     ChannelSet, ChartCapture, ChartSetup, ColourFit, LightLevel, fit_colour_matrix, simulate_chart,
 };
-use crate::l3::{
-    ColourMatrix, IlluminantEntry, IlluminantRegistry, L3Table, TableKind, fuse_entry,
-};
+use crate::l3::{ColourMatrix, IlluminantEntry, IlluminantRegistry, L3Table, TableKind};
 use crate::scene::{DeadLeavesParams, SceneOptions, dead_leaves, training_reflectances};
 use crate::spectral::{IlluminantSpec, IsetData, WavelengthGrid};
 use crate::training::{TrainingSpec, train_table};
@@ -658,8 +656,8 @@ pub fn run_bench(
 
     for c in &opts.configs {
         let t0 = Instant::now();
-        // (table, per-case kernels, label per case)
-        let mut per_case: Vec<(usize, Vec<f32>, String)> = Vec::new();
+        // per case: the table it renders with, and its label
+        let mut per_case: Vec<(usize, String)> = Vec::new();
         let mut tables: Vec<L3Table> = Vec::new();
         match c.tables {
             TableChoice::SiEnsemble => {
@@ -677,12 +675,8 @@ pub fn run_bench(
                 if skip_table.as_ref().is_none_or(|(d, _)| !d && is_default) {
                     skip_table = Some((is_default, tables[0].clone()));
                 }
-                for case in &cases {
-                    per_case.push((
-                        0,
-                        fuse_entry(&tables[0], &case.correction)?,
-                        format!("SI_{}+T", ills.join("+")),
-                    ));
+                for _ in &cases {
+                    per_case.push((0, format!("SI_{}+T", ills.join("+"))));
                 }
             }
             TableChoice::CrossPerIlluminant => {
@@ -691,23 +685,23 @@ pub fn run_bench(
                     let spec =
                         training_spec(c, TableKind::CrossIlluminant, vec![acqs[i].clone()], opts);
                     tables.push(train_table(design, &spec, iset, &|_, _| {}, &cancel)?);
-                    per_case.push((i, tables[i].kernels.clone(), format!("I_{}", case.name)));
+                    per_case.push((i, format!("I_{}", case.name)));
                 }
             }
         }
         let training_seconds = t0.elapsed().as_secs_f64();
         let mut colour = Vec::new();
-        for (case, (ti, kernels, label)) in cases.iter().zip(&per_case) {
+        for (case, (ti, label)) in cases.iter().zip(&per_case) {
             progress(&format!("[{}] ΔE under {}", c.name, case.name));
-            let renderer = prepare(&tables[*ti], kernels)?;
+            let renderer = prepare(&tables[*ti], &case.correction)?;
             colour.push(case.evaluate(label, |v, w, h| Ok(render_xyz(&renderer, v, w, h)?))?);
         }
         progress(&format!(
             "[{}] timing {} runs on {:.1} Mpix",
             c.name, opts.runs, mpix
         ));
-        let (ti, kernels, _) = &per_case[0];
-        let renderer = prepare(&tables[*ti], kernels)?;
+        let (ti, _) = &per_case[0];
+        let renderer = prepare(&tables[*ti], &cases[0].correction)?;
         let (one, all) = measure(&single, opts.runs, mpix, || {
             Ok(render_srgb8(&renderer, &frame, w, h)?)
         })?;
