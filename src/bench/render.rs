@@ -76,3 +76,52 @@ pub fn render_baseline_srgb8(
     let xyz = render_baseline_xyz(volts, width, height, cfa, m)?;
     Ok(xyz_to_srgb8(&xyz, BENCH_WHITE_Y))
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::l3::{ChromaClasses, IDENTITY, L3Params};
+    use crate::test_support::{synthetic_frame_with_blocks, train_synthetic_table};
+
+    #[test]
+    fn prepare_balances_chroma_classes_by_the_lights_neutral() {
+        let params = L3Params {
+            levels: L3Params::levels_for(6, 1.8).unwrap(),
+            min_class_samples: 60,
+            chroma: Some(ChromaClasses {
+                centroids: vec![vec![0.4, 0.15, 0.35, 0.1], vec![0.1, 0.3, 0.3, 0.3]],
+                white: Some(vec![1.0; 4]),
+            }),
+            ..L3Params::default()
+        };
+        let table = train_synthetic_table(&params, 30, |i| {
+            let scale = [0.05f32, 0.2, 0.8, 1.5][i % 4];
+            Ok(vec![synthetic_frame_with_blocks(
+                i as u64,
+                48,
+                12,
+                scale,
+                0.01,
+                (i % 2, (i / 2) % 2),
+            )])
+        })
+        .unwrap();
+        let lamp = vec![1.0, 0.7, 0.9, 0.45];
+        let entry = IlluminantEntry {
+            neutral: Some(lamp.clone()),
+            ..IlluminantEntry::from_matrix("synthetic", IDENTITY)
+        };
+        let f = synthetic_frame_with_blocks(5, 96, 12, 1.0, 0.02, (0, 0));
+        let render = |r: &FastRenderer| render_xyz(r, &f.volts, 96, 96).unwrap();
+        let got = render(&prepare(&table, &entry).unwrap());
+        let under_lamp = FastRenderer::under_light(&table, &table.kernels, Some(&lamp)).unwrap();
+        assert_eq!(got, render(&under_lamp));
+        // what the bench rendered before: the classes' reference light
+        let reference = FastRenderer::new(&table, &table.kernels).unwrap();
+        assert_ne!(
+            got,
+            render(&reference),
+            "the light's neutral changed nothing"
+        );
+    }
+}
