@@ -633,6 +633,22 @@ fn train_in_shards_gives_the_same_table_file() {
         "the SI default is 128 pixels per channel"
     );
     assert_ne!(kernels("one.safetensors"), kernels("avg0.safetensors"));
+    // its colour maps are aimed through D65's and tungsten's T; it keeps, per
+    // level, maps aimed at XYZ under the light for the lights it was not
+    // trained on, and these differ where tungsten's T errs
+    let table = l3::l3::L3Table::load(&d.join("one.safetensors")).unwrap();
+    let transfer = table.meta.params.transfer_maps.as_ref().unwrap();
+    assert_eq!(transfer.len(), 6);
+    assert!(table.transfers_to("Fluorescent") && !table.transfers_to("tungsten"));
+    let top = table.colour_map_at(table.n_bands() - 1).unwrap();
+    let gap = top
+        .m
+        .iter()
+        .flatten()
+        .zip(transfer[5].m.iter().flatten())
+        .map(|(a, b)| (a - b).abs())
+        .fold(0.0, f64::max);
+    assert!(gap > 1e-3, "aimed and transfer maps differ: {gap}");
     assert!(stdout.contains("accumulation shard 2/2"), "{stdout}");
     assert!(d.join("parts/sums-2-of-2.l3p").is_file());
     // one step per process, as on separate machines: surveys, then sums

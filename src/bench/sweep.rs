@@ -266,6 +266,7 @@ impl BaselineChoice {
             kind,
             channels,
             preserve_white: kind == TableKind::CrossIlluminant,
+            through_correction: false,
         };
         let m = fit_colour_matrix(camera, &fit, iset)?;
         Ok(match kind {

@@ -114,6 +114,8 @@ pub fn error_budget(
         kind: crate::l3::TableKind::SameIlluminant,
         channels: ChannelSet::All,
         preserve_white: false,
+        // the paper's SI map: XYZ under the light, then T (T's cost shows)
+        through_correction: false,
     };
     let si_m = fit_colour_matrix(camera, &si_fit, iset)?.then(&correction.t);
     let si: Vec<Xyz> = chans.iter().map(|c| apply(&si_m, c)).collect();

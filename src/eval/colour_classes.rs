@@ -44,10 +44,10 @@ use crate::camera::Camera;
 use crate::colour::{Cmfs, Xyz};
 use crate::l3::{
     CROSS_AVERAGING_PX, ChromaClasses, ColourLoss, ColourMapFit, ColourMatrix, L3Params,
-    MIN_SURFACES_PER_CHANNEL, NoiseModel, TableKind, band_maps, level_maps,
+    MIN_SURFACES_PER_CHANNEL, NoiseModel, band_maps, level_maps,
 };
 use crate::spectral::{IsetData, Spectrum};
-use crate::training::{colour_samples, noise_model};
+use crate::training::{ColourTarget, colour_samples, noise_model};
 
 /// Draws of a patch's classification noise (the patch mean averages pixels
 /// whose 5×5 neighbourhoods fall in different classes).
@@ -205,7 +205,7 @@ pub fn colour_class_study(
     let samples = colour_samples(
         camera,
         std::slice::from_ref(&acq),
-        TableKind::CrossIlluminant,
+        ColourTarget::D65,
         &d65,
         &refl,
     )?;

@@ -422,6 +422,7 @@ pub fn run_paper_table(
             kind,
             channels,
             preserve_white: kind == TableKind::CrossIlluminant,
+            through_correction: false,
         };
         fit_colour_matrix(&camera, &fit, iset)
     };
@@ -512,7 +513,7 @@ pub fn run_paper_table(
             let rep = evaluate_capture(&camera, &cap, &method, &name, c, &opts.chart)?;
             let (linear_mean, baseline) = match method {
                 Method::Table(t) => {
-                    let map = matching_linear_map(&camera, t, iset)?;
+                    let map = matching_linear_map(&camera, t, acq, iset)?;
                     // the linear map gets its own C, as the table does
                     let lin_corr = if camera_aware {
                         camera_corrected(

@@ -12,7 +12,7 @@ use crate::l3::{
 };
 use crate::scene::{Scene, SceneOptions, natural100_chart};
 use crate::spectral::{Extrapolation, IlluminantSpec, IsetData, Spectrum, cie_illuminant};
-use crate::training::colour_samples;
+use crate::training::{ColourTarget, colour_samples, same_illuminant_corrections};
 
 /// A rendering method under evaluation.
 pub enum Method<'a> {
@@ -369,6 +369,7 @@ pub fn fit_baseline_matrix(
         kind: TableKind::SameIlluminant,
         channels: ChannelSet::Rgb,
         preserve_white: false,
+        through_correction: false,
     };
     fit_colour_matrix(camera, &fit, iset)
 }
@@ -395,6 +396,11 @@ pub struct ColourFit<'a> {
     pub kind: TableKind,
     pub channels: ChannelSet,
     pub preserve_white: bool,
+    /// A same-illuminant fit aimed through each light's T
+    /// ([`ColourTarget::ThroughCorrection`], as a same-illuminant table's
+    /// colour maps are) rather than at XYZ under the light (the paper's
+    /// target, [`ColourTarget::UnderLight`]).
+    pub through_correction: bool,
 }
 
 /// The colour samples of the natural reflectances (the set every colour
@@ -404,10 +410,10 @@ pub struct ColourFit<'a> {
 /// (`whites`: the perfect white under each light, same normalisation).
 fn training_samples(
     camera: &Camera,
-    illuminants: &[String],
-    kind: TableKind,
+    fit: &ColourFit,
     iset: Option<&IsetData>,
 ) -> Result<(ColourSamples, ColourSamples), EvalError> {
+    let illuminants = fit.illuminants;
     let grid = *camera.grid();
     let refl: Vec<Spectrum> = crate::scene::natural_reflectances(&grid, iset)?
         .into_iter()
@@ -425,9 +431,20 @@ fn training_samples(
     let d65 = cie_illuminant("D65")
         .ok_or_else(|| EvalError::Invalid("D65 missing".into()))?
         .resample(&grid, Extrapolation::Zero);
-    let samples = |r: &[Spectrum]| {
-        colour_samples(camera, &spds, kind, &d65, r).map_err(|e| EvalError::Invalid(e.to_string()))
+    let err = |e: crate::training::TrainError| EvalError::Invalid(e.to_string());
+    let corrections = if fit.through_correction {
+        same_illuminant_corrections(fit.kind, grid, &refl, &spds).map_err(err)?
+    } else {
+        Vec::new()
     };
+    let target = match fit.kind {
+        TableKind::CrossIlluminant => ColourTarget::D65,
+        TableKind::SameIlluminant if fit.through_correction => {
+            ColourTarget::ThroughCorrection(&corrections)
+        }
+        TableKind::SameIlluminant => ColourTarget::UnderLight(&[]),
+    };
+    let samples = |r: &[Spectrum]| colour_samples(camera, &spds, target, &d65, r).map_err(err);
     Ok((samples(&refl)?, samples(&[Spectrum::constant(grid, 1.0)])?))
 }
 
@@ -437,7 +454,7 @@ pub fn fit_colour_matrix(
     fit: &ColourFit,
     iset: Option<&IsetData>,
 ) -> Result<ColourMatrix, EvalError> {
-    let (samples, whites) = training_samples(camera, fit.illuminants, fit.kind, iset)?;
+    let (samples, whites) = training_samples(camera, fit, iset)?;
     let cfa = camera.cfa();
     let rgb: Option<Vec<usize>> = ["R", "G", "B"]
         .iter()
@@ -509,12 +526,17 @@ fn fit_preserving(
     Ok(ColourMatrix { m, n_channels: nc })
 }
 
-/// The matching linear map of `table`: the plain least-squares channel →
-/// XYZ map fitted on the same (natural) reflectances, illuminants and target
-/// (same-illuminant or D65) as the table, on every channel.
+/// The matching linear map of `table` under the light named `acquisition`:
+/// the plain least-squares channel → XYZ map fitted on the same (natural)
+/// reflectances, illuminants and target as the table renders that light
+/// with, on every channel. A same-illuminant table aims its colour maps
+/// through T under the lights it was trained on, and keeps maps aimed at XYZ
+/// under the light for every other ([`L3Table::transfers_to`]); so does its
+/// matching map.
 pub fn matching_linear_map(
     camera: &Camera,
     table: &L3Table,
+    acquisition: &str,
     iset: Option<&IsetData>,
 ) -> Result<ColourMatrix, EvalError> {
     let fit = ColourFit {
@@ -522,6 +544,7 @@ pub fn matching_linear_map(
         kind: table.meta.kind,
         channels: ChannelSet::All,
         preserve_white: false,
+        through_correction: !table.transfers_to(acquisition),
     };
     fit_colour_matrix(camera, &fit, iset)
 }

@@ -30,7 +30,11 @@
 //!   ([`ColourSamples::judged_through`]) and the error is weighted where it
 //!   is judged, at `T·xyz` relative to `T·white`, pulled back through T
 //!   (noise-free on ISET's RGBW under tungsten, SI_Tun+T 2.58 → 2.47 against
-//!   its matching linear map's 2.52). The samples are the natural reflectances
+//!   its matching linear map's 2.52). Its target is what T must receive to
+//!   give the true D65 colour, `T⁻¹·xyz_D65`, not XYZ under the light
+//!   (`training::ColourTarget`): the map then also absorbs T's own error
+//!   where the channels tell apart what T confuses (rgbw-paper SI_Tun+T
+//!   1.48 → 0.87). The samples are the natural reflectances
 //!   (`scene::natural_reflectances`, no Munsell chips): on ISET's RGBW under
 //!   tungsten a cross table's one-capture error went from 3.55 (ΔE76 on the
 //!   training reflectances) to 2.86, where either change alone made it

@@ -41,11 +41,13 @@ pub struct L3Params {
     /// not name the field.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub chroma: Option<ChromaClasses>,
-    /// Per level, the colour map fitted over every chroma class at once (the
-    /// map a table without a chroma split holds), kept by same-illuminant
-    /// tables with chroma classes: under a light such a table was not trained
-    /// on and corrected by T, its unsaturated kernels' channel sums are moved
-    /// to these maps ([`super::L3Table::transfer_kernels`]). `None` otherwise.
+    /// Per level, the colour map a same-illuminant table renders a light it
+    /// was not trained on with: fitted over every chroma class at once and
+    /// aimed at XYZ under the training lights (the paper's target), not
+    /// through their T as the table's own maps are. Under such a light,
+    /// corrected by one T, the table's unsaturated kernels' channel sums are
+    /// moved to these maps ([`super::L3Table::transfer_kernels`]). `None` in
+    /// cross-illuminant tables and in tables trained before the field.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub transfer_maps: Option<Vec<ColourMatrix>>,
 }

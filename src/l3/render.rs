@@ -48,7 +48,7 @@ pub fn fuse_kernels(table: &L3Table, m: &[[f64; 3]; 3]) -> Vec<f32> {
 /// The kernels `table` renders with under `entry`: each class's kernel times its
 /// band's correction when the entry has one per band (per level, split by chroma
 /// class where the table has them), else times `entry.t`: the table's own kernels, or,
-/// for a chroma-split table under a light it was not trained on, its
+/// for a same-illuminant table under a light it was not trained on, its
 /// [transfer kernels](L3Table::transfer_kernels).
 pub fn fuse_entry(table: &L3Table, entry: &super::IlluminantEntry) -> Result<Vec<f32>, L3Error> {
     let nl = table.n_bands();

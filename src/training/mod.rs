@@ -18,12 +18,13 @@ use serde::{Deserialize, Serialize};
 use sha2::{Digest, Sha256};
 
 use crate::camera::{Camera, CameraError, NoiseSwitches, SensorDesign, mosaic};
+use crate::colour::mat3_mul_vec;
 use crate::l3::{
-    ChromaClasses, Classes, ColourMatrix, GramPartial, IlluminantRegistry, L3Error, L3Params,
-    L3Table, Learned, MIN_SURFACES_PER_CHANNEL, NoiseModel, PatchGeometry, RidgeChoice, ShardSpec,
-    SurveyPartial, TABLE_FORMAT_VERSION, TableKind, TableMeta, TrainControl, TrainSetup,
-    TrainingFrame, accumulate_batches, band_maps, classes_from_survey, learn, level_maps,
-    merge_partials, merge_surveys, package, plan_shards, solve_learned, survey_batches,
+    ChromaClasses, Classes, ColourMatrix, GramPartial, L3Error, L3Params, L3Table, Learned,
+    MIN_SURFACES_PER_CHANNEL, NoiseModel, PatchGeometry, RidgeChoice, ShardSpec, SurveyPartial,
+    TABLE_FORMAT_VERSION, TableKind, TableMeta, TrainControl, TrainSetup, TrainingFrame,
+    accumulate_batches, band_maps, classes_from_survey, learn, level_maps, merge_partials,
+    merge_surveys, package, plan_shards, solve_learned, survey_batches,
 };
 use crate::scene::SceneError;
 use crate::spectral::{
@@ -32,7 +33,10 @@ use crate::spectral::{
 };
 
 pub use crate::scene::training_reflectances;
-pub use colour_samples::{camera_corrected, colour_samples, noise_model, with_neutral};
+pub use colour_samples::{
+    ColourTarget, camera_corrected, colour_samples, inverse_correction, noise_model,
+    same_illuminant_corrections, with_neutral,
+};
 pub use scenes::TrainingScenes;
 
 /// Errors of a training run.
@@ -284,6 +288,11 @@ pub struct TrainingRun {
     maps: Option<Vec<ColourMatrix>>,
     /// Per training illuminant, the sensor's channel responses to white.
     neutrals: Vec<Vec<f64>>,
+    /// Per training illuminant of a same-illuminant table, `T⁻¹` of its
+    /// correction to D65: a pixel's target is `T⁻¹ · xyz_D65`, as its colour
+    /// samples' are ([`ColourTarget::ThroughCorrection`]). Empty for a cross
+    /// table.
+    aim_through: Vec<crate::l3::Mat3>,
     run_key: String,
 }
 
@@ -331,26 +340,29 @@ impl TrainingRun {
             NoiseSwitches::none()
         };
         let nm = noise_model(design);
+        let refl: Vec<_> = crate::scene::natural_reflectances(&grid, iset)
+            .map_err(|e| TrainError::Invalid(e.to_string()))?
+            .into_iter()
+            .map(|(_, s)| s)
+            .collect();
+        let spds: Vec<_> = illuminants.iter().map(|(_, s)| s.clone()).collect();
+        let corrections = same_illuminant_corrections(spec.kind, grid, &refl, &spds)?;
         let maps = match params.colour_map {
             Some(ref fit) => {
-                let spds: Vec<_> = illuminants.iter().map(|(_, s)| s.clone()).collect();
-                let refl: Vec<_> = crate::scene::natural_reflectances(&grid, iset)
-                    .map_err(|e| TrainError::Invalid(e.to_string()))?
-                    .into_iter()
-                    .map(|(_, s)| s)
-                    .collect();
-                let mut samples = colour_samples(&camera, &spds, spec.kind, &d65, &refl)?;
-                if spec.kind == TableKind::SameIlluminant {
-                    // a same-illuminant table is judged after its light's T
-                    let registry = IlluminantRegistry::new(grid, refl.clone())?;
-                    for spd in &spds {
-                        let t = registry.correction_for(spd)?;
-                        samples
-                            .judged_through
-                            .extend(std::iter::repeat_n(t, refl.len()));
-                    }
-                }
+                let target = match spec.kind {
+                    TableKind::CrossIlluminant => ColourTarget::D65,
+                    TableKind::SameIlluminant => ColourTarget::ThroughCorrection(&corrections),
+                };
+                let samples = colour_samples(&camera, &spds, target, &d65, &refl)?;
                 let pooled = level_maps(&samples, &params.levels, &nm, swing, fit)?;
+                if spec.kind == TableKind::SameIlluminant {
+                    // for lights it was not trained under: the maps aimed at
+                    // XYZ under the light, which any light's T can take
+                    let under = ColourTarget::UnderLight(&corrections);
+                    let plain = colour_samples(&camera, &spds, under, &d65, &refl)?;
+                    params.transfer_maps =
+                        Some(level_maps(&plain, &params.levels, &nm, swing, fit)?);
+                }
                 if spec.chroma_classes > 1 {
                     let classes = ChromaClasses::fit_balanced(
                         &samples.channels,
@@ -364,9 +376,6 @@ impl TrainingRun {
                     let maps =
                         band_maps(&samples, &classes, &pooled, &params.levels, &nm, swing, fit)?;
                     params.chroma = Some(classes);
-                    if spec.kind == TableKind::SameIlluminant {
-                        params.transfer_maps = Some(pooled);
-                    }
                     Some(maps)
                 } else {
                     Some(pooled)
@@ -391,6 +400,10 @@ impl TrainingRun {
             nm,
             maps,
             neutrals,
+            aim_through: corrections
+                .iter()
+                .map(inverse_correction)
+                .collect::<Result<_, _>>()?,
             run_key,
         })
     }
@@ -543,14 +556,20 @@ impl TrainingRun {
         let scene = self.scenes.scene(s, ill, ill_name)?;
         let optical = camera.optical_image(&scene).map_err(TrainError::from)?;
         let rates = camera.channel_rates(&optical).map_err(TrainError::from)?;
-        let target_ill = match spec.kind {
-            TableKind::SameIlluminant => ill,
-            TableKind::CrossIlluminant => &self.d65,
-        };
+        // the target: XYZ under D65, taken back through the light's T for a
+        // same-illuminant table
         let xyz_rates = camera
-            .xyz_rates(&optical, target_ill)
+            .xyz_rates(&optical, &self.d65)
             .map_err(TrainError::from)?;
-        let xyz_rates = xyz_rates.as_slice().map(|v| v.to_vec()).unwrap_or_default();
+        let mut xyz_rates = xyz_rates.as_slice().map(|v| v.to_vec()).unwrap_or_default();
+        if let Some(inv) = self.aim_through.get(i) {
+            for px in xyz_rates.chunks_exact_mut(3) {
+                let v = mat3_mul_vec(inv, [px[0] as f64, px[1] as f64, px[2] as f64]);
+                for (o, v) in px.iter_mut().zip(v) {
+                    *o = v as f32;
+                }
+            }
+        }
         // luminance statistic of the noise-free frame: median over pixels of
         // the mean over channels of the channel rates
         let (_, rows, cols) = rates.dim();
