@@ -597,6 +597,52 @@ mod tests {
     use super::*;
 
     #[test]
+    fn a_same_illuminant_tables_matching_map_aims_through_t_only_under_its_own_lights() {
+        let camera = crate::test_support::paper_camera();
+        let mut table = crate::test_support::tiny_table().clone();
+        table.meta.kind = TableKind::SameIlluminant;
+        table.meta.train_illuminants = vec!["Tungsten".into()];
+        // a table that keeps maps for other lights (what the trainer gives an SI table)
+        table.meta.params.transfer_maps = Some(Vec::new());
+        let own = matching_linear_map(&camera, &table, "tungsten", None).unwrap();
+        let foreign = matching_linear_map(&camera, &table, "Fluorescent", None).unwrap();
+        let t = crate::l3::IlluminantRegistry::with_defaults(*camera.grid(), None)
+            .unwrap()
+            .resolve("Tungsten", None)
+            .unwrap()
+            .t;
+        let ills = ["Tungsten".to_string()];
+        let fit = |kind, through_correction| {
+            let f = ColourFit {
+                illuminants: &ills,
+                kind,
+                channels: ChannelSet::All,
+                preserve_white: false,
+                through_correction,
+            };
+            fit_colour_matrix(&camera, &f, None).unwrap()
+        };
+        // under its own light: the map that T takes to the cross map
+        let cross = fit(TableKind::CrossIlluminant, false);
+        for (a, b) in own.then(&t).m.iter().zip(&cross.m) {
+            for k in 0..3 {
+                assert!(
+                    (a[k] - b[k]).abs() < 1e-6 * (1.0 + b[k].abs()),
+                    "{a:?} {b:?}"
+                );
+            }
+        }
+        // under another light: the paper's map, XYZ under the light
+        let plain = fit(TableKind::SameIlluminant, false);
+        assert_eq!(foreign.m, plain.m);
+        assert_ne!(own.m, plain.m);
+        // a table without maps for other lights aims through T everywhere
+        table.meta.params.transfer_maps = None;
+        let old = matching_linear_map(&camera, &table, "Fluorescent", None).unwrap();
+        assert_eq!(old.m, own.m);
+    }
+
+    #[test]
     fn light_levels_set_the_exposure_factor() {
         let base = ChartSetup::default();
         let s = LightLevel::ExposureFactor(0.25).apply(&base).unwrap();
