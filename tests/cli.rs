@@ -616,28 +616,40 @@ fn train_in_shards_gives_the_same_table_file() {
         "6",
     ];
     let train = |out: &str, extra: &[&str]| train_reproducibly(d, &base, out, extra);
-    let (one, _) = train("one.safetensors", &[]);
+    let (one_bytes, _) = train("one.safetensors", &[]);
     let (two, stdout) = train(
         "two.safetensors",
         &["--shards", "2", "--shard-dir", "parts"],
     );
-    assert_eq!(one, two, "2 shards give the single run's bytes");
-    // --colour-averaging-px: 128 is an SI table's default, 0 the noise-free maps
-    // (the spec, stored in the header, differs; the kernels tell)
+    assert_eq!(one_bytes, two, "2 shards give the single run's bytes");
+    // by default an SI table renders with maps fitted for a mean over 48
+    // pixels per channel (a cross table's) and keeps maps for foreign lights
+    // fitted for 128; --colour-averaging-px sets both, 0 the noise-free maps
+    // (the spec, stored in the header, differs; kernels and maps tell)
+    train("avg48.safetensors", &["--colour-averaging-px", "48"]);
     train("avg128.safetensors", &["--colour-averaging-px", "128"]);
     train("avg0.safetensors", &["--colour-averaging-px", "0"]);
-    let kernels = |f: &str| l3::l3::L3Table::load(&d.join(f)).unwrap().kernels;
-    assert_eq!(
-        kernels("one.safetensors"),
-        kernels("avg128.safetensors"),
-        "the SI default is 128 pixels per channel"
+    let load = |f: &str| l3::l3::L3Table::load(&d.join(f)).unwrap();
+    let (one, avg48, avg128) = (
+        load("one.safetensors"),
+        load("avg48.safetensors"),
+        load("avg128.safetensors"),
     );
-    assert_ne!(kernels("one.safetensors"), kernels("avg0.safetensors"));
+    assert_eq!(one.kernels, avg48.kernels, "the rendered maps: 48 px");
+    assert_ne!(one.kernels, avg128.kernels);
+    let transfer = |t: &l3::l3::L3Table| t.meta.params.transfer_maps.clone().unwrap();
+    assert_eq!(
+        transfer(&one),
+        transfer(&avg128),
+        "the transfer maps: 128 px"
+    );
+    assert_ne!(transfer(&one), transfer(&avg48));
+    assert_ne!(one.kernels, load("avg0.safetensors").kernels);
     // its colour maps are aimed through D65's and tungsten's T; it keeps, per
     // level, maps aimed at XYZ under the light for the lights it was not
     // trained on, and these differ where tungsten's T errs
-    let table = l3::l3::L3Table::load(&d.join("one.safetensors")).unwrap();
-    let transfer = table.meta.params.transfer_maps.as_ref().unwrap();
+    let table = &one;
+    let transfer = transfer(table);
     assert_eq!(transfer.len(), 6);
     assert!(table.transfers_to("Fluorescent") && !table.transfers_to("tungsten"));
     let top = table.colour_map_at(table.n_bands() - 1).unwrap();
@@ -664,7 +676,10 @@ fn train_in_shards_gives_the_same_table_file() {
         let args = [&["--shards", "2", "--shard-dir", "steps"][..], step].concat();
         train("steps.safetensors", &args);
     }
-    assert_eq!(std::fs::read(d.join("steps.safetensors")).unwrap(), one);
+    assert_eq!(
+        std::fs::read(d.join("steps.safetensors")).unwrap(),
+        one_bytes
+    );
     // more shards than batches is a clear error
     let (ok, _, err) = l3(&["train", "--shards", "6", "--scenes", "5"], d);
     assert!(!ok && err.contains("6 shards for 5 batches"), "{err}");

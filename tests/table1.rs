@@ -1,8 +1,9 @@
 //! The paper's Table 1 on the paper's sensor (`rgbw-iset`: ISETCam's
 //! default RGBW filters), on a small training set so it runs in CI:
 //! - the rows in the paper's order under tungsten (I_Tun ≤ SI_Tun+T <
-//!   SI_Ens+T < SI_D65+T: 2.67, 2.86, 3.28 and 4.04 here; over 16 captures
-//!   one capture's mean is 2.80 for I_Tun against 3.08 for SI_Tun+T);
+//!   SI_Ens+T < SI_D65+T: 2.67, 2.67, 3.08 and 4.07 here; over 16 captures
+//!   one capture's mean is 2.77 for both I_Tun and SI_Tun+T, which aimed
+//!   through T is the cross table's estimator);
 //! - every L3 row within 0.4 ΔE of its matching linear map (the same
 //!   least-squares channel → XYZ map in every class, evaluated on the same
 //!   noisy frame), or better;
@@ -52,10 +53,13 @@ fn table1_on_the_papers_sensor() {
         si_e.mean,
         si_d.mean
     );
+    // an SI_Tun table aimed through T, with the cross table's averaging, is
+    // the cross table followed by T⁻¹ (least squares commutes with T): the
+    // paper's I_Tun ≤ SI_Tun+T holds as an equality, to rounding
     let i_tun = row("I_Tun");
     assert!(
-        i_tun.mean <= si_t.mean,
-        "I_Tun {} above SI_Tun+T {}",
+        (i_tun.mean - si_t.mean).abs() <= 1e-3,
+        "I_Tun {} and SI_Tun+T {} differ",
         i_tun.mean,
         si_t.mean
     );
@@ -246,9 +250,9 @@ fn per_level_camera_correction_serves_a_d65_table_in_dim_light() {
 
 /// Chroma classes (`chroma_classes`, 8 asked, 6 kept on this sensor) take
 /// the paper's sensor under the targets under tungsten, where one
-/// class sat on the linear floor (2.67 and 2.86 on this capture, 2.77 and
-/// 3.02 over 16): I_Tun ≤ 2.7 and SI_Tun+T ≤ 2.95 (2.06 and 2.46 here), in
-/// the paper's order, with every kernel norm under 100.
+/// class sat on the linear floor (2.67 on this capture for both, 2.77 over
+/// 16): I_Tun ≤ 2.7 and SI_Tun+T ≤ 2.95 (2.22 and 2.22 here), in the
+/// paper's order (to rounding), with every kernel norm under 100.
 #[test]
 fn chroma_classes_take_the_papers_sensor_under_its_targets() {
     use l3::camera::Camera;
@@ -304,7 +308,7 @@ fn chroma_classes_take_the_papers_sensor_under_its_targets() {
     );
     assert!(cross.n_chroma() > 1 && si.n_chroma() > 1);
     assert!(
-        i_tun <= 2.7 && si_tun <= 2.95 && i_tun <= si_tun,
+        i_tun <= 2.7 && si_tun <= 2.95 && i_tun <= si_tun + 1e-3,
         "{i_tun} {si_tun}"
     );
     for table in [&cross, &si] {

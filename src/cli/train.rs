@@ -59,8 +59,9 @@ pub struct TrainArgs {
     #[arg(long)]
     pub no_saturation: bool,
     /// Pixels per channel whose mean the colour maps are fitted for under
-    /// the sensor's noise (0: the noise-free map). Default by kind: 128 for
-    /// same-illuminant tables, 48 for cross-illuminant ones.
+    /// the sensor's noise (0: the noise-free map). Default: 48 for the maps a
+    /// table renders with, 128 for a same-illuminant table's maps for lights
+    /// it was not trained under; given, both.
     #[arg(long)]
     pub colour_averaging_px: Option<f64>,
     /// What each level's colour map minimises: every light's mean ΔE00 or

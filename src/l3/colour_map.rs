@@ -251,34 +251,44 @@ impl ColourLoss {
 impl Default for ColourMapFit {
     fn default() -> Self {
         Self {
-            averaging_px: Some(DEFAULT_AVERAGING_PX),
+            averaging_px: Some(UNDER_LIGHT_AVERAGING_PX),
             perceptual: true,
             loss: ColourLoss::default(),
         }
     }
 }
 
-/// The default [`ColourMapFit::averaging_px`]: an 8×8-pixel region of a
-/// 2×2 CFA (about a quarter of an evaluation patch's interior). Measured on
-/// ISET's RGBW under tungsten (SI_Tun+T, 16 captures; one capture's mean /
-/// noise-free / per-pixel): 64 gave 3.17 / 2.98 / 4.91, 128 gave 3.25 / 2.89
-/// / 6.05, 256 gave 3.42 / 2.84 / 7.28; on rgbw-ar0132at 2.52, 2.55 and 2.58.
-/// 128 was chosen with the earlier ΔE76 maps, where 64 cost two fluorescent
-/// `+C` rows on rgbw-ar0132at; it has not been re-chosen since.
-pub const DEFAULT_AVERAGING_PX: f64 = 128.0;
+/// The averaging of the maps a same-illuminant table keeps for lights it
+/// was not trained under ([`super::L3Params::transfer_maps`]), aimed at XYZ
+/// under the light: 16×16 pixels of a 2×2 CFA's channel, about a quarter of
+/// an evaluation patch's interior, and the default [`ColourMapFit`]. Such a
+/// map has no white-balance gain, so it takes a lighter noise term than a
+/// cross map. Measured on ISET's RGBW under tungsten when every
+/// same-illuminant map was aimed so (SI_Tun+T, 16 captures; one capture's
+/// mean / noise-free / per-pixel): 64 gave 3.17 / 2.98 / 4.91, 128 gave 3.25
+/// / 2.89 / 6.05, 256 gave 3.42 / 2.84 / 7.28; on rgbw-ar0132at 2.52, 2.55
+/// and 2.58. 128 was chosen with the earlier ΔE76 maps, where 64 cost two
+/// fluorescent `+C` rows on rgbw-ar0132at.
+pub const UNDER_LIGHT_AVERAGING_PX: f64 = 128.0;
 
-/// The averaging a cross-illuminant table's colour maps are fitted for. A
-/// cross table's map carries the acquisition light's white balance, so its
-/// noise gain is the larger, and the lighter noise term of 128 left it noisy.
-/// The value is measured, not derived: a 16×16-pixel patch interior holds 64
-/// pixels per channel (2×2 CFA), and over 16 noisy captures of the chart the
-/// mean patch-mean ΔE2000 of one capture is lowest near 48 with the mean-ΔE
-/// loss. I_Tun (one capture's mean / noise-free / per-pixel), mean-ΔE loss:
-/// on ISET's RGBW 32 gave 2.81 / 2.72 / 3.72, 48 gave 2.77 / 2.62 / 4.21, 64
-/// gave 2.77 / 2.54 / 4.71, 96 gave 2.81 / 2.40 / 5.61; on rgbw-ar0132at
-/// 2.21, 2.20, 2.20 and 2.21. (With the squared loss 32 was best: 2.80 /
-/// 2.62 / 4.46 on ISET's RGBW, 2.29 on rgbw-ar0132at.) Same-illuminant
-/// tables keep [`DEFAULT_AVERAGING_PX`].
+/// The averaging of the maps a table renders with under its own lights: a
+/// cross-illuminant table's, and a same-illuminant table's aimed through T
+/// (`training::ColourTarget::ThroughCorrection`), which carry the same
+/// white-balance gain. The lighter noise term of 128 left such maps noisy.
+/// The value is measured, not derived: a 16×16-pixel patch interior holds
+/// 64 pixels per channel (2×2 CFA), and over 16 noisy captures of the chart
+/// the mean patch-mean ΔE2000 of one capture is lowest near 48 with the
+/// mean-ΔE loss. I_Tun (one capture's mean / noise-free / per-pixel),
+/// mean-ΔE loss: on ISET's RGBW 32 gave 2.81 / 2.72 / 3.72, 48 gave 2.77 /
+/// 2.62 / 4.21, 64 gave 2.77 / 2.54 / 4.71, 96 gave 2.81 / 2.40 / 5.61; on
+/// rgbw-ar0132at 2.21, 2.20, 2.20 and 2.21. (With the squared loss 32 was
+/// best: 2.80 / 2.62 / 4.46 on ISET's RGBW, 2.29 on rgbw-ar0132at.) The
+/// aimed same-illuminant maps took 128 until they were measured with it:
+/// on the six sensors' Table 1, 48 moved 23 rows by 0.01 or more for the
+/// better and 7 for the worse (mean −0.014), ISET's RGBW SI_Tun+T 2.73 →
+/// 2.67 (per pixel 6.37 → 4.21, the cross table's figures: with the same
+/// averaging an SI_Tun table followed by T is the cross table), and its
+/// `+C` rows by 0.11–0.30.
 pub const CROSS_AVERAGING_PX: f64 = 48.0;
 
 impl ColourMapFit {

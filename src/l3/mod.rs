@@ -25,8 +25,8 @@ pub use camera_correction::{LevelMap, camera_correction};
 pub use chroma::{ChromaClasses, MAX_CHROMA_CLASSES, MIN_SURFACES_PER_CHANNEL, chromaticity};
 pub use classify::{MAX_CHANNELS, PatchGeometry, PatchStats, mirror, sat_case_index};
 pub use colour_map::{
-    CROSS_AVERAGING_PX, ColourLoss, ColourMapFit, ColourSamples, DEFAULT_AVERAGING_PX, LevelNoise,
-    band_maps, least_squares_map, level_maps,
+    CROSS_AVERAGING_PX, ColourLoss, ColourMapFit, ColourSamples, LevelNoise,
+    UNDER_LIGHT_AVERAGING_PX, band_maps, least_squares_map, level_maps,
 };
 pub use correction::{
     CorrectionSource, IDENTITY, IlluminantEntry, IlluminantRegistry, MAX_MATRIX_ENTRY, Mat3,

@@ -98,8 +98,9 @@ pub struct TrainingSpec {
     pub mean_luminance: f64,
     /// Pixels per channel whose mean each level's colour map is made best
     /// for under the sensor's noise (0: the noise-free map at every level;
-    /// absent: [`crate::l3::DEFAULT_AVERAGING_PX`] for a same-illuminant
-    /// table, [`crate::l3::CROSS_AVERAGING_PX`] for a cross-illuminant one).
+    /// absent: [`crate::l3::CROSS_AVERAGING_PX`] for the maps a table renders
+    /// with, and [`crate::l3::UNDER_LIGHT_AVERAGING_PX`] for a same-illuminant
+    /// table's maps for lights it was not trained under; given, both).
     #[serde(default)]
     pub colour_averaging_px: Option<f64>,
     /// What each level's colour map minimises over its samples (see
@@ -214,12 +215,21 @@ impl TrainingSpec {
         self.scenes
     }
 
-    /// The colour maps' averaging (pixels per channel) this spec trains with.
+    /// The averaging (pixels per channel) of the colour maps this spec's
+    /// table renders with: a cross table's maps, and a same-illuminant
+    /// table's maps aimed through T, which carry a cross map's white-balance
+    /// gain ([`crate::l3::CROSS_AVERAGING_PX`]).
     pub fn colour_averaging(&self) -> f64 {
-        self.colour_averaging_px.unwrap_or(match self.kind {
-            TableKind::SameIlluminant => crate::l3::DEFAULT_AVERAGING_PX,
-            TableKind::CrossIlluminant => crate::l3::CROSS_AVERAGING_PX,
-        })
+        self.colour_averaging_px
+            .unwrap_or(crate::l3::CROSS_AVERAGING_PX)
+    }
+
+    /// The averaging of a same-illuminant table's transfer maps, aimed at XYZ
+    /// under the light for lights it was not trained under
+    /// ([`crate::l3::UNDER_LIGHT_AVERAGING_PX`]).
+    pub fn transfer_averaging(&self) -> f64 {
+        self.colour_averaging_px
+            .unwrap_or(crate::l3::UNDER_LIGHT_AVERAGING_PX)
     }
 
     /// The loss this spec's colour maps minimise: as given, or by the number
@@ -360,8 +370,17 @@ impl TrainingRun {
                     // XYZ under the light, which any light's T can take
                     let under = ColourTarget::UnderLight(&corrections);
                     let plain = colour_samples(&camera, &spds, under, &d65, &refl)?;
-                    params.transfer_maps =
-                        Some(level_maps(&plain, &params.levels, &nm, swing, fit)?);
+                    let transfer_fit = crate::l3::ColourMapFit {
+                        averaging_px: Some(spec.transfer_averaging()).filter(|&px| px > 0.0),
+                        ..*fit
+                    };
+                    params.transfer_maps = Some(level_maps(
+                        &plain,
+                        &params.levels,
+                        &nm,
+                        swing,
+                        &transfer_fit,
+                    )?);
                 }
                 if spec.chroma_classes > 1 {
                     let classes = ChromaClasses::fit_balanced(
@@ -672,12 +691,20 @@ impl TrainingRun {
 }
 
 /// SHA-256 (hex) of what a run's batches depend on.
+/// Bumped whenever the trainer's output for a given spec changes (targets,
+/// colour maps, their noise terms), so that a shard's partial sums from an
+/// older trainer are refused rather than merged with this one's
+/// ([`TrainingRun::run_key`]). 2: same-illuminant maps aimed through T with
+/// the cross averaging.
+const TRAINER_REVISION: u32 = 2;
+
 fn run_key(design: &SensorDesign, spec: &TrainingSpec, iset: bool) -> String {
     let text = serde_json::json!({
         "design": design,
         "spec": spec,
         "iset": iset,
         "partial_format": crate::l3::PARTIAL_FORMAT_VERSION,
+        "trainer": TRAINER_REVISION,
     })
     .to_string();
     hex::encode(Sha256::digest(text.as_bytes()))
