@@ -260,8 +260,7 @@ impl Default for ColourMapFit {
 
 /// The averaging of the maps a same-illuminant table keeps for lights it
 /// was not trained under ([`super::L3Params::transfer_maps`]), aimed at XYZ
-/// under the light: 16×16 pixels of a 2×2 CFA's channel, about a quarter of
-/// an evaluation patch's interior, and the default [`ColourMapFit`]. Such a
+/// under the light, and the default [`ColourMapFit`]. Such a
 /// map has no white-balance gain, so it takes a lighter noise term than a
 /// cross map. Measured on ISET's RGBW under tungsten when every
 /// same-illuminant map was aimed so (SI_Tun+T, 16 captures; one capture's
@@ -284,11 +283,11 @@ pub const UNDER_LIGHT_AVERAGING_PX: f64 = 128.0;
 /// rgbw-ar0132at 2.21, 2.20, 2.20 and 2.21. (With the squared loss 32 was
 /// best: 2.80 / 2.62 / 4.46 on ISET's RGBW, 2.29 on rgbw-ar0132at.) The
 /// aimed same-illuminant maps took 128 until they were measured with it:
-/// on the six sensors' Table 1, 48 moved 23 rows by 0.01 or more for the
-/// better and 7 for the worse (mean −0.014), ISET's RGBW SI_Tun+T 2.73 →
+/// on the six sensors' Table 1, 48 moved 29 rows by 0.01 or more for the
+/// better and 6 for the worse (mean −0.014), ISET's RGBW SI_Tun+T 2.73 →
 /// 2.67 (per pixel 6.37 → 4.21, the cross table's figures: with the same
 /// averaging an SI_Tun table followed by T is the cross table), and its
-/// `+C` rows by 0.11–0.30.
+/// `+C` rows by 0.10–0.30.
 pub const CROSS_AVERAGING_PX: f64 = 48.0;
 
 impl ColourMapFit {
