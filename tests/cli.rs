@@ -661,6 +661,21 @@ fn train_in_shards_gives_the_same_table_file() {
         .map(|(a, b)| (a - b).abs())
         .fold(0.0, f64::max);
     assert!(gap > 1e-3, "aimed and transfer maps differ: {gap}");
+    // the transfer maps' fit was chosen on the standard lights the table was
+    // not trained on, and the summary says which, with both scores
+    let choice = &table.meta.summary["transfer_fit"];
+    assert_eq!(
+        choice["held_out"],
+        serde_json::json!(["D50", "A", "F2", "F11"])
+    );
+    let score = |k: &str| choice[k].as_f64().unwrap();
+    let (p, l) = (score("perceptual_delta_e"), score("least_squares_delta_e"));
+    assert!(
+        p.is_finite() && l.is_finite() && p > 0.0 && l > 0.0,
+        "{choice}"
+    );
+    let chosen = if l < p { "least-squares" } else { "perceptual" };
+    assert_eq!(choice["fit"], chosen, "{choice}");
     assert!(stdout.contains("accumulation shard 2/2"), "{stdout}");
     assert!(d.join("parts/sums-2-of-2.l3p").is_file());
     // one step per process, as on separate machines: surveys, then sums

@@ -320,3 +320,66 @@ fn chroma_classes_take_the_papers_sensor_under_its_targets() {
         assert!(worst <= 100.0, "max kernel norm {worst}");
     }
 }
+
+/// A same-illuminant table under a light it was not trained on renders with
+/// its transfer maps, whose fit (the colour maps' ΔE00 fit or plain least
+/// squares) the trainer chooses on standard lights held out from training
+/// (CIE D50, A, F2, F11). On the paper's sensor the D65 + tungsten table
+/// under ISET's fluorescent lamp, noise-free, was 15.04 against its matching
+/// linear map's 14.63 with the ΔE00 fit; the held-out lights choose least
+/// squares and it meets the noise-free bound of 0.2 (14.64). The D65 table
+/// keeps the ΔE00 fit, which beats its linear map under tungsten (3.19
+/// against 4.21).
+#[test]
+fn held_out_lights_choose_the_fit_a_table_takes_to_a_foreign_light() {
+    use l3::camera::Camera;
+    use l3::eval::{Method, evaluate_capture, linear_table, matching_linear_map, simulate_chart};
+    use l3::l3::IlluminantRegistry;
+    use l3::spectral::WavelengthGrid;
+    use l3::training::{TrainingSpec, train_table};
+
+    let sensor = concat!(env!("CARGO_MANIFEST_DIR"), "/config/sensors/rgbw-iset.toml");
+    let design = SensorDesign::load(sensor, None).unwrap();
+    let grid = WavelengthGrid::default();
+    let camera = Camera::new(&design, grid, None).unwrap();
+    let mut registry = IlluminantRegistry::with_defaults(grid, None).unwrap();
+    let chart = ChartSetup {
+        noise: false,
+        ..ChartSetup::default()
+    };
+    let cancel = std::sync::atomic::AtomicBool::new(false);
+    for (lights, acquisition, fit) in [
+        (&["D65", "Tungsten"][..], "Fluorescent", "least-squares"),
+        (&["D65"][..], "Tungsten", "perceptual"),
+    ] {
+        let spec = TrainingSpec {
+            illuminants: lights.iter().map(|s| s.to_string()).collect(),
+            seed: 7,
+            noise: false,
+            colour_averaging_px: Some(0.0),
+            ..TrainingSpec::default()
+        };
+        let table = train_table(&design, &spec, None, &|_, _| {}, &cancel).unwrap();
+        let choice = &table.meta.summary["transfer_fit"];
+        assert_eq!(choice["fit"], fit, "{lights:?}: {choice}");
+        assert!(table.transfers_to(acquisition));
+        let cap = simulate_chart(&camera, acquisition, None, &chart).unwrap();
+        let corr = registry.resolve(acquisition, None).unwrap();
+        let map = matching_linear_map(&camera, &table, acquisition, None).unwrap();
+        let linear = linear_table(&table, &map).unwrap();
+        let mean = |t: &l3::l3::L3Table| {
+            evaluate_capture(&camera, &cap, &Method::Table(t), "m", &corr, &chart)
+                .unwrap()
+                .summary
+                .mean
+        };
+        let (l3_mean, lin_mean) = (mean(&table), mean(&linear));
+        println!(
+            "{lights:?} under {acquisition}: {l3_mean:.2}, linear map {lin_mean:.2} ({choice})"
+        );
+        assert!(
+            l3_mean <= lin_mean + 0.2,
+            "{lights:?} under {acquisition}: {l3_mean} against {lin_mean}"
+        );
+    }
+}

@@ -44,7 +44,9 @@ pub struct L3Params {
     /// Per level, the colour map a same-illuminant table renders a light it
     /// was not trained on with: fitted over every chroma class at once and
     /// aimed at XYZ under the training lights (the paper's target), not
-    /// through their T as the table's own maps are. Under such a light,
+    /// through their T as the table's own maps are, with the fit that
+    /// renders standard lights held out from training better
+    /// (`training::transfer_fit`). Under such a light,
     /// corrected by one T, the table's unsaturated kernels' channel sums are
     /// moved to these maps ([`super::L3Table::transfer_kernels`]). `None` in
     /// cross-illuminant tables and in tables trained before the field.

@@ -18,7 +18,9 @@
 //!   through the camera-aware C, gained (`docs/table1/summary-chroma8.md`).
 //!
 //! So a same-illuminant table keeps, per level, the map fitted over every
-//! class and aimed at XYZ under the light ([`super::L3Params::transfer_maps`]),
+//! class and aimed at XYZ under the light ([`super::L3Params::transfer_maps`];
+//! the trainer fits it for ΔE00 or by plain least squares, whichever renders
+//! standard lights held out from training better: `training::transfer_fit`),
 //! and under a foreign light with T every unsaturated kernel's channel sums
 //! are moved onto it: each channel's difference is spread evenly over that
 //! channel's pixels in the patch. On a uniform patch the kernel then applies

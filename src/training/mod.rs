@@ -8,6 +8,7 @@
 
 mod colour_samples;
 mod scenes;
+mod transfer_fit;
 
 use std::sync::atomic::AtomicBool;
 use std::time::Instant;
@@ -20,11 +21,12 @@ use sha2::{Digest, Sha256};
 use crate::camera::{Camera, CameraError, NoiseSwitches, SensorDesign, mosaic};
 use crate::colour::mat3_mul_vec;
 use crate::l3::{
-    ChromaClasses, Classes, ColourMatrix, GramPartial, L3Error, L3Params, L3Table, Learned,
-    MIN_SURFACES_PER_CHANNEL, NoiseModel, PatchGeometry, RidgeChoice, ShardSpec, SurveyPartial,
-    TABLE_FORMAT_VERSION, TableKind, TableMeta, TrainControl, TrainSetup, TrainingFrame,
-    accumulate_batches, band_maps, classes_from_survey, learn, level_maps, merge_partials,
-    merge_surveys, package, plan_shards, solve_learned, survey_batches,
+    ChromaClasses, Classes, ColourLoss, ColourMapFit, ColourMatrix, ColourSamples, GramPartial,
+    L3Error, L3Params, L3Table, Learned, MIN_SURFACES_PER_CHANNEL, NoiseModel, PatchGeometry,
+    RidgeChoice, ShardSpec, SurveyPartial, TABLE_FORMAT_VERSION, TableKind, TableMeta,
+    TrainControl, TrainSetup, TrainingFrame, accumulate_batches, band_maps, classes_from_survey,
+    learn, level_maps, merge_partials, merge_surveys, package, plan_shards, solve_learned,
+    survey_batches,
 };
 use crate::scene::SceneError;
 use crate::spectral::{
@@ -38,6 +40,10 @@ pub use colour_samples::{
     same_illuminant_corrections, with_neutral,
 };
 pub use scenes::TrainingScenes;
+pub use transfer_fit::{
+    HELD_OUT_LIGHTS, HeldOutLight, TransferChoice, TransferFit, choose_transfer_fit,
+    held_out_error, held_out_lights,
+};
 
 /// Errors of a training run.
 #[derive(Debug, thiserror::Error)]
@@ -296,6 +302,9 @@ pub struct TrainingRun {
     noise: NoiseSwitches,
     nm: NoiseModel,
     maps: Option<Vec<ColourMatrix>>,
+    /// Which fit a same-illuminant table's transfer maps took, and each
+    /// candidate's score on the held-out lights.
+    transfer_choice: Option<TransferChoice>,
     /// Per training illuminant, the sensor's channel responses to white.
     neutrals: Vec<Vec<f64>>,
     /// Per training illuminant of a same-illuminant table, `T⁻¹` of its
@@ -357,6 +366,7 @@ impl TrainingRun {
             .collect();
         let spds: Vec<_> = illuminants.iter().map(|(_, s)| s.clone()).collect();
         let corrections = same_illuminant_corrections(spec.kind, grid, &refl, &spds)?;
+        let mut transfer_choice = None;
         let maps = match params.colour_map {
             Some(ref fit) => {
                 let target = match spec.kind {
@@ -366,21 +376,10 @@ impl TrainingRun {
                 let samples = colour_samples(&camera, &spds, target, &d65, &refl)?;
                 let pooled = level_maps(&samples, &params.levels, &nm, swing, fit)?;
                 if spec.kind == TableKind::SameIlluminant {
-                    // for lights it was not trained under: the maps aimed at
-                    // XYZ under the light, which any light's T can take
-                    let under = ColourTarget::UnderLight(&corrections);
-                    let plain = colour_samples(&camera, &spds, under, &d65, &refl)?;
-                    let transfer_fit = crate::l3::ColourMapFit {
-                        averaging_px: Some(spec.transfer_averaging()).filter(|&px| px > 0.0),
-                        ..*fit
-                    };
-                    params.transfer_maps = Some(level_maps(
-                        &plain,
-                        &params.levels,
-                        &nm,
-                        swing,
-                        &transfer_fit,
-                    )?);
+                    let (maps, choice) =
+                        transfer_maps(&camera, design, spec, &spds, &corrections, &refl, &params)?;
+                    params.transfer_maps = Some(maps);
+                    transfer_choice = Some(choice);
                 }
                 if spec.chroma_classes > 1 {
                     let classes = ChromaClasses::fit_balanced(
@@ -418,6 +417,7 @@ impl TrainingRun {
             noise,
             nm,
             maps,
+            transfer_choice,
             neutrals,
             aim_through: corrections
                 .iter()
@@ -682,6 +682,7 @@ impl TrainingRun {
                 "frames": n_batches * self.params.levels.len() * cfa.n_positions(),
                 "samples": samples,
                 "colour_maps": maps.map(map_summary),
+                "transfer_fit": self.transfer_choice,
             }),
         };
         let mut table = package(meta, learned)?;
@@ -690,13 +691,80 @@ impl TrainingRun {
     }
 }
 
+/// A same-illuminant table's maps for lights it was not trained under, one
+/// per level, aimed at XYZ under the light (which any light's T can take),
+/// with the fit [`choose_transfer_fit`] picks on the held-out lights (see
+/// `transfer_fit`).
+fn transfer_maps(
+    camera: &Camera,
+    design: &SensorDesign,
+    spec: &TrainingSpec,
+    lights: &[Spectrum],
+    corrections: &[crate::l3::Mat3],
+    refl: &[Spectrum],
+    params: &L3Params,
+) -> Result<(Vec<ColourMatrix>, TransferChoice), TrainError> {
+    let fit = params
+        .colour_map
+        .ok_or_else(|| TrainError::Invalid("transfer maps need a colour map fit".into()))?;
+    let d65 = cie_illuminant("D65")
+        .ok_or_else(|| TrainError::Invalid("D65 missing".into()))?
+        .resample(camera.grid(), Extrapolation::Zero);
+    let (nm, swing) = (noise_model(design), design.voltage_swing_v);
+    let averaging_px = Some(spec.transfer_averaging()).filter(|&px| px > 0.0);
+    // the colour maps' fit, each error weighed after the training light's T
+    let weighed = colour_samples(
+        camera,
+        lights,
+        ColourTarget::UnderLight(corrections),
+        &d65,
+        refl,
+    )?;
+    let perceptual = ColourMapFit {
+        averaging_px,
+        ..fit
+    };
+    // plain least squares in XYZ: no T, no perceptual weights
+    let as_is = colour_samples(camera, lights, ColourTarget::UnderLight(&[]), &d65, refl)?;
+    let least_squares = ColourMapFit {
+        averaging_px,
+        perceptual: false,
+        loss: ColourLoss::SquaredDeltaE,
+    };
+    let noise_free = |samples: &ColourSamples, fit: &ColourMapFit| {
+        let fit = ColourMapFit {
+            averaging_px: None,
+            ..*fit
+        };
+        let level = params.levels.first().copied().unwrap_or(swing);
+        level_maps(samples, &[level], &nm, swing, &fit)?
+            .pop()
+            .ok_or_else(|| TrainError::Invalid("no transfer map".into()))
+    };
+    let held_out = held_out_lights(camera, &spec.illuminants, refl)?;
+    let choice = choose_transfer_fit(
+        &noise_free(&weighed, &perceptual)?,
+        &noise_free(&as_is, &least_squares)?,
+        &held_out,
+    );
+    let (samples, fit) = match choice.fit {
+        TransferFit::Perceptual => (&weighed, &perceptual),
+        TransferFit::LeastSquares => (&as_is, &least_squares),
+    };
+    Ok((
+        level_maps(samples, &params.levels, &nm, swing, fit)?,
+        choice,
+    ))
+}
+
 /// SHA-256 (hex) of what a run's batches depend on.
 /// Bumped whenever the trainer's output for a given spec changes (targets,
 /// colour maps, their noise terms), so that a shard's partial sums from an
 /// older trainer are refused rather than merged with this one's
 /// ([`TrainingRun::run_key`]). 2: same-illuminant maps aimed through T with
-/// the cross averaging.
-const TRAINER_REVISION: u32 = 2;
+/// the cross averaging; 3: transfer maps fitted as the held-out lights
+/// choose.
+const TRAINER_REVISION: u32 = 3;
 
 fn run_key(design: &SensorDesign, spec: &TrainingSpec, iset: bool) -> String {
     let text = serde_json::json!({
