@@ -86,22 +86,27 @@ pub fn held_out_lights(
         .ok_or_else(|| missing("D65"))?
         .resample(&grid, Extrapolation::Zero);
     let white = [Spectrum::constant(grid, 1.0)];
-    HELD_OUT_LIGHTS
+    let named = HELD_OUT_LIGHTS
         .iter()
         .filter(|name| !trained.iter().any(|t| t.eq_ignore_ascii_case(name)))
         .map(|&name| {
-            let spd = cie_illuminant(name)
-                .ok_or_else(|| missing(name))?
-                .resample(&grid, Extrapolation::Zero);
+            let spd = cie_illuminant(name).ok_or_else(|| missing(name))?;
+            Ok((name, spd.resample(&grid, Extrapolation::Zero)))
+        })
+        .collect::<Result<Vec<_>, TrainError>>()?;
+    let spds: Vec<Spectrum> = named.iter().map(|(_, spd)| spd.clone()).collect();
+    // every light's T from one registry, as the service fits it
+    let ts = super::same_illuminant_corrections(
+        crate::l3::TableKind::SameIlluminant,
+        grid,
+        reflectances,
+        &spds,
+    )?;
+    named
+        .into_iter()
+        .zip(ts)
+        .map(|((name, spd), t)| {
             let lights = std::slice::from_ref(&spd);
-            let t = *super::same_illuminant_corrections(
-                crate::l3::TableKind::SameIlluminant,
-                grid,
-                reflectances,
-                lights,
-            )?
-            .first()
-            .ok_or_else(|| TrainError::Invalid(format!("no correction for {name}")))?;
             let samples = colour_samples(camera, lights, ColourTarget::D65, &d65, reflectances)?;
             let whites = colour_samples(camera, lights, ColourTarget::D65, &d65, &white)?;
             let white_channels = whites
