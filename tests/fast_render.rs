@@ -20,6 +20,10 @@ fn design(name: &str) -> SensorDesign {
 }
 
 fn train(design: &SensorDesign, patch: usize) -> L3Table {
+    train_classes(design, patch, 1)
+}
+
+fn train_classes(design: &SensorDesign, patch: usize, chroma_classes: usize) -> L3Table {
     let spec = TrainingSpec {
         illuminants: vec!["D65".into(), "A".into()],
         patch_size: patch,
@@ -27,6 +31,7 @@ fn train(design: &SensorDesign, patch: usize) -> L3Table {
         scenes: 6,
         scene_size: 48,
         seed: 5,
+        chroma_classes,
         ..TrainingSpec::default()
     };
     train_table(design, &spec, None, &|_, _| {}, &AtomicBool::new(false)).expect("train")
@@ -87,8 +92,12 @@ fn tungsten_kernels(table: &L3Table) -> Vec<f32> {
 /// Fast and reference agree to 1e-4 in XYZ, pixel for pixel, with every option
 /// combination, and report the same saturation statistics.
 fn check(design_name: &str, patch: usize) {
-    let d = design(design_name);
-    let table = train(&d, patch);
+    check_table(design_name, &train(&design(design_name), patch));
+}
+
+fn check_table(design_name: &str, table: &L3Table) {
+    let (d, patch) = (design(design_name), table.meta.params.patch_size);
+    let table = table.clone();
     let kernels = tungsten_kernels(&table);
     let (volts, w, h) = frame(&d, 72, 9);
     let (want, ws) = render_reference(&table, &kernels, &volts, w, h).expect("reference");
@@ -140,7 +149,27 @@ fn rgbw_patch9_takes_the_exact_path_and_matches() {
 
 #[test]
 fn bayer_matches_reference() {
+    // two phases share the green channel: the AVX-512 classification takes a
+    // 4 × 4 phase map per CFA position
+    check("bayer-paper", 3);
     check("bayer-paper", 5);
+    check("bayer-paper", 7);
+    // chroma classes: AVX2 classification, AVX-512 kernel step
+    let table = train_classes(&design("bayer-paper"), 5, 4);
+    assert!(table.n_chroma() > 1);
+    check_table("bayer-paper", &table);
+}
+
+#[test]
+fn bayer_takes_the_avx512_path_where_rgbw_does() {
+    let render = |name: &str| {
+        let table = train(&design(name), 5);
+        let kernels = tungsten_kernels(&table);
+        FastRenderer::new(&table, &kernels).expect("fast")
+    };
+    let (rgbw, bayer) = (render("rgbw-paper"), render("bayer-paper"));
+    println!("AVX-512 kernels on this CPU: {}", rgbw.uses_avx512());
+    assert_eq!(bayer.uses_avx512(), rgbw.uses_avx512());
 }
 
 #[test]

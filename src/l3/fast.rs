@@ -10,9 +10,10 @@
 //! - a pixel whose patch holds no saturated value (most of them) is a plain
 //!   affine map of its patch rows: the kernels are laid out one 8-lane vector
 //!   per patch row and output, applied with FMA where the CPU has it;
-//! - on CPUs with AVX-512 (F, VL, BW, DQ, VBMI) and one channel per CFA phase
-//!   (RGBW), classification, kernels and the sRGB encoding run 16 pixels at a
-//!   time in [`avx512`]; elsewhere the AVX2 + FMA or portable loops do;
+//! - on CPUs with AVX-512 (F, VL, BW, DQ, VBMI) and a 2×2 CFA (RGBW, or
+//!   Bayer, whose two green phases make one channel), classification, kernels
+//!   and the sRGB encoding run 16 pixels at a time in [`avx512`]; elsewhere
+//!   the AVX2 + FMA or portable loops do;
 //! - the 3×3 output matrix (illuminant correction, XYZ → linear sRGB and the
 //!   white level) is fused into the kernels, so sRGB leaves through a lookup
 //!   table without an XYZ image;
@@ -519,14 +520,14 @@ impl FastRenderer {
         self.simd_available && self.options.simd
     }
 
-    /// Whether the AVX-512 kernels will be used (2×2 CFAs with one channel per
-    /// phase, patch 3, 5 or 7). A table with chroma classes or more than 32
-    /// levels is classified by the AVX2 code and its kernels applied with AVX-512.
+    /// Whether the AVX-512 kernels will be used (2×2 CFAs, patch 3, 5 or 7).
+    /// A table with chroma classes or more than 32 levels is classified by the
+    /// AVX2 code and its kernels applied with AVX-512.
     pub fn uses_avx512(&self) -> bool {
         self.uses_simd()
             && self.avx512_available
             && self.options.avx512
-            && self.uniform_phases.is_some()
+            && self.phases.is_some()
             && matches!(self.geo.size, 3 | 5 | 7)
     }
 
@@ -1349,18 +1350,13 @@ impl FastRenderer {
                             q[0] * u.lum[0] + q[1] * u.lum[1] + q[2] * u.lum[2] + q[3] * u.lum[3];
                     }
                 } else {
-                    let cpar = tile.c0 % 2;
-                    for i in 0..tw8 {
-                        let pm = &maps[(rpar * 2 + (cpar + i) % 2) % maps.len()];
-                        let q = [sc.sums[0][i], sc.sums[1][i], sc.sums[2][i], sc.sums[3][i]];
-                        let mut lum = 0f32;
-                        for k in 0..4 {
-                            lum += pm.lum[k] * q[k];
-                            let t = &pm.to_mean[k];
-                            sc.means[k][i] = t[0] * q[0] + t[1] * q[1] + t[2] * q[2] + t[3] * q[3];
-                        }
-                        sc.lum[i] = lum;
-                    }
+                    // two phases share a channel (Bayer): each column takes its position's map
+                    LaneMaps::of_row(maps, rpar, tile.c0 % 2).apply(
+                        &sc.sums,
+                        &mut sc.means,
+                        &mut sc.lum,
+                        tw8,
+                    );
                 }
                 if use_contrast {
                     contrast_row(
@@ -1586,7 +1582,7 @@ impl FastRenderer {
         use_contrast: bool,
         set: &KernelSet,
     ) -> Option<avx512::ClassParams> {
-        let u = self.uniform_phases?;
+        let maps = self.phases.as_deref()?;
         let src = self.geo.level_edges();
         if self.n_chroma > 1 || self.n_bands > avx512::MAX_LEVELS || src.len() >= avx512::MAX_LEVELS
         {
@@ -1610,17 +1606,24 @@ impl FastRenderer {
         let same = (0..s).filter(|d| (d + s / 2).is_multiple_of(2)).count();
         let other = s - same;
         let count = [same * same, same * other, other * same, other * other].map(|n| n as f32);
-        if count
-            .iter()
-            .zip(&u.inv)
-            .any(|(n, i)| (n * i - 1.0).abs() > 1e-6)
-        {
+        // one map per CFA position, each mean a mean of whole phases (a
+        // uniform patch's mean is its value)
+        let [m0, m1, m2, m3] = <&[PhaseMap; 4]>::try_from(maps).ok()?;
+        let maps = [m0, m1, m2, m3];
+        let whole = |t: &[f32; 4]| {
+            (t.iter().zip(&count).map(|(w, n)| w * n).sum::<f32>() - 1.0).abs() <= 1e-6
+        };
+        if !maps.iter().all(|m| m.to_mean.iter().all(whole)) {
             return None;
         }
+        let diagonal = maps
+            .iter()
+            .all(|m| (0..4).all(|p| (0..4).all(|q| p == q || m.to_mean[p][q] == 0.0)));
         Some(avx512::ClassParams {
-            inv: u.inv,
+            to_mean: maps.map(|m| m.to_mean),
+            lum: maps.map(|m| m.lum),
+            diagonal,
             count,
-            lum: u.lum,
             inv_area: 1.0 / (s * s) as f32,
             edges,
             below,
@@ -1956,6 +1959,71 @@ fn phase_maps(geo: &PatchGeometry) -> Option<Vec<PhaseMap>> {
         maps.push(PhaseMap { to_mean, lum });
     }
     Some(maps)
+}
+
+/// Per lane of a chunk of [`CHUNK`] columns, the phase map of the lane's CFA
+/// position: a row's maps laid out so that the means of a whole chunk are
+/// element-wise products, which vectorise (a map chosen per pixel does not).
+struct LaneMaps {
+    to_mean: [[[f32; CHUNK]; 4]; 4],
+    lum: [[f32; CHUNK]; 4],
+}
+
+/// Columns per [`LaneMaps`] chunk (the scratch rows are whole chunks long).
+const CHUNK: usize = 2 * LANES;
+
+impl LaneMaps {
+    /// The maps of row parity `rpar` for a chunk whose first column has parity `cpar`.
+    fn of_row(maps: &[PhaseMap], rpar: usize, cpar: usize) -> Self {
+        let mut out = Self {
+            to_mean: [[[0.0; CHUNK]; 4]; 4],
+            lum: [[0.0; CHUNK]; 4],
+        };
+        for lane in 0..CHUNK {
+            let Some(pm) = maps.get((rpar * 2 + (cpar + lane) % 2) % maps.len().max(1)) else {
+                continue;
+            };
+            for p in 0..4 {
+                out.lum[p][lane] = pm.lum[p];
+                for q in 0..4 {
+                    out.to_mean[p][q][lane] = pm.to_mean[p][q];
+                }
+            }
+        }
+        out
+    }
+
+    /// Means and luminance of the first `n` columns (a multiple of [`CHUNK`])
+    /// from their phase sums, in the order of operations of a pixel at a time.
+    #[inline(always)]
+    fn apply(&self, sums: &[Vec<f32>; 4], means: &mut [Vec<f32>; 4], lum: &mut [f32], n: usize) {
+        for base in (0..n).step_by(CHUNK) {
+            let q: [[f32; CHUNK]; 4] = std::array::from_fn(|k| {
+                sums[k]
+                    .get(base..base + CHUNK)
+                    .and_then(|v| <[f32; CHUNK]>::try_from(v).ok())
+                    .unwrap_or([0.0; CHUNK])
+            });
+            let mut l_sum = [0f32; CHUNK];
+            for k in 0..4 {
+                let t = &self.to_mean[k];
+                let mut m = [0f32; CHUNK];
+                for l in 0..CHUNK {
+                    l_sum[l] += self.lum[k][l] * q[k][l];
+                    m[l] = t[0][l] * q[0][l]
+                        + t[1][l] * q[1][l]
+                        + t[2][l] * q[2][l]
+                        + t[3][l] * q[3][l];
+                }
+                if let Some(out) = means[k].get_mut(base..base + CHUNK) {
+                    out.copy_from_slice(&m);
+                }
+            }
+            if let Some(out) = lum.get_mut(base..base + CHUNK) {
+                out.copy_from_slice(&l_sum);
+            }
+        }
+    }
 }
 
 /// The position-free form of the phase maps, when there is one.

@@ -1,8 +1,11 @@
-//! AVX-512 kernels of the fast renderer, for 2×2 CFAs whose four phases each
-//! hold one channel (RGBW) and up to 32 luminance levels:
+//! AVX-512 kernels of the fast renderer, for 2×2 CFAs (RGBW, Bayer) and up
+//! to 32 luminance levels:
 //!
 //! - [`classify_row`] classifies 16 pixels per step: phase sums → means and
-//!   luminance, the contrast, the level by a branch-free binary search over the
+//!   luminance (one multiply per phase where every phase holds its own
+//!   channel, as on RGBW; a 4 × 4 map per CFA position, blended between the
+//!   row's even and odd lanes, where two phases share one, as Bayer's greens
+//!   do), the contrast, the level by a branch-free binary search over the
 //!   level edges held in registers, the contrast threshold by a register
 //!   permute, and the mask of pixels the reference code must classify;
 //! - [`apply_row_packed`] (patch 3 and 5) applies the kernels of 8 pixels at a
@@ -31,11 +34,17 @@ pub(super) const MAX_LEVELS: usize = 32;
 
 /// What classification needs beyond the row data, prepared once per tile.
 pub(super) struct ClassParams {
-    /// Per phase (0: the centre's, 1: same row other column, 2: other row same column, 3: both other).
-    pub inv: [f32; 4],
+    /// Per CFA position (2 · row parity + column parity), the phase map:
+    /// `mean[p] = Σ_q to_mean[p][q] · sum[q]` and `luminance = Σ_q lum[q] ·
+    /// sum[q]`, phases relative to the centre (0: the centre's, 1: same row
+    /// other column, 2: other row same column, 3: both other).
+    pub to_mean: [[[f32; 4]; 4]; 4],
+    pub lum: [[f32; 4]; 4],
+    /// Every position has the same diagonal map (each phase its own
+    /// channel): the means are one multiply per phase.
+    pub diagonal: bool,
     /// Per phase, its values in the patch.
     pub count: [f32; 4],
-    pub lum: [f32; 4],
     pub inv_area: f32,
     /// Level edges padded with +∞ to 32: `edges[l]` is the top of level l.
     pub edges: [f32; MAX_LEVELS],
@@ -115,19 +124,26 @@ pub(super) unsafe fn classify_row<const P: usize>(
         return None;
     }
     let (hp, op, bp) = (he.as_ptr(), ho.as_ptr(), buf.as_ptr());
-    let (mut inv, mut lw) = ([_mm512_setzero_ps(); 4], [_mm512_setzero_ps(); 4]);
-    for k in 0..4 {
-        inv[k] = _mm512_set1_ps(prm.inv[k]);
-        lw[k] = _mm512_set1_ps(prm.lum[k]);
+    // positions of even and odd lanes in this row
+    let pos_even = rpar * 2 + cpar;
+    let pos_odd = rpar * 2 + (1 - cpar);
+    let odd_lanes: __mmask16 = 0xAAAA;
+    // the phase maps of this row's even and odd lanes, one register per coefficient
+    let lanes = |even: f32, odd: f32| {
+        _mm512_mask_blend_ps(odd_lanes, _mm512_set1_ps(even), _mm512_set1_ps(odd))
+    };
+    let (mut to_mean, mut lw) = ([[_mm512_setzero_ps(); 4]; 4], [_mm512_setzero_ps(); 4]);
+    for p in 0..4 {
+        lw[p] = lanes(prm.lum[pos_even][p], prm.lum[pos_odd][p]);
+        for q in 0..4 {
+            to_mean[p][q] = lanes(prm.to_mean[pos_even][p][q], prm.to_mean[pos_odd][p][q]);
+        }
     }
     let inv_area = _mm512_set1_ps(prm.inv_area);
     let e0 = _mm512_loadu_ps(prm.edges.as_ptr());
     let e1 = _mm512_loadu_ps(prm.edges.as_ptr().add(16));
     let b0 = _mm512_loadu_ps(prm.below.as_ptr());
     let b1 = _mm512_loadu_ps(prm.below.as_ptr().add(16));
-    // positions of even and odd lanes in this row
-    let pos_even = rpar * 2 + cpar;
-    let pos_odd = rpar * 2 + (1 - cpar);
     let t_even = &prm.thresholds[pos_even];
     let t_odd = &prm.thresholds[pos_odd];
     let (te0, te1) = (
@@ -138,7 +154,6 @@ pub(super) unsafe fn classify_row<const P: usize>(
         _mm512_loadu_ps(t_odd.as_ptr()),
         _mm512_loadu_ps(t_odd.as_ptr().add(16)),
     );
-    let odd_lanes: __mmask16 = 0xAAAA;
     let pos = _mm512_mask_blend_epi32(
         odd_lanes,
         _mm512_set1_epi32(pos_even as i32),
@@ -175,8 +190,19 @@ pub(super) unsafe fn classify_row<const P: usize>(
             s[base + 1] = _mm512_add_ps(s[base + 1], o);
         }
         let mut m = [_mm512_setzero_ps(); 4];
-        for k in 0..4 {
-            m[k] = _mm512_mul_ps(s[k], inv[k]);
+        if prm.diagonal {
+            for k in 0..4 {
+                m[k] = _mm512_mul_ps(s[k], to_mean[k][k]);
+            }
+        } else {
+            // the same order of operations as the AVX2 path's
+            // `t[0]·q[0] + t[1]·q[1] + t[2]·q[2] + t[3]·q[3]`
+            for k in 0..4 {
+                let t = &to_mean[k];
+                let a = _mm512_add_ps(_mm512_mul_ps(t[0], s[0]), _mm512_mul_ps(t[1], s[1]));
+                let a = _mm512_add_ps(a, _mm512_mul_ps(t[2], s[2]));
+                m[k] = _mm512_add_ps(a, _mm512_mul_ps(t[3], s[3]));
+            }
         }
         let lum = _mm512_add_ps(
             _mm512_add_ps(_mm512_mul_ps(s[0], lw[0]), _mm512_mul_ps(s[1], lw[1])),
