@@ -2,7 +2,9 @@
 //! reference renderer (fused T) and the fast renderer (pooled, new and reused
 //! output buffers; AVX-512 and AVX2 kernels), against a plain copy of the same
 //! frame measured in the same run. Run: `cargo bench --bench render`
-//! (`L3_BENCH_TABLE=FILE` renders that table instead of training one).
+//! (`L3_BENCH_TABLE=FILE` renders that table instead of training one;
+//! `L3_BENCH_SENSOR=TOML` simulates the frame, and trains the table, on that
+//! sensor instead of the default RGBW design, e.g. a Bayer camera).
 
 use std::hint::black_box;
 use std::sync::atomic::AtomicBool;
@@ -21,7 +23,10 @@ const W: usize = 4000;
 const H: usize = 3000;
 
 fn bench(c: &mut Criterion) {
-    let design = SensorDesign::paper_default();
+    let design = match std::env::var_os("L3_BENCH_SENSOR") {
+        Some(p) => SensorDesign::load(std::path::Path::new(&p), None).expect("sensor"),
+        None => SensorDesign::paper_default(),
+    };
     let cancel = AtomicBool::new(false);
     let spec = TrainingSpec {
         illuminants: vec!["D65".into(), "A".into()],
@@ -80,7 +85,7 @@ fn bench(c: &mut Criterion) {
     let fast = FastRenderer::new(&table, &kernels).expect("fast");
     let dn: Vec<u16> = frame
         .iter()
-        .map(|v| (v / 1.8 * 65535.0).round() as u16)
+        .map(|v| (v / design.voltage_swing_v as f32 * 65535.0).round() as u16)
         .collect();
     let (_, st) = fast
         .render_xyz(Mosaic::Volts(&frame), W, H, None)
