@@ -134,6 +134,10 @@ fn check_table(design_name: &str, table: &L3Table) {
 #[test]
 fn rgbw_patch5_matches_reference() {
     check("rgbw-paper", 5);
+    // chroma classes: the AVX-512 classification scores them too
+    let table = train_classes(&design("rgbw-paper"), 5, 8);
+    assert!(table.n_chroma() > 1);
+    check_table("rgbw-paper", &table);
 }
 
 #[test]
@@ -154,7 +158,7 @@ fn bayer_matches_reference() {
     check("bayer-paper", 3);
     check("bayer-paper", 5);
     check("bayer-paper", 7);
-    // chroma classes: AVX2 classification, AVX-512 kernel step
+    // chroma classes
     let table = train_classes(&design("bayer-paper"), 5, 4);
     assert!(table.n_chroma() > 1);
     check_table("bayer-paper", &table);

@@ -521,8 +521,8 @@ impl FastRenderer {
     }
 
     /// Whether the AVX-512 kernels will be used (2×2 CFAs, patch 3, 5 or 7).
-    /// A table with chroma classes or more than 32 levels is classified by the
-    /// AVX2 code and its kernels applied with AVX-512.
+    /// A table with more than 32 levels is classified by the AVX2 code and
+    /// its kernels applied with AVX-512.
     pub fn uses_avx512(&self) -> bool {
         self.uses_simd()
             && self.avx512_available
@@ -1584,8 +1584,9 @@ impl FastRenderer {
     ) -> Option<avx512::ClassParams> {
         let maps = self.phases.as_deref()?;
         let src = self.geo.level_edges();
-        if self.n_chroma > 1 || self.n_bands > avx512::MAX_LEVELS || src.len() >= avx512::MAX_LEVELS
-        {
+        let kc = self.n_chroma.max(1);
+        let n_levels = self.n_bands / kc;
+        if n_levels > avx512::MAX_LEVELS || src.len() >= avx512::MAX_LEVELS {
             return None;
         }
         let mut edges = [f32::INFINITY; avx512::MAX_LEVELS];
@@ -1593,14 +1594,38 @@ impl FastRenderer {
         let mut below = [f32::NEG_INFINITY; avx512::MAX_LEVELS];
         below[1..=src.len()].copy_from_slice(src);
         let n_sat = self.sat_cases.len();
+        // NaN (never expected) sends the pixels to the reference path
+        let threshold = |pos: usize, band: usize| {
+            thresholds
+                .get((pos * self.n_bands + band) * n_sat)
+                .copied()
+                .unwrap_or(f32::NAN)
+        };
         let mut per_pos = [[f32::INFINITY; avx512::MAX_LEVELS]; 4];
-        for (pos, t) in per_pos.iter_mut().enumerate() {
-            for (level, v) in t.iter_mut().take(self.n_bands).enumerate() {
-                // NaN (never expected) sends the pixels to the reference path
-                let g = (pos * self.n_bands + level) * n_sat;
-                *v = thresholds.get(g).copied().unwrap_or(f32::NAN);
+        if kc == 1 {
+            for (pos, t) in per_pos.iter_mut().enumerate() {
+                for (level, v) in t.iter_mut().take(n_levels).enumerate() {
+                    *v = threshold(pos, level);
+                }
             }
         }
+        let chroma = (kc > 1).then(|| {
+            let coef = self.geo.chroma_coefficients();
+            avx512::ChromaParams {
+                coef: coef
+                    .iter()
+                    .map(|a| std::array::from_fn(|ch| a.get(ch).copied().unwrap_or(0.0)))
+                    .collect(),
+                scale: std::array::from_fn(|ch| self.chroma_scale.get(ch).copied().unwrap_or(0.0)),
+                phase_channels: self.phase_channels,
+                n_channels: self.geo.n_channels(),
+                thresholds: (0..4 * self.n_bands)
+                    .map(|i| threshold(i / self.n_bands, i % self.n_bands))
+                    .collect(),
+                margin: CHROMA_MARGIN,
+                floor: CHROMA_MARGIN_FLOOR,
+            }
+        });
         let s = self.geo.size;
         // patch rows (columns) of the centre's parity, and of the other
         let same = (0..s).filter(|d| (d + s / 2).is_multiple_of(2)).count();
@@ -1628,7 +1653,9 @@ impl FastRenderer {
             edges,
             below,
             thresholds: per_pos,
-            n_levels: self.n_bands as u32,
+            n_levels: n_levels as u32,
+            n_chroma: kc as u32,
+            chroma,
             n_sat: n_sat as u32,
             use_contrast,
             n_classes: u32::try_from(set.paired().len() / set.pstride).ok()?,

@@ -6,8 +6,11 @@
 //!   channel, as on RGBW; a 4 × 4 map per CFA position, blended between the
 //!   row's even and odd lanes, where two phases share one, as Bayer's greens
 //!   do), the contrast, the level by a branch-free binary search over the
-//!   level edges held in registers, the contrast threshold by a register
-//!   permute, and the mask of pixels the reference code must classify;
+//!   level edges held in registers, the chroma class where the table has
+//!   them (its scores in the reference's order, with the reference's margin
+//!   to the runner-up), the contrast threshold by a register permute (a
+//!   gather with chroma classes), and the mask of pixels the reference code
+//!   must classify;
 //! - [`apply_row_packed`] (patch 3 and 5) applies the kernels of 8 pixels at a
 //!   time, all three outputs sharing one 16-lane FMA per patch row (the input
 //!   row spread to their lanes by one permute), and sums the lanes of the 8
@@ -53,11 +56,32 @@ pub(super) struct ClassParams {
     /// Per CFA position, the contrast threshold of each level (sat case 0), padded with +∞.
     pub thresholds: [[f32; MAX_LEVELS]; 4],
     pub n_levels: u32,
+    /// Chroma classes per level (1: none); with more, [`Self::chroma`].
+    pub n_chroma: u32,
+    pub chroma: Option<ChromaParams>,
     pub n_sat: u32,
     pub use_contrast: bool,
     /// Classes in the kernel layout, and values per class.
     pub n_classes: u32,
     pub kstride: u32,
+}
+
+/// What the chroma classification needs ([`super::FastRenderer::chroma_row`]'s
+/// scores, 16 pixels at a time).
+pub(super) struct ChromaParams {
+    /// Per chroma class, its score weight per channel (0 past the sensor's channels).
+    pub coef: Vec<[f32; 4]>,
+    /// Per channel, the largest score weight in magnitude (the margin's scale).
+    pub scale: [f32; 4],
+    /// Per CFA position, the channel of each phase.
+    pub phase_channels: [[u8; 4]; 4],
+    pub n_channels: usize,
+    /// Per CFA position and band (level × classes + class), the contrast
+    /// threshold of saturation case 0.
+    pub thresholds: Vec<f32>,
+    /// [`super::CHROMA_MARGIN`] and [`super::CHROMA_MARGIN_FLOOR`].
+    pub margin: f32,
+    pub floor: f32,
 }
 
 /// Per-row counts from [`classify_row`].
@@ -120,6 +144,17 @@ pub(super) unsafe fn classify_row<const P: usize>(
         || prm.n_classes == 0
         || sat.is_some_and(|s| s.len() < tw_pad)
         || prm.n_levels as usize > MAX_LEVELS
+        || prm.n_chroma == 0
+        || prm.chroma.as_ref().is_some_and(|c| {
+            c.coef.len() != prm.n_chroma as usize
+                || c.n_channels > 4
+                || c.phase_channels
+                    .iter()
+                    .flatten()
+                    .any(|&ch| ch as usize >= c.n_channels)
+                || c.thresholds.len() < 4 * (prm.n_levels * prm.n_chroma) as usize
+        })
+        || (prm.n_chroma > 1) != prm.chroma.is_some()
     {
         return None;
     }
@@ -161,7 +196,21 @@ pub(super) unsafe fn classify_row<const P: usize>(
     );
     // kernel offsets: class = ((pos · levels + level) · n_sat + 0) · 2 + texture
     let per_level = 2 * prm.n_sat * prm.kstride;
-    let base = _mm512_mullo_epi32(pos, _mm512_set1_epi32((prm.n_levels * per_level) as i32));
+    let n_bands = prm.n_levels * prm.n_chroma;
+    let base = _mm512_mullo_epi32(pos, _mm512_set1_epi32((n_bands * per_level) as i32));
+    // chroma: per channel, the phase that holds it for the even and the odd lanes
+    // (the last such phase, as the AVX2 path writes them)
+    let mut chroma_phase = [(0usize, 0usize); 4];
+    if let Some(c) = &prm.chroma {
+        for (p, (&ce, &co)) in c.phase_channels[pos_even]
+            .iter()
+            .zip(&c.phase_channels[pos_odd])
+            .enumerate()
+        {
+            chroma_phase[ce as usize].0 = p;
+            chroma_phase[co as usize].1 = p;
+        }
+    }
     let per_level = _mm512_set1_epi32(per_level as i32);
     let per_texture = _mm512_set1_epi32(prm.kstride as i32);
     let last = _mm512_set1_epi32(((prm.n_classes - 1) * prm.kstride) as i32);
@@ -222,6 +271,19 @@ pub(super) unsafe fn classify_row<const P: usize>(
         // (NaN luminance fails both tests)
         let mut exact = _mm512_cmp_ps_mask::<_CMP_NGT_UQ>(_mm512_sub_ps(lum, bottom), margin)
             | _mm512_cmp_ps_mask::<_CMP_NGE_UQ>(_mm512_sub_ps(top, lum), margin);
+        // the band: the level, or the level's chroma class
+        let band = match &prm.chroma {
+            None => lo,
+            Some(c) => {
+                let (best, sure) = chroma_classes(c, &m, &chroma_phase, odd_lanes);
+                exact |= !sure;
+                let band = _mm512_add_epi32(
+                    _mm512_mullo_epi32(lo, _mm512_set1_epi32(prm.n_chroma as i32)),
+                    best,
+                );
+                _mm512_min_epu32(band, _mm512_set1_epi32(n_bands as i32 - 1))
+            }
+        };
         let mut texture: __mmask16 = 0;
         if prm.use_contrast {
             // Σ |v − m_k| = Σ (2 · max(v, m_k) − v − m_k) = 2 · Σ max(v, m_k) − Σ_k (S_k + n_k · m_k):
@@ -247,11 +309,21 @@ pub(super) unsafe fn classify_row<const P: usize>(
                 rest = _mm512_fmadd_ps(count[k], m[k], rest);
             }
             let cv = _mm512_mul_ps(_mm512_fmsub_ps(sum, two, rest), inv_area);
-            let t = _mm512_mask_blend_ps(
-                odd_lanes,
-                _mm512_permutex2var_ps(te0, lo, te1),
-                _mm512_permutex2var_ps(to0, lo, to1),
-            );
+            let t = match &prm.chroma {
+                None => _mm512_mask_blend_ps(
+                    odd_lanes,
+                    _mm512_permutex2var_ps(te0, lo, te1),
+                    _mm512_permutex2var_ps(to0, lo, to1),
+                ),
+                // (checked: 4 × bands thresholds; the band is clamped below the bands)
+                Some(c) => _mm512_i32gather_ps::<4>(
+                    _mm512_add_epi32(
+                        _mm512_mullo_epi32(pos, _mm512_set1_epi32(n_bands as i32)),
+                        band,
+                    ),
+                    c.thresholds.as_ptr(),
+                ),
+            };
             let gap = _mm512_castsi512_ps(_mm512_and_si512(
                 _mm512_castps_si512(_mm512_sub_ps(cv, t)),
                 abs_mask,
@@ -267,7 +339,7 @@ pub(super) unsafe fn classify_row<const P: usize>(
         let valid = tail_mask(i, tw);
         exact &= valid;
         // where each pixel's kernels start (class 0's for the reference path's pixels)
-        let off = _mm512_add_epi32(base, _mm512_mullo_epi32(lo, per_level));
+        let off = _mm512_add_epi32(base, _mm512_mullo_epi32(band, per_level));
         let off = _mm512_mask_add_epi32(off, texture, off, per_texture);
         let off = _mm512_maskz_mov_epi32(!exact, _mm512_min_epu32(off, last));
         _mm512_storeu_si512(offsets.as_mut_ptr().add(i).cast(), off);
@@ -281,6 +353,49 @@ pub(super) unsafe fn classify_row<const P: usize>(
         texture: u64::from(_mm512_reduce_add_epi32(n_texture) as u32),
         exact: u64::from(_mm512_reduce_add_epi32(n_exact) as u32),
     })
+}
+
+/// The chroma class of 16 pixels from their phase means `m`, as
+/// [`PatchGeometry::chroma_of`](crate::l3::PatchGeometry::chroma_of) scores it
+/// (separate multiplies and adds, in its order), and the lanes whose class is
+/// sure: the runner-up's score is at least the margin above the best's.
+/// `phase[ch]` is the phase holding channel `ch` for the even and odd lanes.
+#[inline(always)]
+unsafe fn chroma_classes(
+    c: &ChromaParams,
+    m: &[__m512; 4],
+    phase: &[(usize, usize); 4],
+    odd_lanes: __mmask16,
+) -> (__m512i, __mmask16) {
+    let zero = _mm512_setzero_ps();
+    let mut cm = [zero; 4];
+    for (ch, v) in cm.iter_mut().enumerate().take(c.n_channels) {
+        let (pe, po) = phase[ch];
+        *v = _mm512_max_ps(_mm512_mask_blend_ps(odd_lanes, m[pe & 3], m[po & 3]), zero);
+    }
+    let mut scale = zero;
+    for (v, &w) in cm.iter().zip(&c.scale).take(c.n_channels) {
+        scale = _mm512_add_ps(scale, _mm512_mul_ps(_mm512_set1_ps(w), *v));
+    }
+    let inf = _mm512_set1_ps(f32::INFINITY);
+    let (mut s1, mut s2, mut best) = (inf, inf, _mm512_setzero_si512());
+    for (k, a) in c.coef.iter().enumerate() {
+        let mut score = zero;
+        for (v, &w) in cm.iter().zip(a).take(c.n_channels) {
+            score = _mm512_add_ps(score, _mm512_mul_ps(_mm512_set1_ps(w), *v));
+        }
+        let lower = _mm512_cmp_ps_mask::<_CMP_LT_OQ>(score, s1);
+        s2 = _mm512_min_ps(s2, _mm512_max_ps(s1, score));
+        best = _mm512_mask_mov_epi32(best, lower, _mm512_set1_epi32(k as i32));
+        s1 = _mm512_min_ps(s1, score);
+    }
+    let margin = _mm512_add_ps(
+        _mm512_mul_ps(_mm512_set1_ps(c.margin), scale),
+        _mm512_set1_ps(c.floor),
+    );
+    // (NaN fails)
+    let sure = _mm512_cmp_ps_mask::<_CMP_GE_OQ>(_mm512_sub_ps(s2, s1), margin);
+    (best, sure)
 }
 
 /// Whether the kernel step's arguments are long enough for `n` pixels (a
