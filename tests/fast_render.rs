@@ -135,9 +135,14 @@ fn check_table(design_name: &str, table: &L3Table) {
 fn rgbw_patch5_matches_reference() {
     check("rgbw-paper", 5);
     // chroma classes: the AVX-512 classification scores them too
-    let table = train_classes(&design("rgbw-paper"), 5, 8);
+    check_chroma("rgbw-paper", 8);
+}
+
+/// [`check_table`] on a patch-5 table of `classes` chroma classes (asked).
+fn check_chroma(design_name: &str, classes: usize) {
+    let table = train_classes(&design(design_name), 5, classes);
     assert!(table.n_chroma() > 1);
-    check_table("rgbw-paper", &table);
+    check_table(design_name, &table);
 }
 
 #[test]
@@ -158,10 +163,7 @@ fn bayer_matches_reference() {
     check("bayer-paper", 3);
     check("bayer-paper", 5);
     check("bayer-paper", 7);
-    // chroma classes
-    let table = train_classes(&design("bayer-paper"), 5, 4);
-    assert!(table.n_chroma() > 1);
-    check_table("bayer-paper", &table);
+    check_chroma("bayer-paper", 4);
 }
 
 #[test]
