@@ -1236,6 +1236,13 @@ impl FastRenderer {
             None
         };
         let mut st = RenderStats::default();
+        // where two phases share a channel (Bayer), each row parity's maps per lane
+        let lane_maps = match (&self.phases, &self.uniform_phases) {
+            (Some(maps), None) => {
+                Some([0, 1].map(|rpar| LaneMaps::of_row(maps, rpar, tile.c0 % 2)))
+            }
+            _ => None,
+        };
         for y in 0..tile.rows {
             let r = tile.r0 + y;
             // 3. which pixels see a saturated value
@@ -1310,7 +1317,7 @@ impl FastRenderer {
                 }
             }
             // 4. phase sums → per-phase means and luminance, then contrast and class
-            if let Some(maps) = &self.phases {
+            if self.phases.is_some() {
                 for v in sc.sums.iter_mut() {
                     v[..tw8].fill(0.0);
                 }
@@ -1349,14 +1356,9 @@ impl FastRenderer {
                         lum[i] =
                             q[0] * u.lum[0] + q[1] * u.lum[1] + q[2] * u.lum[2] + q[3] * u.lum[3];
                     }
-                } else {
+                } else if let Some(lanes) = &lane_maps {
                     // two phases share a channel (Bayer): each column takes its position's map
-                    LaneMaps::of_row(maps, rpar, tile.c0 % 2).apply(
-                        &sc.sums,
-                        &mut sc.means,
-                        &mut sc.lum,
-                        tw8,
-                    );
+                    lanes[rpar].apply(&sc.sums, &mut sc.means, &mut sc.lum, tw8);
                 }
                 if use_contrast {
                     contrast_row(
