@@ -449,6 +449,24 @@ fn simulate_train_render_eval() {
         d,
     );
     assert!(!ok && err.contains("captures"), "{err}");
+    // Table 1 over several captures: refused without noise (before any
+    // training) and with the captured floor, which is a one-table study
+    let (ok, _, err) = l3(
+        &["eval", "--paper-table", "--no-noise", "--captures", "4"],
+        d,
+    );
+    assert!(!ok && err.contains("needs noise"), "{err}");
+    let (ok, _, err) = l3(
+        &[
+            "eval",
+            "--paper-table",
+            "--captures",
+            "4",
+            "--captured-floor",
+        ],
+        d,
+    );
+    assert!(!ok && err.contains("captured-floor"), "{err}");
 
     // a captured chart frame: the simulated chart written by `l3 simulate` scores as the
     // chart eval simulates itself (the same seed; u16 quantisation apart), with the light

@@ -62,15 +62,17 @@ pub struct EvalArgs {
     /// Also evaluate N noisy captures (seeds --seed, --seed + 1, …) and one
     /// noise-free capture, and split the patch-mean error: one capture's
     /// mean and spread, the patch means averaged over the captures (the
-    /// bias) and the noise-free chart. 2–64; not with --paper-table.
-    #[arg(long, value_parser = clap::value_parser!(u16).range(2..=64), conflicts_with = "paper_table")]
+    /// bias) and the noise-free chart. 2–64. With --paper-table: every row
+    /// over N captures at full exposure (its mean and spread, and its
+    /// matching linear map's), beside the first capture's table.
+    #[arg(long, value_parser = clap::value_parser!(u16).range(2..=64))]
     pub captures: Option<u16>,
     /// With --captures N: also fit the captured floor, a linear map from each
     /// patch's channel means to XYZ fitted on the chart itself (minimising the
     /// mean ΔE2000 over the N captures), scored on N fresh captures and
     /// 2-fold cross-validated over the patches: what a linear pipeline reaches
     /// on this capture's flare and noise given the answers, and without them.
-    #[arg(long, requires = "captures")]
+    #[arg(long, requires = "captures", conflicts_with = "paper_table")]
     pub captured_floor: bool,
     /// Study the light taken from a frame with `--table` (an SI table): under A,
     /// Tungsten, D50, D65, F2, F11 and 2700–10000 K, the colour temperature from
@@ -376,6 +378,7 @@ fn run_paper_tables(
         seed: a.seed,
         chart,
         chroma_classes: a.chroma_classes,
+        captures: a.captures.map_or(1, usize::from),
         ..PaperOptions::default()
     };
     let mut tables = Vec::new();

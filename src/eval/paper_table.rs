@@ -9,11 +9,13 @@ use std::sync::atomic::AtomicBool;
 
 use serde::{Deserialize, Serialize};
 
+use super::noise_split::check_captures;
+use super::workflow::ChartCapture;
 use super::workflow::{
     ChannelSet, ChartSetup, ColourFit, LightLevel, Method, evaluate_capture, fit_colour_matrix,
     linear_table, matching_linear_map, simulate_chart,
 };
-use super::{DeltaEReport, EvalError};
+use super::{DeltaEReport, EvalError, summarize};
 use crate::camera::{Camera, SensorDesign};
 use crate::l3::{IlluminantEntry, IlluminantRegistry, L3Table, LevelMap, TableKind};
 use crate::spectral::{IsetData, WavelengthGrid};
@@ -63,6 +65,13 @@ pub struct PaperOptions {
     /// Chroma classes of every table (1: none; see `src/l3/chroma.rs`).
     #[serde(default = "one")]
     pub chroma_classes: usize,
+    /// Noisy captures of the chart every row is evaluated on at full
+    /// exposure: 1 (the table as the paper gives it, one capture), or
+    /// [`super::MIN_CAPTURES`]..=[`super::MAX_CAPTURES`], which adds each row's mean over
+    /// the captures (chart seeds `chart.seed`, `chart.seed + 1`, …) and its
+    /// matching linear map's ([`CaptureSpread`]).
+    #[serde(default = "one")]
+    pub captures: usize,
 }
 
 fn one() -> usize {
@@ -83,6 +92,7 @@ impl Default for PaperOptions {
             chart: ChartSetup::default(),
             exposures: default_exposures(),
             chroma_classes: 1,
+            captures: 1,
         }
     }
 }
@@ -123,6 +133,38 @@ pub struct PaperRow {
     /// The paper's (mean, std, p90) for this row, tungsten only.
     pub paper: Option<[f64; 3]>,
     pub training_seconds: Option<f64>,
+    /// With [`PaperOptions::captures`] > 1: the row over every capture.
+    #[serde(default)]
+    pub captures: Option<CaptureSpread>,
+}
+
+/// A row's patch-mean ΔE2000 over several noisy captures of the chart
+/// (the first is the capture the rest of the row is measured on). One
+/// capture's patch means keep noise (a 16 × 16 interior), so its mean moves
+/// from capture to capture by about a tenth of a ΔE on the real sensors:
+/// as much as the bounds rows are judged by.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct CaptureSpread {
+    /// The mean patch-mean ΔE of each capture.
+    pub per_capture: Vec<f64>,
+    /// Their mean and standard deviation.
+    pub mean: f64,
+    pub std: f64,
+    /// L3 rows: the matching linear map's mean over the same captures.
+    #[serde(default)]
+    pub linear_mean: Option<f64>,
+}
+
+impl CaptureSpread {
+    fn new(per_capture: Vec<f64>, linear: Option<&[f64]>) -> Self {
+        let stats = summarize(&per_capture);
+        Self {
+            mean: stats.mean,
+            std: stats.std,
+            linear_mean: linear.map(|l| summarize(l).mean),
+            per_capture,
+        }
+    }
 }
 
 /// Which conventional baseline an L3 row is compared with: like with like.
@@ -150,6 +192,9 @@ pub struct BaselineComparison {
     pub baseline: String,
     /// L3 patch-mean ΔE minus the baseline's, full exposure.
     pub mean_difference: f64,
+    /// The same over every capture ([`PaperOptions::captures`] > 1).
+    #[serde(default)]
+    pub capture_mean_difference: Option<f64>,
     /// (exposure factor, L3 per-pixel ΔE / baseline per-pixel ΔE), full
     /// exposure first.
     pub pixel_ratios: Vec<(f64, f64)>,
@@ -247,6 +292,11 @@ impl PaperTable {
                     method: r.method.clone(),
                     baseline: b.method.clone(),
                     mean_difference: r.mean - b.mean,
+                    capture_mean_difference: r
+                        .captures
+                        .as_ref()
+                        .zip(b.captures.as_ref())
+                        .map(|(r, b)| r.mean - b.mean),
                     pixel_ratios,
                 })
             })
@@ -258,6 +308,43 @@ impl PaperTable {
         row.exposures
             .iter()
             .min_by(|a, b| a.factor.total_cmp(&b.factor))
+    }
+
+    /// The captures a run was evaluated on: 1, or [`PaperOptions::captures`].
+    pub fn n_captures(&self) -> usize {
+        self.rows
+            .iter()
+            .filter_map(|r| r.captures.as_ref())
+            .map(|c| c.per_capture.len())
+            .max()
+            .unwrap_or(1)
+    }
+
+    /// With several captures: every row's mean over them beside its first
+    /// capture and, for L3 rows, the matching linear map's; else nothing.
+    fn captures_markdown(&self) -> String {
+        let n = self.n_captures();
+        if n < 2 {
+            return String::new();
+        }
+        let seed = self.options.chart.seed;
+        let mut s = format!(
+            "\nOver {n} noisy captures of the chart (seeds {seed}–{}): each row's mean patch-mean ΔE2000 and its spread from capture to capture.\n\n\
+             | acquisition | method | first capture | mean over {n} (std) | matching linear map over {n} | L3 − linear |\n|---|---|---|---|---|---|\n",
+            seed.wrapping_add(n as u64 - 1)
+        );
+        for r in &self.rows {
+            let Some(c) = &r.captures else { continue };
+            let (lin, gap) = match c.linear_mean {
+                Some(l) => (format!("{l:.2}"), format!("{:+.2}", c.mean - l)),
+                None => ("—".into(), "—".into()),
+            };
+            s.push_str(&format!(
+                "| {} | {} | {:.2} | {:.2} ({:.2}) | {lin} | {gap} |\n",
+                r.acquisition, r.method, r.mean, c.mean, c.std
+            ));
+        }
+        s
     }
 
     /// A markdown rendering beside the paper's figures.
@@ -301,9 +388,10 @@ impl PaperTable {
                 paper
             ));
         }
+        s.push_str(&self.captures_markdown());
         if !self.comparisons.is_empty() {
             s.push_str("\nEach L3 row against its conventional baseline (of RGB and all channels, the one with the lower mean patch-mean ΔE over this sensor's baseline rows at full exposure): patch-mean difference, and per-pixel ΔE as a ratio L3 / baseline at each exposure factor.\n\n");
-            s.push_str("| acquisition | method | baseline | Δ patch mean | per-pixel L3/baseline |\n|---|---|---|---|---|\n");
+            s.push_str("| acquisition | method | baseline | Δ patch mean | Δ over the captures | per-pixel L3/baseline |\n|---|---|---|---|---|---|\n");
             for c in &self.comparisons {
                 let ratios: Vec<String> = c
                     .pixel_ratios
@@ -311,11 +399,14 @@ impl PaperTable {
                     .map(|(f, r)| format!("{f}×: {r:.2}"))
                     .collect();
                 s.push_str(&format!(
-                    "| {} | {} | {} | {:+.2} | {} |\n",
+                    "| {} | {} | {} | {:+.2} | {} | {} |\n",
                     c.acquisition,
                     c.method,
                     c.baseline,
                     c.mean_difference,
+                    c.capture_mean_difference
+                        .map(|d| format!("{d:+.2}"))
+                        .unwrap_or_else(|| "—".into()),
                     ratios.join(", ")
                 ));
             }
@@ -338,10 +429,21 @@ impl PaperTable {
 /// its matching linear map and its baseline, so that a regression on any
 /// sensor shows in one place.
 pub fn paper_summary(tables: &[PaperTable]) -> String {
-    let mut s = String::from(
+    let n = tables.iter().map(PaperTable::n_captures).max().unwrap_or(1);
+    let (more, more_rule) = if n > 1 {
+        (
+            format!(
+                " mean over {n} captures (std) | matching linear map over {n} | Δ over {n} vs baseline |"
+            ),
+            "---|---|---|",
+        )
+    } else {
+        (String::new(), "")
+    };
+    let mut s = format!(
         "Table 1 on every sensor (patch-mean ΔE2000; per-pixel ΔE at full and lowest exposure)\n\n\
-         | sensor | acquisition | method | mean | matching linear map | per-pixel | low light per-pixel | baseline | Δ mean vs baseline | low light L3/baseline |\n\
-         |---|---|---|---|---|---|---|---|---|---|\n",
+         | sensor | acquisition | method | mean | matching linear map | per-pixel | low light per-pixel | baseline | Δ mean vs baseline | low light L3/baseline |{more}\n\
+         |---|---|---|---|---|---|---|---|---|---|{more_rule}\n",
     );
     let f2 = |v: Option<f64>| v.map(|v| format!("{v:.2}")).unwrap_or_else(|| "—".into());
     for t in tables {
@@ -349,8 +451,21 @@ pub fn paper_summary(tables: &[PaperTable]) -> String {
             let b = t.baseline_for(r);
             let low = PaperTable::low_light(r);
             let low_b = b.and_then(PaperTable::low_light);
+            let over = match (&r.captures, n > 1) {
+                (Some(c), true) => format!(
+                    " {:.2} ({:.2}) | {} | {} |",
+                    c.mean,
+                    c.std,
+                    f2(c.linear_mean),
+                    b.and_then(|b| b.captures.as_ref())
+                        .map(|bc| format!("{:+.2}", c.mean - bc.mean))
+                        .unwrap_or_else(|| "—".into())
+                ),
+                (None, true) => " — | — | — |".into(),
+                _ => String::new(),
+            };
             s.push_str(&format!(
-                "| {} | {} | {} | {:.2} | {} | {:.2} | {} | {} | {} | {} |\n",
+                "| {} | {} | {} | {:.2} | {} | {:.2} | {} | {} | {} | {} |{over}\n",
                 t.sensor,
                 r.acquisition,
                 r.method,
@@ -371,6 +486,24 @@ pub fn paper_summary(tables: &[PaperTable]) -> String {
     s
 }
 
+/// `first` (a method's mean patch-mean ΔE on the first capture), then its
+/// mean on each of the further captures `extra`.
+fn means_over(
+    first: f64,
+    extra: &[ChartCapture],
+    camera: &Camera,
+    method: &Method,
+    name: &str,
+    correction: &IlluminantEntry,
+    setup: &ChartSetup,
+) -> Result<Vec<f64>, EvalError> {
+    std::iter::once(Ok(first))
+        .chain(extra.iter().map(|cap| {
+            evaluate_capture(camera, cap, method, name, correction, setup).map(|r| r.summary.mean)
+        }))
+        .collect()
+}
+
 fn short(name: &str) -> String {
     match name.to_ascii_lowercase().as_str() {
         "tungsten" => "Tun".into(),
@@ -386,6 +519,15 @@ pub fn run_paper_table(
     opts: &PaperOptions,
     progress: &(dyn Fn(&str) + Sync),
 ) -> Result<PaperTable, EvalError> {
+    if opts.captures != 1 {
+        check_captures(opts.captures, "a Table 1 over several captures")?;
+        if !opts.chart.noise {
+            return Err(EvalError::Invalid(
+                "a Table 1 over several captures needs noise: every noise-free capture is the same"
+                    .into(),
+            ));
+        }
+    }
     let grid = WavelengthGrid::default();
     let camera = Camera::new(design, grid, iset).map_err(|e| EvalError::Invalid(e.to_string()))?;
     let mut registry = IlluminantRegistry::with_defaults(grid, iset)?;
@@ -487,6 +629,16 @@ pub fn run_paper_table(
             None,
         ));
         let cap = simulate_chart(&camera, acq, iset, &opts.chart)?;
+        // the further captures of a run over several (chart seeds after the first)
+        let extra = (1..opts.captures as u64)
+            .map(|k| {
+                let setup = ChartSetup {
+                    seed: opts.chart.seed.wrapping_add(k),
+                    ..opts.chart.clone()
+                };
+                simulate_chart(&camera, acq, iset, &setup)
+            })
+            .collect::<Result<Vec<_>, EvalError>>()?;
         let lower = opts
             .exposures
             .iter()
@@ -511,7 +663,11 @@ pub fn run_paper_table(
             };
             let c = &own;
             let rep = evaluate_capture(&camera, &cap, &method, &name, c, &opts.chart)?;
-            let (linear_mean, baseline) = match method {
+            let means = |first: f64, method: &Method, name: &str, corr: &IlluminantEntry| {
+                means_over(first, &extra, &camera, method, name, corr, &opts.chart)
+            };
+            let row_means = means(rep.summary.mean, &method, &name, c)?;
+            let (linear_mean, linear_means, baseline) = match method {
                 Method::Table(t) => {
                     let map = matching_linear_map(&camera, t, acq, iset)?;
                     // the linear map gets its own C, as the table does
@@ -530,14 +686,16 @@ pub fn run_paper_table(
                         corr.clone()
                     };
                     let lt = linear_table(t, &map)?;
+                    let (lin_method, lin_name) = (Method::Table(&lt), format!("linear {name}"));
                     let lin = evaluate_capture(
                         &camera,
                         &cap,
-                        &Method::Table(&lt),
-                        &format!("linear {name}"),
+                        &lin_method,
+                        &lin_name,
                         &lin_corr,
                         &opts.chart,
                     )?;
+                    let lin_means = means(lin.summary.mean, &lin_method, &lin_name, &lin_corr)?;
                     // like with like: a table for this light alone against
                     // the matrix for this light; one table for several
                     // lights (then T) against one matrix (then T)
@@ -549,9 +707,9 @@ pub fn run_paper_table(
                         } else {
                             BaselineFamily::D65FitThenT
                         };
-                    (Some(lin.summary.mean), Some(family))
+                    (Some(lin.summary.mean), Some(lin_means), Some(family))
                 }
-                Method::Baseline(_) => (None, None),
+                Method::Baseline(_) => (None, None, None),
             };
             let exposures = lower
                 .iter()
@@ -584,6 +742,8 @@ pub fn run_paper_table(
                     None
                 },
                 training_seconds: secs,
+                captures: (opts.captures > 1)
+                    .then(|| CaptureSpread::new(row_means, linear_means.as_deref())),
             });
             reports.push(rep);
         }
@@ -632,6 +792,7 @@ mod tests {
             baseline,
             paper: None,
             training_seconds: None,
+            captures: None,
         }
     }
 
@@ -686,5 +847,81 @@ mod tests {
         assert_eq!(t.baseline_for(i).unwrap().method, "Baseline_Tun");
         let s = t.row("Tungsten", "SI_D65+T").unwrap();
         assert_eq!(t.baseline_for(s).unwrap().method, "Baseline+T all");
+    }
+
+    #[test]
+    fn several_captures_need_noise_and_a_count_in_range() {
+        let design = SensorDesign::paper_default();
+        let run = |captures: usize, noise: bool| {
+            let opts = PaperOptions {
+                captures,
+                chart: ChartSetup {
+                    noise,
+                    ..ChartSetup::default()
+                },
+                ..PaperOptions::default()
+            };
+            // (refused before any table is trained)
+            match run_paper_table(&design, None, &opts, &|_| {}) {
+                Err(EvalError::Invalid(m)) => m,
+                other => panic!(
+                    "{captures} captures, noise {noise}: {:?}",
+                    other.map(|_| ())
+                ),
+            }
+        };
+        assert!(run(4, false).contains("needs noise"), "{}", run(4, false));
+        for n in [0, super::super::MAX_CAPTURES + 1] {
+            assert!(run(n, true).contains("captures"), "{}", run(n, true));
+        }
+    }
+
+    #[test]
+    fn rows_over_several_captures_are_reported_beside_the_first() {
+        use BaselineFamily::*;
+        let with = |mut r: PaperRow, means: &[f64], linear: Option<&[f64]>| {
+            r.captures = Some(CaptureSpread::new(means.to_vec(), linear));
+            r
+        };
+        let mut t = table(vec![
+            with(
+                row("Tungsten", "I_Tun", 2.67, Some(AcquisitionFit)),
+                &[2.67, 2.87],
+                Some(&[5.0, 5.2]),
+            ),
+            with(
+                row("Tungsten", "Baseline_Tun", 4.0, None),
+                &[4.0, 4.4],
+                None,
+            ),
+            row("Tungsten", "Baseline_Tun all", 4.5, None),
+        ]);
+        let spread = t.rows[0].captures.clone().unwrap();
+        assert!((spread.mean - 2.77).abs() < 1e-12, "{spread:?}");
+        assert!((spread.linear_mean.unwrap() - 5.1).abs() < 1e-12);
+        assert_eq!(t.n_captures(), 2);
+        t.comparisons = t.compare_with_baselines();
+        let c = &t.comparisons[0];
+        assert!((c.mean_difference - (2.67 - 4.0)).abs() < 1e-12);
+        assert!((c.capture_mean_difference.unwrap() - (2.77 - 4.2)).abs() < 1e-12);
+        let md = t.markdown();
+        assert!(
+            md.contains("Over 2 noisy captures of the chart (seeds 7–8)"),
+            "{md}"
+        );
+        assert!(md.contains("| Tungsten | I_Tun | 2.67 | 2.77 ("), "{md}");
+        assert!(md.contains("| 5.10 | -2.33 |"), "{md}");
+        assert!(md.contains("| -1.33 | -1.43 |"), "{md}");
+        let summary = paper_summary(std::slice::from_ref(&t));
+        assert!(summary.contains("mean over 2 captures (std)"), "{summary}");
+        assert!(
+            summary.contains("| 2.77 (0.10) | 5.10 | -1.43 |"),
+            "{summary}"
+        );
+        // one capture: the columns are not there
+        let one = table(vec![row("Tungsten", "I_Tun", 2.67, Some(AcquisitionFit))]);
+        assert_eq!(one.n_captures(), 1);
+        assert!(!one.markdown().contains("noisy captures"));
+        assert!(!paper_summary(&[one]).contains("captures"));
     }
 }
