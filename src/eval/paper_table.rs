@@ -10,10 +10,9 @@ use std::sync::atomic::AtomicBool;
 use serde::{Deserialize, Serialize};
 
 use super::noise_split::check_captures;
-use super::workflow::ChartCapture;
 use super::workflow::{
-    ChannelSet, ChartSetup, ColourFit, LightLevel, Method, evaluate_capture, fit_colour_matrix,
-    linear_table, matching_linear_map, simulate_chart,
+    ChannelSet, ChartCapture, ChartSetup, ColourFit, LightLevel, Method, evaluate_capture,
+    fit_colour_matrix, linear_table, matching_linear_map, simulate_chart,
 };
 use super::{DeltaEReport, EvalError, summarize};
 use crate::camera::{Camera, SensorDesign};
