@@ -686,14 +686,28 @@ fn train_in_shards_gives_the_same_table_file() {
         choice["held_out"],
         serde_json::json!(["D50", "A", "F2", "F11"])
     );
-    let score = |k: &str| choice[k].as_f64().unwrap();
-    let (p, l) = (score("perceptual_delta_e"), score("least_squares_delta_e"));
-    assert!(
-        p.is_finite() && l.is_finite() && p > 0.0 && l > 0.0,
-        "{choice}"
-    );
-    let chosen = if l < p { "least-squares" } else { "perceptual" };
-    assert_eq!(choice["fit"], chosen, "{choice}");
+    // both fits on both lights together, then on each light alone, and the
+    // winner is the one with the lowest score
+    let candidates = choice["candidates"].as_array().unwrap();
+    let tried: Vec<(String, String)> = candidates
+        .iter()
+        .map(|c| (c["fit"].to_string(), c["lights"].to_string()))
+        .collect();
+    let fits = ["\"perceptual\"", "\"least-squares\""];
+    let subsets = [r#"["D65","Tungsten"]"#, r#"["D65"]"#, r#"["Tungsten"]"#];
+    let expected: Vec<(String, String)> = subsets
+        .iter()
+        .flat_map(|l| fits.iter().map(move |f| (f.to_string(), l.to_string())))
+        .collect();
+    assert_eq!(tried, expected, "{choice}");
+    let scores: Vec<f64> = candidates
+        .iter()
+        .map(|c| c["held_out_delta_e"].as_f64().unwrap())
+        .collect();
+    assert!(scores.iter().all(|s| s.is_finite() && *s > 0.0), "{choice}");
+    let best = (0..scores.len()).fold(0, |b, i| if scores[i] < scores[b] { i } else { b });
+    assert_eq!(choice["fit"], candidates[best]["fit"], "{choice}");
+    assert_eq!(choice["lights"], candidates[best]["lights"], "{choice}");
     assert!(stdout.contains("accumulation shard 2/2"), "{stdout}");
     assert!(d.join("parts/sums-2-of-2.l3p").is_file());
     // one step per process, as on separate machines: surveys, then sums

@@ -342,11 +342,12 @@ fn chroma_classes_take_the_papers_sensor_under_its_targets() {
 
 /// A same-illuminant table under a light it was not trained on renders with
 /// its transfer maps, whose fit (the colour maps' ΔE00 fit or plain least
-/// squares) the trainer chooses on standard lights held out from training
-/// (CIE D50, A, F2, F11). On the paper's sensor the D65 + tungsten table
-/// under ISET's fluorescent lamp, noise-free, was 15.04 against its matching
-/// linear map's 14.63 with the ΔE00 fit; the held-out lights choose least
-/// squares and it meets the noise-free bound of 0.2 (14.64). The D65 table
+/// squares, on all its training lights or, for an ensemble, on one of them)
+/// the trainer chooses on standard lights held out from training (CIE D50,
+/// A, F2, F11). On the paper's sensor the D65 + tungsten table under ISET's
+/// fluorescent lamp, noise-free, was 15.04 against its matching linear map's
+/// 14.63 with both lights' ΔE00 fit and 14.64 with their least squares; the
+/// held-out lights now choose tungsten's least squares, 12.65. The D65 table
 /// keeps the ΔE00 fit, which beats its linear map under tungsten (3.19
 /// against 4.21).
 #[test]
@@ -367,9 +368,14 @@ fn held_out_lights_choose_the_fit_a_table_takes_to_a_foreign_light() {
         ..ChartSetup::default()
     };
     let cancel = std::sync::atomic::AtomicBool::new(false);
-    for (lights, acquisition, fit) in [
-        (&["D65", "Tungsten"][..], "Fluorescent", "least-squares"),
-        (&["D65"][..], "Tungsten", "perceptual"),
+    for (lights, acquisition, fit, fitted_on) in [
+        (
+            &["D65", "Tungsten"][..],
+            "Fluorescent",
+            "least-squares",
+            "Tungsten",
+        ),
+        (&["D65"][..], "Tungsten", "perceptual", "D65"),
     ] {
         let spec = TrainingSpec {
             illuminants: lights.iter().map(|s| s.to_string()).collect(),
@@ -381,6 +387,7 @@ fn held_out_lights_choose_the_fit_a_table_takes_to_a_foreign_light() {
         let table = train_table(&design, &spec, None, &|_, _| {}, &cancel).unwrap();
         let choice = &table.meta.summary["transfer_fit"];
         assert_eq!(choice["fit"], fit, "{lights:?}: {choice}");
+        assert_eq!(choice["lights"], serde_json::json!([fitted_on]), "{choice}");
         assert!(table.transfers_to(acquisition));
         let cap = simulate_chart(&camera, acquisition, None, &chart).unwrap();
         let corr = registry.resolve(acquisition, None).unwrap();
@@ -396,8 +403,9 @@ fn held_out_lights_choose_the_fit_a_table_takes_to_a_foreign_light() {
         println!(
             "{lights:?} under {acquisition}: {l3_mean:.2}, linear map {lin_mean:.2} ({choice})"
         );
+        // the noise-free bound is 0.2; both tables beat their linear map
         assert!(
-            l3_mean <= lin_mean + 0.2,
+            l3_mean < lin_mean,
             "{lights:?} under {acquisition}: {l3_mean} against {lin_mean}"
         );
     }

@@ -21,12 +21,11 @@ use sha2::{Digest, Sha256};
 use crate::camera::{Camera, CameraError, NoiseSwitches, SensorDesign, mosaic};
 use crate::colour::mat3_mul_vec;
 use crate::l3::{
-    ChromaClasses, Classes, ColourLoss, ColourMapFit, ColourMatrix, ColourSamples, GramPartial,
-    L3Error, L3Params, L3Table, Learned, MIN_SURFACES_PER_CHANNEL, NoiseModel, PatchGeometry,
-    RidgeChoice, ShardSpec, SurveyPartial, TABLE_FORMAT_VERSION, TableKind, TableMeta,
-    TrainControl, TrainSetup, TrainingFrame, accumulate_batches, band_maps, classes_from_survey,
-    learn, level_maps, merge_partials, merge_surveys, package, plan_shards, solve_learned,
-    survey_batches,
+    ChromaClasses, Classes, ColourLoss, ColourMapFit, ColourMatrix, GramPartial, L3Error, L3Params,
+    L3Table, Learned, MIN_SURFACES_PER_CHANNEL, NoiseModel, PatchGeometry, RidgeChoice, ShardSpec,
+    SurveyPartial, TABLE_FORMAT_VERSION, TableKind, TableMeta, TrainControl, TrainSetup,
+    TrainingFrame, accumulate_batches, band_maps, classes_from_survey, learn, level_maps,
+    merge_partials, merge_surveys, package, plan_shards, solve_learned, survey_batches,
 };
 use crate::scene::SceneError;
 use crate::spectral::{
@@ -693,7 +692,8 @@ impl TrainingRun {
 
 /// A same-illuminant table's maps for lights it was not trained under, one
 /// per level, aimed at XYZ under the light (which any light's T can take),
-/// with the fit [`choose_transfer_fit`] picks on the held-out lights (see
+/// with the fit, on all its training lights or (an ensemble) on one of them,
+/// that [`choose_transfer_fit`] picks on the held-out lights (see
 /// `transfer_fit`).
 fn transfer_maps(
     camera: &Camera,
@@ -713,46 +713,51 @@ fn transfer_maps(
     let (nm, swing) = (noise_model(design), design.voltage_swing_v);
     let averaging_px = Some(spec.transfer_averaging()).filter(|&px| px > 0.0);
     // the colour maps' fit, each error weighed after the training light's T
-    let weighed = colour_samples(
-        camera,
-        lights,
-        ColourTarget::UnderLight(corrections),
-        &d65,
-        refl,
-    )?;
     let perceptual = ColourMapFit {
         averaging_px,
         ..fit
     };
     // plain least squares in XYZ: no T, no perceptual weights
-    let as_is = colour_samples(camera, lights, ColourTarget::UnderLight(&[]), &d65, refl)?;
     let least_squares = ColourMapFit {
         averaging_px,
         perceptual: false,
         loss: ColourLoss::SquaredDeltaE,
     };
-    let noise_free = |samples: &ColourSamples, fit: &ColourMapFit| {
-        let fit = ColourMapFit {
-            averaging_px: None,
-            ..*fit
-        };
-        let level = params.levels.first().copied().unwrap_or(swing);
-        level_maps(samples, &[level], &nm, swing, &fit)?
-            .pop()
-            .ok_or_else(|| TrainError::Invalid("no transfer map".into()))
-    };
+    // each fit on every training light, then (an ensemble) on each alone
+    let singles = if lights.len() > 1 { lights.len() } else { 0 };
+    let subsets = std::iter::once(0..lights.len()).chain((0..singles).map(|i| i..i + 1));
+    let mut candidates = Vec::new();
+    for range in subsets {
+        let mismatch = || TrainError::Invalid("lights, corrections and names differ".into());
+        let spds = lights.get(range.clone()).ok_or_else(mismatch)?;
+        let ts = corrections.get(range.clone()).ok_or_else(mismatch)?;
+        let names = spec.illuminants.get(range).ok_or_else(mismatch)?.to_vec();
+        let weighed = colour_samples(camera, spds, ColourTarget::UnderLight(ts), &d65, refl)?;
+        let as_is = colour_samples(camera, spds, ColourTarget::UnderLight(&[]), &d65, refl)?;
+        candidates.push((TransferFit::Perceptual, names.clone(), weighed, perceptual));
+        candidates.push((TransferFit::LeastSquares, names, as_is, least_squares));
+    }
+    let level = params.levels.first().copied().unwrap_or(swing);
+    let noise_free = candidates
+        .iter()
+        .map(|(fit, names, samples, how)| {
+            let how = ColourMapFit {
+                averaging_px: None,
+                ..*how
+            };
+            let map = level_maps(samples, &[level], &nm, swing, &how)?
+                .pop()
+                .ok_or_else(|| TrainError::Invalid("no transfer map".into()))?;
+            Ok((*fit, names.clone(), map))
+        })
+        .collect::<Result<Vec<_>, TrainError>>()?;
     let held_out = held_out_lights(camera, &spec.illuminants, refl)?;
-    let choice = choose_transfer_fit(
-        &noise_free(&weighed, &perceptual)?,
-        &noise_free(&as_is, &least_squares)?,
-        &held_out,
-    );
-    let (samples, fit) = match choice.fit {
-        TransferFit::Perceptual => (&weighed, &perceptual),
-        TransferFit::LeastSquares => (&as_is, &least_squares),
-    };
+    let (best, choice) = choose_transfer_fit(&noise_free, &held_out);
+    let (_, _, samples, how) = candidates
+        .get(best)
+        .ok_or_else(|| TrainError::Invalid("no transfer map candidate".into()))?;
     Ok((
-        level_maps(samples, &params.levels, &nm, swing, fit)?,
+        level_maps(samples, &params.levels, &nm, swing, how)?,
         choice,
     ))
 }
@@ -763,8 +768,8 @@ fn transfer_maps(
 /// older trainer are refused rather than merged with this one's
 /// ([`TrainingRun::run_key`]). 2: same-illuminant maps aimed through T with
 /// the cross averaging; 3: transfer maps fitted as the held-out lights
-/// choose.
-const TRAINER_REVISION: u32 = 3;
+/// choose; 4: an ensemble's transfer maps may take one training light's fit.
+const TRAINER_REVISION: u32 = 4;
 
 fn run_key(design: &SensorDesign, spec: &TrainingSpec, iset: bool) -> String {
     let text = serde_json::json!({
