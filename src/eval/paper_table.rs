@@ -390,22 +390,29 @@ impl PaperTable {
         s.push_str(&self.captures_markdown());
         if !self.comparisons.is_empty() {
             s.push_str("\nEach L3 row against its conventional baseline (of RGB and all channels, the one with the lower mean patch-mean ΔE over this sensor's baseline rows at full exposure): patch-mean difference, and per-pixel ΔE as a ratio L3 / baseline at each exposure factor.\n\n");
-            s.push_str("| acquisition | method | baseline | Δ patch mean | Δ over the captures | per-pixel L3/baseline |\n|---|---|---|---|---|---|\n");
+            let several = self.n_captures() > 1;
+            s.push_str(if several {
+                "| acquisition | method | baseline | Δ patch mean | Δ over the captures | per-pixel L3/baseline |\n|---|---|---|---|---|---|\n"
+            } else {
+                "| acquisition | method | baseline | Δ patch mean | per-pixel L3/baseline |\n|---|---|---|---|---|\n"
+            });
             for c in &self.comparisons {
                 let ratios: Vec<String> = c
                     .pixel_ratios
                     .iter()
                     .map(|(f, r)| format!("{f}×: {r:.2}"))
                     .collect();
+                let over = match (several, c.capture_mean_difference) {
+                    (false, _) => String::new(),
+                    (true, Some(d)) => format!(" {d:+.2} |"),
+                    (true, None) => " — |".into(),
+                };
                 s.push_str(&format!(
-                    "| {} | {} | {} | {:+.2} | {} | {} |\n",
+                    "| {} | {} | {} | {:+.2} |{over} {} |\n",
                     c.acquisition,
                     c.method,
                     c.baseline,
                     c.mean_difference,
-                    c.capture_mean_difference
-                        .map(|d| format!("{d:+.2}"))
-                        .unwrap_or_else(|| "—".into()),
                     ratios.join(", ")
                 ));
             }
@@ -917,10 +924,23 @@ mod tests {
             summary.contains("| 2.77 (0.10) | 5.10 | -1.43 |"),
             "{summary}"
         );
+        assert!(
+            md.contains("| Δ patch mean | Δ over the captures |"),
+            "{md}"
+        );
         // one capture: the columns are not there
-        let one = table(vec![row("Tungsten", "I_Tun", 2.67, Some(AcquisitionFit))]);
+        let mut one = table(vec![
+            row("Tungsten", "I_Tun", 2.67, Some(AcquisitionFit)),
+            row("Tungsten", "Baseline_Tun", 4.0, None),
+        ]);
+        one.comparisons = one.compare_with_baselines();
         assert_eq!(one.n_captures(), 1);
-        assert!(!one.markdown().contains("noisy captures"));
+        let md = one.markdown();
+        assert!(
+            !md.contains("noisy captures") && !md.contains("captures |"),
+            "{md}"
+        );
+        assert!(md.contains("| Baseline_Tun | -1.33 | 1×"), "{md}");
         assert!(!paper_summary(&[one]).contains("captures"));
     }
 }
