@@ -79,6 +79,9 @@ pub struct TransferCandidate {
     /// Mean ΔE00 on the held-out lights ([`held_out_error`]); not finite
     /// where the map cannot be scored.
     pub held_out_delta_e: f64,
+    /// The same on each held-out light, in [`TransferChoice::held_out`]'s
+    /// order.
+    pub per_light_delta_e: Vec<f64>,
 }
 
 /// The transfer fit a table took and why: every candidate's mean ΔE00 on the
@@ -202,6 +205,10 @@ pub fn choose_transfer_fit(
             fit: *fit,
             lights: trained.clone(),
             held_out_delta_e: held_out_error(map, lights).unwrap_or(f64::NAN),
+            per_light_delta_e: lights
+                .iter()
+                .map(|h| held_out_error(map, std::slice::from_ref(h)).unwrap_or(f64::NAN))
+                .collect(),
         })
         .collect();
     let mut best = 0;
@@ -341,6 +348,7 @@ mod tests {
         );
         assert_eq!(c.candidates.len(), 4);
         assert_eq!(c.candidates[2].lights, ["A"]);
+        assert_eq!(c.candidates[3].per_light_delta_e, [e_f2]);
         // a score is the mean over the lights of each light's mean
         let all = held_out_error(&under_f2, &lights).unwrap();
         let mean = lights
