@@ -201,14 +201,24 @@ pub fn choose_transfer_fit(
 ) -> (usize, TransferChoice) {
     let scored: Vec<TransferCandidate> = candidates
         .iter()
-        .map(|(fit, trained, map)| TransferCandidate {
-            fit: *fit,
-            lights: trained.clone(),
-            held_out_delta_e: held_out_error(map, lights).unwrap_or(f64::NAN),
-            per_light_delta_e: lights
+        .map(|(fit, trained, map)| {
+            let per_light: Vec<f64> = lights
                 .iter()
                 .map(|h| held_out_error(map, std::slice::from_ref(h)).unwrap_or(f64::NAN))
-                .collect(),
+                .collect();
+            // the mean of the lights' means, as `held_out_error` over them all
+            // (not finite where any light is not, or there is none)
+            let mean = if per_light.is_empty() {
+                f64::NAN
+            } else {
+                per_light.iter().sum::<f64>() / per_light.len() as f64
+            };
+            TransferCandidate {
+                fit: *fit,
+                lights: trained.clone(),
+                held_out_delta_e: mean,
+                per_light_delta_e: per_light,
+            }
         })
         .collect();
     let mut best = 0;
