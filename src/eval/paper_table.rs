@@ -177,9 +177,16 @@ pub enum BaselineFamily {
     /// fitted for this light and this camera).
     AcquisitionFit,
     /// The matrix fitted under D65, then T (`Baseline+T` and `Baseline+T
-    /// all`): for SI tables trained under D65 or an ensemble of lights, which
-    /// like this matrix serve every light through T.
+    /// all`): for SI tables trained under D65, which like this matrix serve
+    /// every light through T.
     D65FitThenT,
+    /// The matrix fitted on an ensemble's lights together, then T
+    /// (`Baseline_Ens+T`, `Baseline_Ens3+T` and their `all`): for SI tables
+    /// trained on that ensemble (`SI_Ens+T`, `SI_Ens3+T`), a conventional
+    /// pipeline calibrated on the same lights and serving every light
+    /// through T. (Until these rows existed the ensembles were judged
+    /// against the D65 fit; the markdown still shows that difference.)
+    EnsembleFitThenT,
 }
 
 /// One L3 row against its baseline (of the RGB and all-channel variants,
@@ -263,15 +270,30 @@ impl PaperTable {
         let stem = match row.baseline? {
             BaselineFamily::AcquisitionFit => format!("Baseline_{}", short(&row.acquisition)),
             BaselineFamily::D65FitThenT => "Baseline+T".to_string(),
+            // `SI_Ens+T` against `Baseline_Ens+T`
+            BaselineFamily::EnsembleFitThenT => row.method.replacen("SI_", "Baseline_", 1),
         };
+        self.baseline_row(&row.acquisition, &stem)
+    }
+
+    /// An ensemble row's D65-fit + T baseline, which judged the ensembles
+    /// before [`BaselineFamily::EnsembleFitThenT`]: shown beside its own.
+    pub fn d65_baseline_for(&self, row: &PaperRow) -> Option<&PaperRow> {
+        (row.baseline? == BaselineFamily::EnsembleFitThenT)
+            .then(|| self.baseline_row(&row.acquisition, "Baseline+T"))?
+    }
+
+    /// The baseline `stem` under `acquisition` in the sensor's variant, or
+    /// the other variant when that one is missing.
+    fn baseline_row(&self, acquisition: &str, stem: &str) -> Option<&PaperRow> {
         let all = format!("{stem} all");
         let (first, second) = if self.all_channel_baseline() {
-            (all, stem)
+            (all.as_str(), stem)
         } else {
-            (stem, all)
+            (stem, all.as_str())
         };
-        self.row(&row.acquisition, &first)
-            .or_else(|| self.row(&row.acquisition, &second))
+        self.row(acquisition, first)
+            .or_else(|| self.row(acquisition, second))
     }
 
     fn compare_with_baselines(&self) -> Vec<BaselineComparison> {
@@ -479,8 +501,14 @@ pub fn paper_summary(tables: &[PaperTable]) -> String {
                 f2(r.linear_mean),
                 r.pixel_mean,
                 f2(low.map(|p| p.pixel_mean)),
-                b.map(|b| format!("{} {:.2}", b.method, b.mean))
-                    .unwrap_or_else(|| "—".into()),
+                b.map(|b| {
+                    let d65 = t
+                        .d65_baseline_for(r)
+                        .map(|d| format!(" (D65 fit: {:.2}, {:+.2})", d.mean, r.mean - d.mean))
+                        .unwrap_or_default();
+                    format!("{} {:.2}{d65}", b.method, b.mean)
+                })
+                .unwrap_or_else(|| "—".into()),
                 b.map(|b| format!("{:+.2}", r.mean - b.mean))
                     .unwrap_or_else(|| "—".into()),
                 f2(low
@@ -576,6 +604,21 @@ pub fn run_paper_table(
     };
     let d65_rgb = fit_matrix(&d65_list, TableKind::SameIlluminant, ChannelSet::Rgb)?;
     let d65_all = fit_matrix(&d65_list, TableKind::SameIlluminant, ChannelSet::All)?;
+    // each ensemble's own conventional matrices (RGB, all channels), fitted
+    // on its lights together as its table was, then T
+    let mut ensemble_fits = Vec::new();
+    for (name, t) in std::iter::once(("Ens".to_string(), &si_ens)).chain(
+        si_all
+            .as_ref()
+            .map(|t| (format!("Ens{}", all_ens.len()), t)),
+    ) {
+        let lights = &t.meta.train_illuminants;
+        ensemble_fits.push((
+            name,
+            fit_matrix(lights, TableKind::SameIlluminant, ChannelSet::Rgb)?,
+            fit_matrix(lights, TableKind::SameIlluminant, ChannelSet::All)?,
+        ));
+    }
     let mut rows = Vec::new();
     let mut reports = Vec::new();
     let mut chart_name = String::new();
@@ -628,6 +671,15 @@ pub fn run_paper_table(
         };
         methods.push(("Baseline+T".into(), Method::Baseline(&d65_rgb), None));
         methods.push(("Baseline+T all".into(), Method::Baseline(&d65_all), None));
+        for (name, rgb, all) in &ensemble_fits {
+            methods.push((format!("Baseline_{name}+T"), Method::Baseline(rgb), None));
+            methods.push((
+                format!("Baseline_{name}+T all"),
+                Method::Baseline(all),
+                None,
+            ));
+        }
+        let acq_names = [format!("Baseline_{tag}"), format!("Baseline_{tag} all")];
         methods.push((format!("Baseline_{tag}"), Method::Baseline(&acq_rgb), None));
         methods.push((
             format!("Baseline_{tag} all"),
@@ -655,7 +707,7 @@ pub fn run_paper_table(
             .collect::<Result<Vec<_>, EvalError>>()?;
         for (name, method, secs) in methods {
             progress(&format!("evaluating {name} under {acq}"));
-            let is_acq_baseline = name.starts_with("Baseline_");
+            let is_acq_baseline = acq_names.contains(&name);
             let camera_aware = name.ends_with("+C");
             let own: IlluminantEntry = match method {
                 Method::Table(t) if camera_aware => camera_corrected(
@@ -710,6 +762,8 @@ pub fn run_paper_table(
                     let family =
                         if only_acq || camera_aware || t.meta.kind == TableKind::CrossIlluminant {
                             BaselineFamily::AcquisitionFit
+                        } else if t.meta.train_illuminants.len() > 1 {
+                            BaselineFamily::EnsembleFitThenT
                         } else {
                             BaselineFamily::D65FitThenT
                         };
@@ -853,6 +907,37 @@ mod tests {
         assert_eq!(t.baseline_for(i).unwrap().method, "Baseline_Tun");
         let s = t.row("Tungsten", "SI_D65+T").unwrap();
         assert_eq!(t.baseline_for(s).unwrap().method, "Baseline+T all");
+    }
+
+    #[test]
+    fn an_ensemble_is_judged_against_the_matrix_fitted_on_its_lights() {
+        use BaselineFamily::*;
+        let t = table(vec![
+            row("Fluorescent", "SI_D65+T", 1.53, Some(D65FitThenT)),
+            row("Fluorescent", "SI_Ens+T", 1.61, Some(EnsembleFitThenT)),
+            row("Fluorescent", "SI_Ens3+T", 1.46, Some(EnsembleFitThenT)),
+            row("Fluorescent", "Baseline+T", 1.96, None),
+            row("Fluorescent", "Baseline+T all", 1.48, None),
+            row("Fluorescent", "Baseline_Ens+T", 1.89, None),
+            row("Fluorescent", "Baseline_Ens+T all", 1.57, None),
+            row("Fluorescent", "Baseline_Ens3+T", 1.57, None),
+            row("Fluorescent", "Baseline_Ens3+T all", 1.52, None),
+        ]);
+        assert!(t.all_channel_baseline());
+        let r = |m: &str| t.row("Fluorescent", m).unwrap();
+        let base = |m: &str| t.baseline_for(r(m)).unwrap().method.clone();
+        assert_eq!(base("SI_D65+T"), "Baseline+T all");
+        assert_eq!(base("SI_Ens+T"), "Baseline_Ens+T all");
+        assert_eq!(base("SI_Ens3+T"), "Baseline_Ens3+T all");
+        // the D65 fit, which judged the ensembles before, is shown beside
+        let d65 = |m: &str| t.d65_baseline_for(r(m)).map(|b| b.method.clone());
+        assert_eq!(d65("SI_Ens+T").as_deref(), Some("Baseline+T all"));
+        assert_eq!(d65("SI_D65+T"), None);
+        let summary = paper_summary(std::slice::from_ref(&t));
+        assert!(
+            summary.contains("| Baseline_Ens+T all 1.57 (D65 fit: 1.48, +0.13) | +0.04 |"),
+            "{summary}"
+        );
     }
 
     #[test]
