@@ -84,7 +84,7 @@ fn design_sections() -> Vec<u32> {
     text.lines()
         .filter(|l| l.starts_with('#'))
         .flat_map(|l| {
-            let at = l.find('§').map_or(l.len(), |i| i);
+            let at = l.find('§').unwrap_or(l.len());
             sections_after(&l[at..])
         })
         .collect()

@@ -119,29 +119,30 @@ pub fn extract_links(text: &str) -> Vec<Link> {
         let line = without_code_spans(raw);
         // Reference definitions: `[label]: target`.
         let t = line.trim_start();
-        if t.starts_with('[') && !t.starts_with("[^") {
-            if let Some(close) = t.find("]:") {
-                let target = t[close + 2..].split_whitespace().next().unwrap_or("");
-                let target = target.trim_start_matches('<').trim_end_matches('>');
-                if !target.is_empty() {
-                    links.push(Link {
-                        line: i + 1,
-                        target: target.to_string(),
-                    });
-                }
+        if t.starts_with('[')
+            && !t.starts_with("[^")
+            && let Some(close) = t.find("]:")
+        {
+            let target = t[close + 2..].split_whitespace().next().unwrap_or("");
+            let target = target.trim_start_matches('<').trim_end_matches('>');
+            if !target.is_empty() {
+                links.push(Link {
+                    line: i + 1,
+                    target: target.to_string(),
+                });
             }
         }
         // Inline links and images: `](target)`.
         let mut from = 0;
         while let Some(at) = line[from..].find("](") {
             let start = from + at + 2;
-            if let Some(target) = target_of(&line[start..]) {
-                if !target.is_empty() {
-                    links.push(Link {
-                        line: i + 1,
-                        target,
-                    });
-                }
+            if let Some(target) = target_of(&line[start..])
+                && !target.is_empty()
+            {
+                links.push(Link {
+                    line: i + 1,
+                    target,
+                });
             }
             from = start;
         }
