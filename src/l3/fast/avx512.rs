@@ -28,7 +28,8 @@
 
 use std::arch::x86_64::*;
 
-use super::{CONTRAST_MARGIN, LUMINANCE_MARGIN, NO_CLASS, packed, packed_lane, packed_stride};
+use super::kernels::{packed, packed_lane, packed_stride};
+use super::{CONTRAST_MARGIN, LUMINANCE_MARGIN, NO_CLASS};
 
 /// Lanes per classification step.
 pub(super) const WIDE: usize = 16;
@@ -929,8 +930,8 @@ pub(super) unsafe fn srgb8_row(
 
 #[cfg(test)]
 mod tests {
+    use super::super::SrgbLut;
     use super::*;
-    use crate::colour::SrgbLut;
 
     #[test]
     fn the_polynomial_reproduces_every_entry_of_the_srgb_table() {
@@ -977,7 +978,7 @@ mod tests {
         let classes: Vec<usize> = (0..n).map(|_| rng.random_range(0..n_classes)).collect();
         let mut offsets: Vec<u32> = classes.iter().map(|&c| (c * kstride) as u32).collect();
         let mut planes = [vec![0f32; n], vec![0f32; n], vec![0f32; n]];
-        if !super::super::avx512_available() {
+        if !super::super::dispatch::avx512_available() {
             return;
         }
         let run = |offsets: &[u32], planes: &mut [Vec<f32>; 3]| {
@@ -1019,7 +1020,7 @@ mod tests {
 
     #[test]
     fn the_vector_encoder_equals_the_table() {
-        if !super::super::avx512_available() {
+        if !super::super::dispatch::avx512_available() {
             return;
         }
         let lut = SrgbLut::new();

@@ -66,7 +66,7 @@ impl FramePool {
                 b.resize(len, 0);
                 b
             }
-            None => crate::buffers::zeroed::<u8>(len),
+            None => super::zeroed::<u8>(len),
         };
         Frame { buf, pool: self }
     }
