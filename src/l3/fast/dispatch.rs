@@ -1,4 +1,6 @@
-//! Bands, tiles and the instruction set: the render split over threads.
+//! The render split over threads: bands of rows (one rayon task each), tiles
+//! of columns, and the instruction set each tile runs with (portable, AVX2 +
+//! FMA, or AVX-512), with the patch size as a constant where it is a common one.
 
 use std::sync::atomic::{AtomicBool, Ordering};
 
@@ -8,7 +10,7 @@ use super::kernels::KernelSet;
 use super::scratch::{SCRATCH, Scratch};
 use super::sink::Sink;
 use super::source::Source;
-use super::tile::Tile;
+use super::tile::{Tile, TileCtx};
 use super::{FastRenderer, L3Error, Region, RenderStats};
 
 /// Rows per rayon task.
@@ -17,7 +19,7 @@ const BAND_ROWS: usize = 32;
 const TILE_COLS: usize = 512;
 
 impl FastRenderer {
-    /// Render the region band by band into `out` (`chans` values per pixel); bands not yet
+    /// Render the region band by band into `out` (3 values per pixel); bands not yet
     /// started when `cancel` is set are skipped and the render fails.
     pub(super) fn run<T: Send, S: Sink<T>>(
         &self,
@@ -30,12 +32,20 @@ impl FastRenderer {
     ) -> Result<RenderStats, L3Error> {
         let chans = 3;
         let row_len = reg.width * chans;
-        let simd = if self.uses_avx512() {
+        let isa = if self.uses_avx512() {
             Isa::Avx512
         } else if self.uses_simd() {
             Isa::Avx2
         } else {
             Isa::Portable
+        };
+        let ctx = TileCtx {
+            fr: self,
+            src,
+            set,
+            sink,
+            reg,
+            row_len,
         };
         let stats = out
             .par_chunks_mut(BAND_ROWS * row_len)
@@ -46,20 +56,8 @@ impl FastRenderer {
                 }
                 // the thread's buffers, reused across bands and renders
                 SCRATCH.with(|cell| match cell.try_borrow_mut() {
-                    Ok(mut scratch) => {
-                        self.band(src, reg, set, b, band, row_len, simd, sink, &mut scratch)
-                    }
-                    Err(_) => self.band(
-                        src,
-                        reg,
-                        set,
-                        b,
-                        band,
-                        row_len,
-                        simd,
-                        sink,
-                        &mut Scratch::default(),
-                    ),
+                    Ok(mut scratch) => ctx.band(isa, b, band, &mut scratch),
+                    Err(_) => ctx.band(isa, b, band, &mut Scratch::default()),
                 })
             })
             .reduce(RenderStats::default, |mut a, b| {
@@ -71,165 +69,97 @@ impl FastRenderer {
         }
         Ok(stats)
     }
+}
 
-    /// Render band `b` (rows `reg.y + b·BAND_ROWS …`) tile by tile.
-    #[allow(clippy::too_many_arguments)]
-    fn band<T, S: Sink<T>>(
-        &self,
-        src: &Source<'_>,
-        reg: Region,
-        set: &KernelSet,
-        b: usize,
-        band: &mut [T],
-        row_len: usize,
-        simd: Isa,
-        sink: &S,
-        scratch: &mut Scratch,
-    ) -> RenderStats {
-        let chans = 3;
-        {
-            {
-                let y0 = reg.y + b * BAND_ROWS;
-                let rows = band.len() / row_len;
-                let mut st = RenderStats::default();
-                let mut x = 0;
-                while x < reg.width {
-                    let tw = TILE_COLS.min(reg.width - x);
-                    let tile = Tile {
-                        r0: y0,
-                        c0: reg.x + x,
-                        rows,
-                        cols: tw,
-                    };
-                    st += match simd {
-                        // SAFETY: `Avx512` is only chosen when the CPU reports AVX-512 F, VL,
-                        // BW, VBMI, AVX2 and FMA; `Avx2` when it reports AVX2 and FMA.
-                        Isa::Avx512 => unsafe {
-                            self.tile_avx512(
-                                src,
-                                set,
-                                tile,
-                                scratch,
-                                band,
-                                row_len,
-                                chans * x,
-                                sink,
-                            )
-                        },
-                        Isa::Avx2 => unsafe {
-                            self.tile_avx2(src, set, tile, scratch, band, row_len, chans * x, sink)
-                        },
-                        Isa::Portable => self.tile::<false, false, 0, T, S>(
-                            src,
-                            set,
-                            tile,
-                            scratch,
-                            band,
-                            row_len,
-                            chans * x,
-                            sink,
-                        ),
-                    };
-                    x += tw;
-                }
-                st
-            }
+impl<S> TileCtx<'_, S> {
+    /// Render band `b` (rows `reg.y + b·BAND_ROWS …`) tile by tile with `isa`.
+    fn band<T>(&self, isa: Isa, b: usize, band: &mut [T], scratch: &mut Scratch) -> RenderStats
+    where
+        S: Sink<T>,
+    {
+        let reg = self.reg;
+        let y0 = reg.y + b * BAND_ROWS;
+        let rows = band.len() / self.row_len;
+        let mut st = RenderStats::default();
+        let mut x = 0;
+        while x < reg.width {
+            let tw = TILE_COLS.min(reg.width - x);
+            let tile = Tile {
+                r0: y0,
+                c0: reg.x + x,
+                rows,
+                cols: tw,
+            };
+            st += match isa {
+                // SAFETY: `Avx512` is only chosen when the CPU reports AVX-512 F, VL,
+                // BW, VBMI, AVX2 and FMA; `Avx2` when it reports AVX2 and FMA.
+                Isa::Avx512 => unsafe { self.tile_avx512(tile, scratch, band) },
+                Isa::Avx2 => unsafe { self.tile_avx2(tile, scratch, band) },
+                Isa::Portable => self.tile::<false, false, 0, T>(tile, scratch, band),
+            };
+            x += tw;
         }
+        st
     }
 
     #[cfg(target_arch = "x86_64")]
     #[target_feature(enable = "avx2,fma")]
-    #[allow(clippy::too_many_arguments)]
-    unsafe fn tile_avx2<T, S: Sink<T>>(
-        &self,
-        src: &Source<'_>,
-        set: &KernelSet,
-        tile: Tile,
-        scratch: &mut Scratch,
-        band: &mut [T],
-        row_len: usize,
-        offset: usize,
-        sink: &S,
-    ) -> RenderStats {
-        self.tile_sized::<false, T, S>(src, set, tile, scratch, band, row_len, offset, sink)
+    unsafe fn tile_avx2<T>(&self, tile: Tile, sc: &mut Scratch, band: &mut [T]) -> RenderStats
+    where
+        S: Sink<T>,
+    {
+        self.tile_sized::<false, T>(tile, sc, band)
     }
 
     /// [`tile`](Self::tile) with the patch size as a constant where it is a common
     /// one, so loops unroll (inlined into the `target_feature` functions).
     #[inline(always)]
-    #[allow(clippy::too_many_arguments)]
-    fn tile_sized<const WIDE: bool, T, S: Sink<T>>(
+    fn tile_sized<const WIDE: bool, T>(
         &self,
-        src: &Source<'_>,
-        set: &KernelSet,
         tile: Tile,
         sc: &mut Scratch,
         band: &mut [T],
-        row_len: usize,
-        offset: usize,
-        sink: &S,
-    ) -> RenderStats {
-        match self.geo.size {
-            3 => self.tile::<true, WIDE, 3, T, S>(src, set, tile, sc, band, row_len, offset, sink),
-            5 => self.tile::<true, WIDE, 5, T, S>(src, set, tile, sc, band, row_len, offset, sink),
-            7 => self.tile::<true, WIDE, 7, T, S>(src, set, tile, sc, band, row_len, offset, sink),
-            _ => self.tile::<true, false, 0, T, S>(src, set, tile, sc, band, row_len, offset, sink),
+    ) -> RenderStats
+    where
+        S: Sink<T>,
+    {
+        match self.fr.geo.size {
+            3 => self.tile::<true, WIDE, 3, T>(tile, sc, band),
+            5 => self.tile::<true, WIDE, 5, T>(tile, sc, band),
+            7 => self.tile::<true, WIDE, 7, T>(tile, sc, band),
+            _ => self.tile::<true, false, 0, T>(tile, sc, band),
         }
     }
 
     #[cfg(target_arch = "x86_64")]
     #[target_feature(enable = "avx2,fma,avx512f,avx512vl,avx512bw,avx512dq,avx512vbmi")]
-    #[allow(clippy::too_many_arguments)]
-    unsafe fn tile_avx512<T, S: Sink<T>>(
-        &self,
-        src: &Source<'_>,
-        set: &KernelSet,
-        tile: Tile,
-        scratch: &mut Scratch,
-        band: &mut [T],
-        row_len: usize,
-        offset: usize,
-        sink: &S,
-    ) -> RenderStats {
-        self.tile_sized::<true, T, S>(src, set, tile, scratch, band, row_len, offset, sink)
+    unsafe fn tile_avx512<T>(&self, tile: Tile, sc: &mut Scratch, band: &mut [T]) -> RenderStats
+    where
+        S: Sink<T>,
+    {
+        self.tile_sized::<true, T>(tile, sc, band)
     }
 
     #[cfg(not(target_arch = "x86_64"))]
-    #[allow(clippy::too_many_arguments)]
-    unsafe fn tile_avx512<T, S: Sink<T>>(
-        &self,
-        src: &Source<'_>,
-        set: &KernelSet,
-        tile: Tile,
-        scratch: &mut Scratch,
-        band: &mut [T],
-        row_len: usize,
-        offset: usize,
-        sink: &S,
-    ) -> RenderStats {
-        self.tile::<false, false, 0, T, S>(src, set, tile, scratch, band, row_len, offset, sink)
+    unsafe fn tile_avx512<T>(&self, tile: Tile, sc: &mut Scratch, band: &mut [T]) -> RenderStats
+    where
+        S: Sink<T>,
+    {
+        self.tile::<false, false, 0, T>(tile, sc, band)
     }
 
     #[cfg(not(target_arch = "x86_64"))]
-    #[allow(clippy::too_many_arguments)]
-    unsafe fn tile_avx2<T, S: Sink<T>>(
-        &self,
-        src: &Source<'_>,
-        set: &KernelSet,
-        tile: Tile,
-        scratch: &mut Scratch,
-        band: &mut [T],
-        row_len: usize,
-        offset: usize,
-        sink: &S,
-    ) -> RenderStats {
-        self.tile::<false, false, 0, T, S>(src, set, tile, scratch, band, row_len, offset, sink)
+    unsafe fn tile_avx2<T>(&self, tile: Tile, sc: &mut Scratch, band: &mut [T]) -> RenderStats
+    where
+        S: Sink<T>,
+    {
+        self.tile::<false, false, 0, T>(tile, sc, band)
     }
 }
 
 /// The instruction set a render runs with.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub(super) enum Isa {
+enum Isa {
     Portable,
     Avx2,
     Avx512,

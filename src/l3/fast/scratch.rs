@@ -8,10 +8,20 @@ thread_local! {
 /// Reusable per-thread buffers.
 #[derive(Default)]
 pub(super) struct Scratch {
+    /// The tile and its halo, clamped volts.
     pub(super) buf: Vec<f32>,
+    /// Per buffer row, the horizontal sums over the patch's even and odd
+    /// column offsets, and the horizontal maxima.
     pub(super) he: Vec<f32>,
     pub(super) ho: Vec<f32>,
     pub(super) hmax: Vec<f32>,
+    /// One output row's work.
+    pub(super) row: RowScratch,
+}
+
+/// The buffers of one output row of a tile.
+#[derive(Default)]
+pub(super) struct RowScratch {
     pub(super) sums: [Vec<f32>; 4],
     pub(super) means: [Vec<f32>; 4],
     pub(super) lum: Vec<f32>,
@@ -26,13 +36,13 @@ pub(super) struct Scratch {
     pub(super) chroma: ChromaScratch,
 }
 
-/// A tile row's chroma classes ([`FastRenderer::chroma_row`]).
+/// A tile row's chroma classes ([`FastRenderer::chroma_row`](super::FastRenderer::chroma_row)).
 #[derive(Default)]
 pub(super) struct ChromaScratch {
     /// Channel means per channel (clamped at 0), from the phase means.
     pub(super) means: Vec<Vec<f32>>,
     pub(super) score: Vec<f32>,
-    /// Each pixel's score scale (see [`CHROMA_MARGIN`]).
+    /// Each pixel's score scale (see [`CHROMA_MARGIN`](super::CHROMA_MARGIN)).
     pub(super) scale: Vec<f32>,
     /// The lowest and second-lowest class score, and the lowest's class.
     pub(super) s1: Vec<f32>,

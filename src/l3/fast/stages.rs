@@ -8,6 +8,16 @@ use super::{
     FastRenderer, LANES, LUMINANCE_MARGIN, PatchGeometry, RenderStats, dot, sat_case_index,
 };
 
+/// One output row of a tile: the padded input rows under it (from the patch's
+/// top row), their stride, its width and where it starts in the frame.
+pub(super) struct TileRow<'a> {
+    pub(super) rows: &'a [f32],
+    pub(super) stride: usize,
+    pub(super) tw: usize,
+    pub(super) r: usize,
+    pub(super) c0: usize,
+}
+
 impl FastRenderer {
     /// The reference classification of a gathered patch: (class, sat case, fell back, texture).
     #[inline]
@@ -128,27 +138,24 @@ impl FastRenderer {
         }
     }
 
-    /// The reference path for the pixel at column `i` of a tile row (frame pixel
-    /// `rc`): gather its patch from `rows`, classify it with the reference code
-    /// and apply the table's layout of `set`.
-    #[allow(clippy::too_many_arguments)]
+    /// The reference path for the pixel at column `i` of a tile row: gather its
+    /// patch from the row's buffer into `patch`, classify it with the reference
+    /// code and apply the table's layout of `set` (`feat`: its features).
     #[inline(always)]
     pub(super) fn exact_pixel(
         &self,
         set: &KernelSet,
-        rows: &[f32],
-        stride: usize,
+        row: &TileRow<'_>,
         i: usize,
-        (r, c): (usize, usize),
-        patch: &mut [f32],
-        feat: &mut [f32],
+        (patch, feat): (&mut [f32], &mut [f32]),
         st: &mut RenderStats,
     ) -> [f32; 4] {
         let s = self.geo.size;
         let nf = self.n_features;
+        let (r, c) = (row.r, row.c0 + i);
         for dy in 0..s {
-            let o = dy * stride + i;
-            patch[dy * s..dy * s + s].copy_from_slice(&rows[o..o + s]);
+            let o = dy * row.stride + i;
+            patch[dy * s..dy * s + s].copy_from_slice(&row.rows[o..o + s]);
         }
         let (class, sat, fell_back, texture) = self.classify_exact(patch, r, c);
         st.exact_path += 1;

@@ -4,34 +4,38 @@
 use super::avx512;
 use super::kernels::KernelSet;
 use super::phases::PhaseMap;
-use super::tile::WideRow;
+use super::scratch::RowScratch;
+use super::stages::TileRow;
 use super::{CHROMA_MARGIN, CHROMA_MARGIN_FLOOR, FastRenderer, NO_CLASS, RenderStats};
 
 impl FastRenderer {
-    /// The AVX-512 kernel step over a tile row whose classes (`class`, [`NO_CLASS`]
+    /// The AVX-512 kernel step over a tile row whose classes (`rs.class`, [`NO_CLASS`]
     /// for the reference path) the portable code found: each pixel's kernels by its
-    /// class's offset in the paired layout, then the reference path's pixels. Only
-    /// from `WIDE` tiles. Returns `false`, having written nothing to the output, when
-    /// the kernel step refuses its arguments. Out of line (one call per row), so
-    /// the tiles the AVX-512 classification takes do not carry it.
+    /// class's offset in the paired layout, then the reference path's pixels, into
+    /// `rs.lin`. Only from `WIDE` tiles. Returns `false`, having written nothing to the
+    /// output, when the kernel step refuses its arguments. Out of line (one call per
+    /// row), so the tiles the AVX-512 classification takes do not carry it.
     ///
     /// # Safety
     /// The CPU must have AVX-512 F, VL and DQ, AVX2 and FMA.
-    #[cfg(target_arch = "x86_64")]
     #[inline(never)]
     #[target_feature(enable = "avx512f,avx512vl,avx512dq,avx2,fma")]
-    #[allow(clippy::too_many_arguments)]
     pub(super) unsafe fn apply_classes_wide<const P: usize>(
         &self,
         set: &KernelSet,
-        work: &WideRow<'_>,
-        class: &[u32],
-        offsets: &mut [u32],
-        lin: &mut [Vec<f32>; 3],
-        (patch, feat): (&mut Vec<f32>, &mut Vec<f32>),
+        row: &TileRow<'_>,
+        rs: &mut RowScratch,
         st: &mut RenderStats,
     ) -> bool {
-        let tw = work.tw;
+        let tw = row.tw;
+        let RowScratch {
+            class,
+            offsets,
+            lin,
+            patch,
+            feat,
+            ..
+        } = rs;
         let mut texture = 0u64;
         let padded = offsets.len().min(tw.div_ceil(16) * 16);
         for (i, o) in offsets[..padded].iter_mut().enumerate() {
@@ -49,8 +53,8 @@ impl FastRenderer {
         // offsets of what it touches
         let applied = unsafe {
             avx512::apply_kernels::<P>(
-                work.rows,
-                work.stride,
+                row.rows,
+                row.stride,
                 offsets,
                 tw,
                 set.paired(),
@@ -63,8 +67,7 @@ impl FastRenderer {
         }
         st.texture += texture;
         for i in (0..tw).filter(|&i| class[i] == NO_CLASS) {
-            let rc = (work.r, work.c0 + i);
-            let v = self.exact_pixel(set, work.rows, work.stride, i, rc, patch, feat, st);
+            let v = self.exact_pixel(set, row, i, (&mut patch[..], &mut feat[..]), st);
             l0[i] = v[0];
             l1[i] = v[1];
             l2[i] = v[2];
@@ -74,7 +77,6 @@ impl FastRenderer {
 
     /// The AVX-512 classification's view of the table for one tile: phase
     /// weights, level edges and the contrast thresholds per position and level.
-    #[cfg(target_arch = "x86_64")]
     pub(super) fn class_params(
         &self,
         thresholds: &[f32],
