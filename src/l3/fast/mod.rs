@@ -333,8 +333,8 @@ impl FastRenderer {
     ) -> Result<(Frame, f64, RenderStats), L3Error> {
         let reg = check_region(region, width, height)?;
         let mut out = Frame::take(reg.width * reg.height * 3);
-        let (wy, stats) =
-            self.srgb8_into(mosaic, width, height, region, white, &mut out, cancel)?;
+        let (src, clamped) = self.source(mosaic, width, height)?;
+        let (wy, stats) = self.srgb8_into(&src, clamped, reg, white, &mut out, cancel)?;
         Ok((out, wy, stats))
     }
 
@@ -350,28 +350,6 @@ impl FastRenderer {
         white: WhiteLevel,
         out: &mut [u8],
     ) -> Result<(f64, RenderStats), L3Error> {
-        self.srgb8_into(
-            mosaic,
-            width,
-            height,
-            region,
-            white,
-            out,
-            &AtomicBool::new(false),
-        )
-    }
-
-    #[allow(clippy::too_many_arguments)]
-    fn srgb8_into(
-        &self,
-        mosaic: Mosaic<'_>,
-        width: usize,
-        height: usize,
-        region: Option<Region>,
-        white: WhiteLevel,
-        out: &mut [u8],
-        cancel: &AtomicBool,
-    ) -> Result<(f64, RenderStats), L3Error> {
         let reg = check_region(region, width, height)?;
         let need = reg.width * reg.height * 3;
         if out.len() != need {
@@ -383,7 +361,22 @@ impl FastRenderer {
             });
         }
         let (src, clamped) = self.source(mosaic, width, height)?;
-        let wy = self.white_of(&src, white);
+        self.srgb8_into(&src, clamped, reg, white, out, &AtomicBool::new(false))
+    }
+
+    /// Render the checked region `reg` of the checked frame `src` (`clamped`
+    /// values outside the swing) into `out`, which holds 3 bytes per pixel of
+    /// the region. Returns the white Y used.
+    fn srgb8_into(
+        &self,
+        src: &Source<'_>,
+        clamped: u64,
+        reg: Region,
+        white: WhiteLevel,
+        out: &mut [u8],
+        cancel: &AtomicBool,
+    ) -> Result<(f64, RenderStats), L3Error> {
+        let wy = self.white_of(src, white);
         let k = 1.0 / wy;
         let m = XYZ_TO_LINEAR_SRGB.map(|r| r.map(|v| v * k));
         let set = KernelSet::new(
@@ -391,7 +384,7 @@ impl FastRenderer {
             self.geo.size,
             self.sat_cases.len(),
         );
-        let mut stats = self.run(&src, reg, &set, out, Srgb8Sink::shared(), cancel)?;
+        let mut stats = self.run(src, reg, &set, out, Srgb8Sink::shared(), cancel)?;
         stats.clamped = clamped;
         Ok((wy, stats))
     }

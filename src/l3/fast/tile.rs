@@ -115,10 +115,10 @@ impl<S> TileCtx<'_, S> {
             }
             let out_row = &mut band[y * self.row_len + run.offset..(y + 1) * self.row_len];
             #[cfg(target_arch = "x86_64")]
-            if let Some(prm) = &wide {
-                if self.wide_row::<P, T>(&run, prm, sc, y, out_row, &mut st) {
-                    continue;
-                }
+            if let Some(prm) = &wide
+                && self.wide_row::<P, T>(&run, prm, sc, y, out_row, &mut st)
+            {
+                continue;
             }
             // 4. phase sums → per-phase means and luminance, then contrast and class
             if fr.phases.is_some() {
@@ -237,37 +237,34 @@ impl<S> TileCtx<'_, S> {
         let sat = run.any_sat.then_some(&rs.sat[..]);
         let (he, ho) = (&he[y * tw8..], &ho[y * tw8..]);
         let (rpar, cpar) = (r % 2, run.tile.c0 % 2);
+        let classify = avx512::ClassifyRow {
+            he,
+            ho,
+            tw_pad: tw8,
+            buf: rows,
+            stride,
+            sat,
+            tw,
+            rpar,
+            cpar,
+        };
         // SAFETY: `wide` is only set in `tile_avx512`, which runs when the CPU has
         // the features; the kernels check the lengths of what they touch.
-        let counts = unsafe {
-            avx512::classify_row::<P>(
-                he,
-                ho,
-                tw8,
-                rows,
-                stride,
-                sat,
-                tw,
-                rpar,
-                cpar,
-                prm,
-                &mut rs.class,
-                &mut rs.offsets,
-            )
-        };
+        let counts =
+            unsafe { avx512::classify_row::<P>(&classify, prm, &mut rs.class, &mut rs.offsets) };
         let [l0, l1, l2] = &mut rs.lin;
+        let kernels = avx512::KernelRow {
+            buf: rows,
+            stride,
+            offsets: &rs.offsets,
+            tw,
+            kernels: self.set.paired(),
+            kstride: self.set.pstride,
+        };
         let applied = counts.is_some()
             // SAFETY: as above
             && unsafe {
-                avx512::apply_kernels::<P>(
-                    rows,
-                    stride,
-                    &rs.offsets,
-                    tw,
-                    self.set.paired(),
-                    self.set.pstride,
-                    [&mut l0[..], &mut l1[..], &mut l2[..]],
-                )
+                avx512::apply_kernels::<P>(&kernels, [&mut l0[..], &mut l1[..], &mut l2[..]])
             };
         let (true, Some(counts)) = (applied, counts) else {
             return false;

@@ -49,18 +49,18 @@ impl FastRenderer {
             };
         }
         let [l0, l1, l2] = lin;
+        let kernels = avx512::KernelRow {
+            buf: row.rows,
+            stride: row.stride,
+            offsets,
+            tw,
+            kernels: set.paired(),
+            kstride: set.pstride,
+        };
         // SAFETY: the caller has the features; the kernel step checks the lengths and
         // offsets of what it touches
         let applied = unsafe {
-            avx512::apply_kernels::<P>(
-                row.rows,
-                row.stride,
-                offsets,
-                tw,
-                set.paired(),
-                set.pstride,
-                [&mut l0[..], &mut l1[..], &mut l2[..]],
-            )
+            avx512::apply_kernels::<P>(&kernels, [&mut l0[..], &mut l1[..], &mut l2[..]])
         };
         if !applied {
             return false;

@@ -7,22 +7,41 @@ use std::arch::x86_64::*;
 use super::super::kernels::{packed, packed_lane, packed_stride};
 use super::WIDE;
 
+/// One output row as the kernel step reads it.
+#[derive(Clone, Copy)]
+pub(in super::super) struct KernelRow<'a> {
+    /// The tile buffer from the patch's top row, rows `stride` apart.
+    pub buf: &'a [f32],
+    pub stride: usize,
+    /// Per pixel, where its kernels start in `kernels` (from
+    /// [`classify_row`](super::classify_row)), padded to whole 16-lane chunks.
+    pub offsets: &'a [u32],
+    /// Pixels in the row.
+    pub tw: usize,
+    /// The kernels, `kstride` values per class.
+    pub kernels: &'a [f32],
+    pub kstride: usize,
+}
+
 /// Whether the kernel step's arguments are long enough for `n` pixels (a
 /// multiple of 8) of patch size `p` with classes of at least `min_kstride`
 /// values, and every offset leaves a whole class inside `kernels`.
 #[target_feature(enable = "avx512f,avx512vl,avx512dq,avx2,fma")]
-#[allow(clippy::too_many_arguments)]
 unsafe fn kernel_args_ok(
+    row: &KernelRow<'_>,
     min_kstride: usize,
     p: usize,
-    buf: &[f32],
-    stride: usize,
-    offsets: &[u32],
     n: usize,
-    kernels: &[f32],
-    kstride: usize,
     planes: &[&mut [f32]; 3],
 ) -> bool {
+    let KernelRow {
+        buf,
+        stride,
+        offsets,
+        kernels,
+        kstride,
+        ..
+    } = *row;
     let padded = n.div_ceil(WIDE) * WIDE;
     if p == 0
         || kstride < min_kstride
@@ -48,12 +67,7 @@ unsafe fn kernel_args_ok(
 /// The CPU must have AVX-512 F, VL and DQ, AVX2 and FMA.
 #[target_feature(enable = "avx512f,avx512vl,avx512dq,avx2,fma")]
 pub(in super::super) unsafe fn apply_kernels<const P: usize>(
-    buf: &[f32],
-    stride: usize,
-    offsets: &[u32],
-    tw: usize,
-    kernels: &[f32],
-    kstride: usize,
+    row: &KernelRow<'_>,
     planes: [&mut [f32]; 3],
 ) -> bool {
     let step = if packed(P) {
@@ -61,12 +75,13 @@ pub(in super::super) unsafe fn apply_kernels<const P: usize>(
     } else {
         apply_row::<P>
     };
-    step(buf, stride, offsets, tw, kernels, kstride, planes)
+    step(row, planes)
 }
 
 /// Apply the kernels of pixels `0..tw` (rounded up to 8) of one output row into
 /// the three output planes, with each pixel's kernels at `offsets` (from
-/// [`classify_row`](super::classify_row)) in `kernels`, which holds per class, `kstride` values apart:
+/// [`classify_row`](super::classify_row)) in `kernels`, which holds per class,
+/// `kstride` values apart:
 /// `P` rows of 16 weights (X row | Y row, 8 lanes each), the biases (X at lane
 /// 0, Y at lane 8), `P` rows of 8 Z weights, and the Z bias at lane 0. Pixels
 /// for the reference path get class 0's values (the caller overwrites them).
@@ -76,30 +91,17 @@ pub(in super::super) unsafe fn apply_kernels<const P: usize>(
 /// # Safety
 /// The CPU must have AVX-512 F, VL and DQ, AVX2 and FMA.
 #[target_feature(enable = "avx512f,avx512vl,avx512dq,avx2,fma")]
-#[allow(clippy::too_many_arguments)]
-unsafe fn apply_row<const P: usize>(
-    buf: &[f32],
-    stride: usize,
-    offsets: &[u32],
-    tw: usize,
-    kernels: &[f32],
-    kstride: usize,
-    planes: [&mut [f32]; 3],
-) -> bool {
+unsafe fn apply_row<const P: usize>(row: &KernelRow<'_>, planes: [&mut [f32]; 3]) -> bool {
+    let KernelRow {
+        buf,
+        stride,
+        offsets,
+        tw,
+        kernels,
+        ..
+    } = *row;
     let n = tw.div_ceil(8) * 8;
-    if P == 0
-        || !kernel_args_ok(
-            24 * (P + 1),
-            P,
-            buf,
-            stride,
-            offsets,
-            n,
-            kernels,
-            kstride,
-            &planes,
-        )
-    {
+    if P == 0 || !kernel_args_ok(row, 24 * (P + 1), P, n, &planes) {
         return false;
     }
     let (bp, kp) = (buf.as_ptr(), kernels.as_ptr());
@@ -210,30 +212,17 @@ unsafe fn index(lanes: &[i32; WIDE]) -> __m512i {
 /// # Safety
 /// The CPU must have AVX-512 F, VL and DQ, AVX2 and FMA.
 #[target_feature(enable = "avx512f,avx512vl,avx512dq,avx2,fma")]
-#[allow(clippy::too_many_arguments)]
-unsafe fn apply_row_packed<const P: usize>(
-    buf: &[f32],
-    stride: usize,
-    offsets: &[u32],
-    tw: usize,
-    kernels: &[f32],
-    kstride: usize,
-    planes: [&mut [f32]; 3],
-) -> bool {
+unsafe fn apply_row_packed<const P: usize>(row: &KernelRow<'_>, planes: [&mut [f32]; 3]) -> bool {
+    let KernelRow {
+        buf,
+        stride,
+        offsets,
+        tw,
+        kernels,
+        ..
+    } = *row;
     let n = tw.div_ceil(8) * 8;
-    if !packed(P)
-        || !kernel_args_ok(
-            packed_stride(P),
-            P,
-            buf,
-            stride,
-            offsets,
-            n,
-            kernels,
-            kstride,
-            &planes,
-        )
-    {
+    if !packed(P) || !kernel_args_ok(row, packed_stride(P), P, n, &planes) {
         return false;
     }
     let idx = const { PackedIdx::new(P) };
@@ -374,9 +363,15 @@ mod tests {
         let run = |offsets: &[u32], planes: &mut [Vec<f32>; 3]| {
             let [x, y, z] = planes;
             // SAFETY: the CPU has the features (checked above)
-            unsafe {
-                apply_row_packed::<P>(&buf, stride, offsets, tw, &kernels, kstride, [x, y, z])
-            }
+            let row = KernelRow {
+                buf: &buf,
+                stride,
+                offsets,
+                tw,
+                kernels: &kernels,
+                kstride,
+            };
+            unsafe { apply_row_packed::<P>(&row, [x, y, z]) }
         };
         assert!(run(&offsets, &mut planes));
         for (i, &c) in classes.iter().enumerate().take(tw) {

@@ -76,38 +76,56 @@ fn tail_mask(i: usize, n: usize) -> u16 {
     }
 }
 
+/// One output row as the classification reads it.
+#[derive(Clone, Copy)]
+pub(in super::super) struct ClassifyRow<'a> {
+    /// `P` rows of `tw_pad` horizontal sums over the even / odd column offsets
+    /// of the patch, starting at the patch's top row.
+    pub he: &'a [f32],
+    pub ho: &'a [f32],
+    pub tw_pad: usize,
+    /// The tile buffer from the patch's top row, rows `stride` apart.
+    pub buf: &'a [f32],
+    pub stride: usize,
+    /// Per pixel, whether its patch holds a saturated value (when the tile can).
+    pub sat: Option<&'a [bool]>,
+    /// Pixels in the row.
+    pub tw: usize,
+    /// The parities of the row and of the tile's first column.
+    pub rpar: usize,
+    pub cpar: usize,
+}
+
 /// Classify pixels `0..tw` of one output row.
 ///
-/// - `he`, `ho`: `P` rows of `tw_pad` horizontal sums over the even / odd column
-///   offsets of the patch, starting at the patch's top row;
-/// - `buf`: the tile buffer from the patch's top row, rows `stride` apart;
-/// - `sat`: per pixel, whether its patch holds a saturated value (when the tile can);
 /// - `class`: receives [`NO_CLASS`] where the reference code must decide, 0
-///   elsewhere; `rpar`/`cpar` are the parities of the row and
-///   of the tile's first column;
+///   elsewhere;
 /// - `offsets`: receives where each pixel's kernels start in the AVX-512 layout
-///   (class 0's for the reference path's pixels), for the kernel step ([`apply_kernels`](super::apply_kernels)).
+///   (class 0's for the reference path's pixels), for the kernel step
+///   ([`apply_kernels`](super::apply_kernels)).
 ///
 /// Returns `None` (and writes nothing) if a slice is too short.
 ///
 /// # Safety
 /// The CPU must have AVX-512 F, VL, BW and DQ, AVX2 and FMA.
 #[target_feature(enable = "avx512f,avx512vl,avx512bw,avx512dq,avx2,fma")]
-#[allow(clippy::too_many_arguments)]
 pub(in super::super) unsafe fn classify_row<const P: usize>(
-    he: &[f32],
-    ho: &[f32],
-    tw_pad: usize,
-    buf: &[f32],
-    stride: usize,
-    sat: Option<&[bool]>,
-    tw: usize,
-    rpar: usize,
-    cpar: usize,
+    row: &ClassifyRow<'_>,
     prm: &ClassParams,
     class: &mut [u32],
     offsets: &mut [u32],
 ) -> Option<RowCounts> {
+    let ClassifyRow {
+        he,
+        ho,
+        tw_pad,
+        buf,
+        stride,
+        sat,
+        tw,
+        rpar,
+        cpar,
+    } = *row;
     let rad = P / 2;
     if P == 0
         || tw > tw_pad

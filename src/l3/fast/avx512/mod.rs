@@ -28,8 +28,8 @@ mod apply;
 mod classify;
 mod srgb;
 
-pub(super) use apply::apply_kernels;
-pub(super) use classify::{ChromaParams, ClassParams, MAX_LEVELS, classify_row};
+pub(super) use apply::{KernelRow, apply_kernels};
+pub(super) use classify::{ChromaParams, ClassParams, ClassifyRow, MAX_LEVELS, classify_row};
 pub(super) use srgb::{SrgbPoly, srgb8_row};
 
 /// Lanes per classification step.
