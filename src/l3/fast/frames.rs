@@ -5,7 +5,7 @@
 //! first write, and on virtual machines that hand freed memory back to the host
 //! (free page reporting) the host faults it in again as well. Two measures:
 //!
-//! - new buffers come from [`crate::buffers::zeroed`], which asks for
+//! - new buffers come from [`buffers::zeroed`](super::zeroed), which asks for
 //!   transparent huge pages on large buffers (measured on one thread: 14 ms to allocate and fill
 //!   36 MB in 4 KiB pages, 2 ms in 2 MiB pages);
 //! - 8-bit frames come as a [`Frame`], which gives its buffer back to a small
@@ -66,7 +66,7 @@ impl FramePool {
                 b.resize(len, 0);
                 b
             }
-            None => crate::buffers::zeroed::<u8>(len),
+            None => super::zeroed::<u8>(len),
         };
         Frame { buf, pool: self }
     }

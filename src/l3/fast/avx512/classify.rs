@@ -1,0 +1,393 @@
+//! The classification of 16 pixels at a time.
+
+#![allow(unsafe_op_in_unsafe_fn)]
+
+use std::arch::x86_64::*;
+
+use super::super::{CONTRAST_MARGIN, LUMINANCE_MARGIN, NO_CLASS};
+use super::WIDE;
+
+/// The most luminance levels the register tables hold.
+pub(in super::super) const MAX_LEVELS: usize = 32;
+
+/// What classification needs beyond the row data, prepared once per tile.
+pub(in super::super) struct ClassParams {
+    /// Per CFA position (2 · row parity + column parity), the phase map:
+    /// `mean[p] = Σ_q to_mean[p][q] · sum[q]` and `luminance = Σ_q lum[q] ·
+    /// sum[q]`, phases relative to the centre (0: the centre's, 1: same row
+    /// other column, 2: other row same column, 3: both other).
+    pub to_mean: [[[f32; 4]; 4]; 4],
+    pub lum: [[f32; 4]; 4],
+    /// Every position has the same diagonal map (each phase its own
+    /// channel): the means are one multiply per phase.
+    pub diagonal: bool,
+    /// Per phase, its values in the patch.
+    pub count: [f32; 4],
+    pub inv_area: f32,
+    /// Level edges padded with +∞ to 32: `edges[l]` is the top of level l.
+    pub edges: [f32; MAX_LEVELS],
+    /// The bottom of each level: −∞, then the edges.
+    pub below: [f32; MAX_LEVELS],
+    /// Per CFA position, the contrast threshold of each level (sat case 0), padded with +∞.
+    pub thresholds: [[f32; MAX_LEVELS]; 4],
+    pub n_levels: u32,
+    /// Chroma classes per level (1: none); with more, [`Self::chroma`].
+    pub n_chroma: u32,
+    pub chroma: Option<ChromaParams>,
+    pub n_sat: u32,
+    pub use_contrast: bool,
+    /// Classes in the kernel layout, and values per class.
+    pub n_classes: u32,
+    pub kstride: u32,
+}
+
+/// What the chroma classification needs ([`FastRenderer::chroma_row`](super::super::FastRenderer::chroma_row)'s
+/// scores, 16 pixels at a time).
+pub(in super::super) struct ChromaParams {
+    /// Per chroma class, its score weight per channel (0 past the sensor's channels).
+    pub coef: Vec<[f32; 4]>,
+    /// Per channel, the largest score weight in magnitude (the margin's scale).
+    pub scale: [f32; 4],
+    /// Per CFA position, the channel of each phase.
+    pub phase_channels: [[u8; 4]; 4],
+    pub n_channels: usize,
+    /// Per CFA position and band (level × classes + class), the contrast
+    /// threshold of saturation case 0.
+    pub thresholds: Vec<f32>,
+    /// [`CHROMA_MARGIN`](super::super::CHROMA_MARGIN) and
+    /// [`CHROMA_MARGIN_FLOOR`](super::super::CHROMA_MARGIN_FLOOR).
+    pub margin: f32,
+    pub floor: f32,
+}
+
+/// Per-row counts from [`classify_row`].
+#[derive(Default, Clone, Copy)]
+pub(in super::super) struct RowCounts {
+    pub texture: u64,
+    pub exact: u64,
+}
+
+#[inline(always)]
+fn tail_mask(i: usize, n: usize) -> u16 {
+    if i + WIDE <= n {
+        u16::MAX
+    } else {
+        ((1u32 << (n - i)) - 1) as u16
+    }
+}
+
+/// One output row as the classification reads it.
+#[derive(Clone, Copy)]
+pub(in super::super) struct ClassifyRow<'a> {
+    /// `P` rows of `tw_pad` horizontal sums over the even / odd column offsets
+    /// of the patch, starting at the patch's top row.
+    pub he: &'a [f32],
+    pub ho: &'a [f32],
+    pub tw_pad: usize,
+    /// The tile buffer from the patch's top row, rows `stride` apart.
+    pub buf: &'a [f32],
+    pub stride: usize,
+    /// Per pixel, whether its patch holds a saturated value (when the tile can).
+    pub sat: Option<&'a [bool]>,
+    /// Pixels in the row.
+    pub tw: usize,
+    /// The parities of the row and of the tile's first column.
+    pub rpar: usize,
+    pub cpar: usize,
+}
+
+/// Classify pixels `0..tw` of one output row.
+///
+/// - `class`: receives [`NO_CLASS`] where the reference code must decide, 0
+///   elsewhere;
+/// - `offsets`: receives where each pixel's kernels start in the AVX-512 layout
+///   (class 0's for the reference path's pixels), for the kernel step
+///   ([`apply_kernels`](super::apply_kernels)).
+///
+/// Returns `None` (and writes nothing) if a slice is too short.
+///
+/// # Safety
+/// The CPU must have AVX-512 F, VL, BW and DQ, AVX2 and FMA.
+#[target_feature(enable = "avx512f,avx512vl,avx512bw,avx512dq,avx2,fma")]
+pub(in super::super) unsafe fn classify_row<const P: usize>(
+    row: &ClassifyRow<'_>,
+    prm: &ClassParams,
+    class: &mut [u32],
+    offsets: &mut [u32],
+) -> Option<RowCounts> {
+    let ClassifyRow {
+        he,
+        ho,
+        tw_pad,
+        buf,
+        stride,
+        sat,
+        tw,
+        rpar,
+        cpar,
+    } = *row;
+    let rad = P / 2;
+    if P == 0
+        || tw > tw_pad
+        || !tw_pad.is_multiple_of(WIDE)
+        || he.len() < P * tw_pad
+        || ho.len() < P * tw_pad
+        || buf.len() < (P - 1) * stride + tw_pad + P - 1
+        || class.len() < tw_pad
+        || offsets.len() < tw_pad
+        || prm.n_classes == 0
+        || sat.is_some_and(|s| s.len() < tw_pad)
+        || prm.n_levels as usize > MAX_LEVELS
+        || prm.n_chroma == 0
+        || prm.chroma.as_ref().is_some_and(|c| {
+            c.coef.len() != prm.n_chroma as usize
+                || c.n_channels > 4
+                || c.phase_channels
+                    .iter()
+                    .flatten()
+                    .any(|&ch| ch as usize >= c.n_channels)
+                || c.thresholds.len() < 4 * (prm.n_levels * prm.n_chroma) as usize
+        })
+        || (prm.n_chroma > 1) != prm.chroma.is_some()
+    {
+        return None;
+    }
+    let (hp, op, bp) = (he.as_ptr(), ho.as_ptr(), buf.as_ptr());
+    // positions of even and odd lanes in this row
+    let pos_even = rpar * 2 + cpar;
+    let pos_odd = rpar * 2 + (1 - cpar);
+    let odd_lanes: __mmask16 = 0xAAAA;
+    // the phase maps of this row's even and odd lanes, one register per coefficient
+    let lanes = |even: f32, odd: f32| {
+        _mm512_mask_blend_ps(odd_lanes, _mm512_set1_ps(even), _mm512_set1_ps(odd))
+    };
+    let (mut to_mean, mut lw) = ([[_mm512_setzero_ps(); 4]; 4], [_mm512_setzero_ps(); 4]);
+    for p in 0..4 {
+        lw[p] = lanes(prm.lum[pos_even][p], prm.lum[pos_odd][p]);
+        for q in 0..4 {
+            to_mean[p][q] = lanes(prm.to_mean[pos_even][p][q], prm.to_mean[pos_odd][p][q]);
+        }
+    }
+    let inv_area = _mm512_set1_ps(prm.inv_area);
+    let e0 = _mm512_loadu_ps(prm.edges.as_ptr());
+    let e1 = _mm512_loadu_ps(prm.edges.as_ptr().add(16));
+    let b0 = _mm512_loadu_ps(prm.below.as_ptr());
+    let b1 = _mm512_loadu_ps(prm.below.as_ptr().add(16));
+    let t_even = &prm.thresholds[pos_even];
+    let t_odd = &prm.thresholds[pos_odd];
+    let (te0, te1) = (
+        _mm512_loadu_ps(t_even.as_ptr()),
+        _mm512_loadu_ps(t_even.as_ptr().add(16)),
+    );
+    let (to0, to1) = (
+        _mm512_loadu_ps(t_odd.as_ptr()),
+        _mm512_loadu_ps(t_odd.as_ptr().add(16)),
+    );
+    let pos = _mm512_mask_blend_epi32(
+        odd_lanes,
+        _mm512_set1_epi32(pos_even as i32),
+        _mm512_set1_epi32(pos_odd as i32),
+    );
+    // kernel offsets: class = ((pos · levels + level) · n_sat + 0) · 2 + texture
+    let per_level = 2 * prm.n_sat * prm.kstride;
+    let n_bands = prm.n_levels * prm.n_chroma;
+    let base = _mm512_mullo_epi32(pos, _mm512_set1_epi32((n_bands * per_level) as i32));
+    // chroma: per channel, the phase that holds it for the even and the odd lanes
+    // (the last such phase, as the AVX2 path writes them)
+    let mut chroma_phase = [(0usize, 0usize); 4];
+    if let Some(c) = &prm.chroma {
+        for (p, (&ce, &co)) in c.phase_channels[pos_even]
+            .iter()
+            .zip(&c.phase_channels[pos_odd])
+            .enumerate()
+        {
+            chroma_phase[ce as usize].0 = p;
+            chroma_phase[co as usize].1 = p;
+        }
+    }
+    let per_level = _mm512_set1_epi32(per_level as i32);
+    let per_texture = _mm512_set1_epi32(prm.kstride as i32);
+    let last = _mm512_set1_epi32(((prm.n_classes - 1) * prm.kstride) as i32);
+    let mut count = [_mm512_setzero_ps(); 4];
+    for (c, &n) in count.iter_mut().zip(&prm.count) {
+        *c = _mm512_set1_ps(n);
+    }
+    let two = _mm512_set1_ps(2.0);
+    let one = _mm512_set1_ps(1.0);
+    let margin = _mm512_set1_ps(LUMINANCE_MARGIN);
+    let cmargin = _mm512_set1_ps(CONTRAST_MARGIN);
+    let abs_mask = _mm512_set1_epi32(0x7fff_ffff);
+    let no_class = _mm512_set1_epi32(NO_CLASS as i32);
+    // per-lane counts of texture and reference-path pixels, summed after the row
+    let (mut n_texture, mut n_exact) = (_mm512_setzero_si512(), _mm512_setzero_si512());
+    let one_i = _mm512_set1_epi32(1);
+    let mut i = 0;
+    while i < tw {
+        // phase sums over the patch rows
+        let mut s = [_mm512_setzero_ps(); 4];
+        for dy in 0..P {
+            let e = _mm512_loadu_ps(hp.add(dy * tw_pad + i));
+            let o = _mm512_loadu_ps(op.add(dy * tw_pad + i));
+            let base = 2 * ((dy + rad) % 2);
+            s[base] = _mm512_add_ps(s[base], e);
+            s[base + 1] = _mm512_add_ps(s[base + 1], o);
+        }
+        let mut m = [_mm512_setzero_ps(); 4];
+        if prm.diagonal {
+            for k in 0..4 {
+                m[k] = _mm512_mul_ps(s[k], to_mean[k][k]);
+            }
+        } else {
+            // the same order of operations as the AVX2 path's
+            // `t[0]·q[0] + t[1]·q[1] + t[2]·q[2] + t[3]·q[3]`
+            for k in 0..4 {
+                let t = &to_mean[k];
+                let a = _mm512_add_ps(_mm512_mul_ps(t[0], s[0]), _mm512_mul_ps(t[1], s[1]));
+                let a = _mm512_add_ps(a, _mm512_mul_ps(t[2], s[2]));
+                m[k] = _mm512_add_ps(a, _mm512_mul_ps(t[3], s[3]));
+            }
+        }
+        let lum = _mm512_add_ps(
+            _mm512_add_ps(_mm512_mul_ps(s[0], lw[0]), _mm512_mul_ps(s[1], lw[1])),
+            _mm512_add_ps(_mm512_mul_ps(s[2], lw[2]), _mm512_mul_ps(s[3], lw[3])),
+        );
+        // level: the number of edges below the luminance (a binary search over the
+        // edges held in two registers), exact only if no edge lies within the margin
+        let mut lo = _mm512_setzero_si512();
+        for step in [16, 8, 4, 2, 1] {
+            let probe = _mm512_add_epi32(lo, _mm512_set1_epi32(step - 1));
+            let e = _mm512_permutex2var_ps(e0, probe, e1);
+            let k = _mm512_cmp_ps_mask::<_CMP_LT_OQ>(e, lum);
+            lo = _mm512_mask_add_epi32(lo, k, lo, _mm512_set1_epi32(step));
+        }
+        let top = _mm512_permutex2var_ps(e0, lo, e1);
+        let bottom = _mm512_permutex2var_ps(b0, lo, b1);
+        // (NaN luminance fails both tests)
+        let mut exact = _mm512_cmp_ps_mask::<_CMP_NGT_UQ>(_mm512_sub_ps(lum, bottom), margin)
+            | _mm512_cmp_ps_mask::<_CMP_NGE_UQ>(_mm512_sub_ps(top, lum), margin);
+        // the band: the level, or the level's chroma class
+        let band = match &prm.chroma {
+            None => lo,
+            Some(c) => {
+                let (best, sure) = chroma_classes(c, &m, &chroma_phase, odd_lanes);
+                exact |= !sure;
+                let band = _mm512_add_epi32(
+                    _mm512_mullo_epi32(lo, _mm512_set1_epi32(prm.n_chroma as i32)),
+                    best,
+                );
+                _mm512_min_epu32(band, _mm512_set1_epi32(n_bands as i32 - 1))
+            }
+        };
+        let mut texture: __mmask16 = 0;
+        if prm.use_contrast {
+            // Σ |v − m_k| = Σ (2 · max(v, m_k) − v − m_k) = 2 · Σ max(v, m_k) − Σ_k (S_k + n_k · m_k):
+            // two operations per value instead of three. One accumulator per patch row,
+            // so the adds do not wait on each other.
+            let mut acc = [_mm512_setzero_ps(); P];
+            for (dy, a) in acc.iter_mut().enumerate() {
+                let pr = (dy + rad) % 2;
+                let row = bp.add(dy * stride + i);
+                for dx in 0..P {
+                    let v = _mm512_loadu_ps(row.add(dx));
+                    // (the max takes an adder; the accumulation an FMA unit, which is
+                    // otherwise idle here)
+                    *a = _mm512_fmadd_ps(_mm512_max_ps(v, m[2 * pr + (dx + rad) % 2]), one, *a);
+                }
+            }
+            let mut sum = acc[0];
+            for a in &acc[1..] {
+                sum = _mm512_add_ps(sum, *a);
+            }
+            let mut rest = _mm512_add_ps(_mm512_add_ps(s[0], s[1]), _mm512_add_ps(s[2], s[3]));
+            for k in 0..4 {
+                rest = _mm512_fmadd_ps(count[k], m[k], rest);
+            }
+            let cv = _mm512_mul_ps(_mm512_fmsub_ps(sum, two, rest), inv_area);
+            let t = match &prm.chroma {
+                None => _mm512_mask_blend_ps(
+                    odd_lanes,
+                    _mm512_permutex2var_ps(te0, lo, te1),
+                    _mm512_permutex2var_ps(to0, lo, to1),
+                ),
+                // (checked: 4 × bands thresholds; the band is clamped below the bands)
+                Some(c) => _mm512_i32gather_ps::<4>(
+                    _mm512_add_epi32(
+                        _mm512_mullo_epi32(pos, _mm512_set1_epi32(n_bands as i32)),
+                        band,
+                    ),
+                    c.thresholds.as_ptr(),
+                ),
+            };
+            let gap = _mm512_castsi512_ps(_mm512_and_si512(
+                _mm512_castps_si512(_mm512_sub_ps(cv, t)),
+                abs_mask,
+            ));
+            // near the threshold (or NaN): the reference decides
+            exact |= _mm512_cmp_ps_mask::<_CMP_NGE_UQ>(gap, cmargin);
+            texture = _mm512_cmp_ps_mask::<_CMP_GT_OQ>(cv, t);
+        }
+        if let Some(sat) = sat {
+            let b = _mm_loadu_si128(sat.as_ptr().add(i).cast());
+            exact |= _mm_cmpneq_epi8_mask(b, _mm_setzero_si128());
+        }
+        let valid = tail_mask(i, tw);
+        exact &= valid;
+        // where each pixel's kernels start (class 0's for the reference path's pixels)
+        let off = _mm512_add_epi32(base, _mm512_mullo_epi32(band, per_level));
+        let off = _mm512_mask_add_epi32(off, texture, off, per_texture);
+        let off = _mm512_maskz_mov_epi32(!exact, _mm512_min_epu32(off, last));
+        _mm512_storeu_si512(offsets.as_mut_ptr().add(i).cast(), off);
+        let c = _mm512_maskz_mov_epi32(exact, no_class);
+        _mm512_storeu_si512(class.as_mut_ptr().add(i).cast(), c);
+        n_texture = _mm512_mask_add_epi32(n_texture, texture & !exact & valid, n_texture, one_i);
+        n_exact = _mm512_mask_add_epi32(n_exact, exact, n_exact, one_i);
+        i += WIDE;
+    }
+    Some(RowCounts {
+        texture: u64::from(_mm512_reduce_add_epi32(n_texture) as u32),
+        exact: u64::from(_mm512_reduce_add_epi32(n_exact) as u32),
+    })
+}
+
+/// The chroma class of 16 pixels from their phase means `m`, as
+/// [`PatchGeometry::chroma_of`](super::super::PatchGeometry::chroma_of) scores it
+/// (separate multiplies and adds, in its order), and the lanes whose class is
+/// sure: the runner-up's score is at least the margin above the best's.
+/// `phase[ch]` is the phase holding channel `ch` for the even and odd lanes.
+#[inline(always)]
+unsafe fn chroma_classes(
+    c: &ChromaParams,
+    m: &[__m512; 4],
+    phase: &[(usize, usize); 4],
+    odd_lanes: __mmask16,
+) -> (__m512i, __mmask16) {
+    let zero = _mm512_setzero_ps();
+    let mut cm = [zero; 4];
+    for (ch, v) in cm.iter_mut().enumerate().take(c.n_channels) {
+        let (pe, po) = phase[ch];
+        *v = _mm512_max_ps(_mm512_mask_blend_ps(odd_lanes, m[pe & 3], m[po & 3]), zero);
+    }
+    let mut scale = zero;
+    for (v, &w) in cm.iter().zip(&c.scale).take(c.n_channels) {
+        scale = _mm512_add_ps(scale, _mm512_mul_ps(_mm512_set1_ps(w), *v));
+    }
+    let inf = _mm512_set1_ps(f32::INFINITY);
+    let (mut s1, mut s2, mut best) = (inf, inf, _mm512_setzero_si512());
+    for (k, a) in c.coef.iter().enumerate() {
+        let mut score = zero;
+        for (v, &w) in cm.iter().zip(a).take(c.n_channels) {
+            score = _mm512_add_ps(score, _mm512_mul_ps(_mm512_set1_ps(w), *v));
+        }
+        let lower = _mm512_cmp_ps_mask::<_CMP_LT_OQ>(score, s1);
+        s2 = _mm512_min_ps(s2, _mm512_max_ps(s1, score));
+        best = _mm512_mask_mov_epi32(best, lower, _mm512_set1_epi32(k as i32));
+        s1 = _mm512_min_ps(s1, score);
+    }
+    let margin = _mm512_add_ps(
+        _mm512_mul_ps(_mm512_set1_ps(c.margin), scale),
+        _mm512_set1_ps(c.floor),
+    );
+    // (NaN fails)
+    let sure = _mm512_cmp_ps_mask::<_CMP_GE_OQ>(_mm512_sub_ps(s2, s1), margin);
+    (best, sure)
+}
