@@ -3,22 +3,27 @@
 //! one run on the same frames (issue 5). Pure core: no HTTP, no SQL.
 
 mod plot;
+mod records;
 mod render;
 mod report;
+mod run;
 mod skips;
+mod stats;
 mod sweep;
 
 pub use plot::{PlotError, pareto_front, svg_plot};
+pub use records::{
+    BenchReport, ColourResult, ConfigKind, ConfigResult, FrameInfo, ParetoFront, SensorSweep,
+    Throughput,
+};
 pub use render::{
     BENCH_WHITE_Y, RENDERER, render_baseline_srgb8, render_baseline_xyz, render_srgb8, render_xyz,
 };
 pub use report::{BENCH_SCHEMA, markdown_table, sensor_sweep_markdown};
+pub use run::{run_bench, run_sensor_sweep};
 pub use skips::{EncoderResult, SkipInputs, SkipResult, run_skips};
-pub use sweep::{
-    BaselineChoice, BenchOptions, BenchReport, ColourResult, ConfigKind, ConfigResult, FrameInfo,
-    L3Config, ParetoFront, SensorSweep, TableChoice, Throughput, default_sweep, median, run_bench,
-    run_sensor_sweep,
-};
+pub use stats::median;
+pub use sweep::{BaselineChoice, BenchOptions, L3Config, TableChoice, default_sweep};
 
 /// Errors of a benchmark run.
 #[derive(Debug, thiserror::Error)]

@@ -2,9 +2,10 @@
 //! series per acquisition illuminant, the Pareto front of each drawn as a
 //! step line, and the plain copy as a vertical reference line.
 
+use plotters::coord::types::RangedCoordf64;
 use plotters::prelude::*;
 
-use super::sweep::BenchReport;
+use super::records::BenchReport;
 
 /// Errors of drawing the plot.
 #[derive(Debug, thiserror::Error)]
@@ -65,26 +66,15 @@ fn draw_err<E: std::fmt::Display>(e: E) -> PlotError {
     PlotError::Draw(e.to_string())
 }
 
+/// One plotted configuration: its name, ms/Mpix (all threads) and mean ΔE per acquisition.
+type PlotRow<'a> = (&'a str, f64, Vec<Option<f64>>);
+
+/// The chart the plot draws on: log ms/Mpix against mean ΔE.
+type Chart<'a, 'b> = ChartContext<'a, SVGBackend<'b>, Cartesian2d<LogCoord<f64>, RangedCoordf64>>;
+
 /// Draw the report as an SVG document.
 pub fn svg_plot(report: &BenchReport) -> Result<String, PlotError> {
-    // (name, x, [mean ΔE per acquisition])
-    let rows: Vec<(&str, f64, Vec<Option<f64>>)> = report
-        .configs
-        .iter()
-        .filter(|r| !r.colour.is_empty())
-        .map(|r| {
-            (
-                r.name.as_str(),
-                r.all_threads.ms_per_mpix,
-                report
-                    .acquisitions
-                    .iter()
-                    .map(|a| r.colour_under(a).map(|c| c.mean))
-                    .collect(),
-            )
-        })
-        .filter(|(_, x, _)| x.is_finite() && *x > 0.0)
-        .collect();
+    let rows = plot_rows(report);
     if rows.is_empty() {
         return Err(PlotError::Empty(
             "no configuration has colour results".into(),
@@ -129,85 +119,11 @@ pub fn svg_plot(report: &BenchReport) -> Result<String, PlotError> {
             .light_line_style(WHITE.mix(0.0))
             .draw()
             .map_err(draw_err)?;
-
         if let Some(cx) = copy_x {
-            let grey = RGBColor(120, 120, 120);
-            chart
-                .draw_series(LineSeries::new(
-                    vec![(cx, 0.0), (cx, y_hi)],
-                    grey.stroke_width(1),
-                ))
-                .map_err(draw_err)?
-                .label(format!(
-                    "plain copy of the frame: {cx:.2} ms/Mpix (no colour)"
-                ))
-                .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], grey));
-            chart
-                .draw_series(std::iter::once(Text::new(
-                    "plain copy".to_string(),
-                    (cx * 1.05, y_hi * 0.97),
-                    ("sans-serif", 16).into_font().color(&grey),
-                )))
-                .map_err(draw_err)?;
+            copy_line(&mut chart, cx, y_hi)?;
         }
-
         for (k, ill) in report.acquisitions.iter().enumerate() {
-            let colour = SERIES[k % SERIES.len()];
-            let pts: Vec<(usize, (f64, f64))> = rows
-                .iter()
-                .enumerate()
-                .filter_map(|(i, r)| r.2.get(k).copied().flatten().map(|y| (i, (r.1, y))))
-                .filter(|(_, p)| p.1.is_finite())
-                .collect();
-            let xy: Vec<(f64, f64)> = pts.iter().map(|p| p.1).collect();
-            let front: Vec<(f64, f64)> = pareto_front(&xy).into_iter().map(|i| xy[i]).collect();
-            // the front: a step line and a ring round each of its points
-            chart
-                .draw_series(LineSeries::new(
-                    step_line(&front),
-                    colour.stroke_width(FRONT_WIDTH),
-                ))
-                .map_err(draw_err)?
-                .label(format!("Pareto front under {ill}"))
-                .legend(move |(x, y)| {
-                    PathElement::new(
-                        vec![(x, y), (x + 20, y)],
-                        colour.stroke_width(FRONT_WIDTH - 1),
-                    )
-                });
-            chart
-                .draw_series(
-                    front
-                        .iter()
-                        .map(|&p| Circle::new(p, 9, colour.stroke_width(2))),
-                )
-                .map_err(draw_err)?;
-            // the points
-            let label = format!("mean ΔE under {ill}");
-            if k % 2 == 0 {
-                chart
-                    .draw_series(xy.iter().map(|&p| Circle::new(p, 5, colour.filled())))
-                    .map_err(draw_err)?
-                    .label(label)
-                    .legend(move |(x, y)| Circle::new((x + 10, y), 5, colour.filled()));
-            } else {
-                chart
-                    .draw_series(
-                        xy.iter()
-                            .map(|&p| TriangleMarker::new(p, 6, colour.filled())),
-                    )
-                    .map_err(draw_err)?
-                    .label(label)
-                    .legend(move |(x, y)| TriangleMarker::new((x + 10, y), 6, colour.filled()));
-            }
-            if k == 0 {
-                chart
-                    .draw_series(pts.iter().map(|&(i, p)| {
-                        EmptyElement::at(p)
-                            + Text::new(rows[i].0.to_string(), (8, -16), ("sans-serif", 15))
-                    }))
-                    .map_err(draw_err)?;
-            }
+            acquisition_series(&mut chart, &rows, k, ill)?;
         }
         chart
             .configure_series_labels()
@@ -220,6 +136,116 @@ pub fn svg_plot(report: &BenchReport) -> Result<String, PlotError> {
         root.present().map_err(draw_err)?;
     }
     Ok(tag_front_lines(&svg))
+}
+
+/// The configurations with colour results and a positive finite time.
+fn plot_rows(report: &BenchReport) -> Vec<PlotRow<'_>> {
+    report
+        .configs
+        .iter()
+        .filter(|r| !r.colour.is_empty())
+        .map(|r| {
+            (
+                r.name.as_str(),
+                r.all_threads.ms_per_mpix,
+                report
+                    .acquisitions
+                    .iter()
+                    .map(|a| r.colour_under(a).map(|c| c.mean))
+                    .collect(),
+            )
+        })
+        .filter(|(_, x, _)| x.is_finite() && *x > 0.0)
+        .collect()
+}
+
+/// The plain copy as a vertical reference line at `cx`, labelled.
+fn copy_line(chart: &mut Chart<'_, '_>, cx: f64, y_hi: f64) -> Result<(), PlotError> {
+    let grey = RGBColor(120, 120, 120);
+    chart
+        .draw_series(LineSeries::new(
+            vec![(cx, 0.0), (cx, y_hi)],
+            grey.stroke_width(1),
+        ))
+        .map_err(draw_err)?
+        .label(format!(
+            "plain copy of the frame: {cx:.2} ms/Mpix (no colour)"
+        ))
+        .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], grey));
+    chart
+        .draw_series(std::iter::once(Text::new(
+            "plain copy".to_string(),
+            (cx * 1.05, y_hi * 0.97),
+            ("sans-serif", 16).into_font().color(&grey),
+        )))
+        .map_err(draw_err)?;
+    Ok(())
+}
+
+/// The series of acquisition `k` (`ill`): its Pareto front as a step line with a ring round
+/// each of its points, the points, and (for the first) the configuration names.
+fn acquisition_series(
+    chart: &mut Chart<'_, '_>,
+    rows: &[PlotRow<'_>],
+    k: usize,
+    ill: &str,
+) -> Result<(), PlotError> {
+    let colour = SERIES[k % SERIES.len()];
+    let pts: Vec<(usize, (f64, f64))> = rows
+        .iter()
+        .enumerate()
+        .filter_map(|(i, r)| r.2.get(k).copied().flatten().map(|y| (i, (r.1, y))))
+        .filter(|(_, p)| p.1.is_finite())
+        .collect();
+    let xy: Vec<(f64, f64)> = pts.iter().map(|p| p.1).collect();
+    let front: Vec<(f64, f64)> = pareto_front(&xy).into_iter().map(|i| xy[i]).collect();
+    // the front: a step line and a ring round each of its points
+    chart
+        .draw_series(LineSeries::new(
+            step_line(&front),
+            colour.stroke_width(FRONT_WIDTH),
+        ))
+        .map_err(draw_err)?
+        .label(format!("Pareto front under {ill}"))
+        .legend(move |(x, y)| {
+            PathElement::new(
+                vec![(x, y), (x + 20, y)],
+                colour.stroke_width(FRONT_WIDTH - 1),
+            )
+        });
+    chart
+        .draw_series(
+            front
+                .iter()
+                .map(|&p| Circle::new(p, 9, colour.stroke_width(2))),
+        )
+        .map_err(draw_err)?;
+    // the points
+    let label = format!("mean ΔE under {ill}");
+    if k.is_multiple_of(2) {
+        chart
+            .draw_series(xy.iter().map(|&p| Circle::new(p, 5, colour.filled())))
+            .map_err(draw_err)?
+            .label(label)
+            .legend(move |(x, y)| Circle::new((x + 10, y), 5, colour.filled()));
+    } else {
+        chart
+            .draw_series(
+                xy.iter()
+                    .map(|&p| TriangleMarker::new(p, 6, colour.filled())),
+            )
+            .map_err(draw_err)?
+            .label(label)
+            .legend(move |(x, y)| TriangleMarker::new((x + 10, y), 6, colour.filled()));
+    }
+    if k == 0 {
+        chart
+            .draw_series(pts.iter().map(|&(i, p)| {
+                EmptyElement::at(p) + Text::new(rows[i].0.to_string(), (8, -16), ("sans-serif", 15))
+            }))
+            .map_err(draw_err)?;
+    }
+    Ok(())
 }
 
 /// Mark the front's polylines (the only ones with [`FRONT_WIDTH`]) with

@@ -1,7 +1,7 @@
 //! The benchmark's markdown table (the JSON is the serde form of
 //! [`BenchReport`], schema [`BENCH_SCHEMA`]).
 
-use super::sweep::{BenchReport, ConfigKind, SensorSweep};
+use super::records::{BenchReport, ConfigKind, ConfigResult, SensorSweep};
 
 /// Identifier of the benchmark JSON's schema.
 pub const BENCH_SCHEMA: &str = "l3.bench.v1";
@@ -15,6 +15,32 @@ fn opt(v: Option<f64>, digits: usize) -> String {
 
 /// A markdown rendering: one row per configuration, the baseline and the copy.
 pub fn markdown_table(r: &BenchReport) -> String {
+    let mut s = table_header(r);
+    for c in &r.configs {
+        s.push_str(&config_row(r, c));
+    }
+    s.push_str(&format!(
+        "\nTraining: {} scenes of {}×{} px per table (the I-tables row trains one table per illuminant; its time is the sum). \
+         Throughput frame: {}. Whole run: {:.0} s.\n",
+        r.options.scenes, r.options.scene_size, r.options.scene_size, r.frame.source, r.total_seconds
+    ));
+    s.push_str(&skips_markdown(r));
+    if !r.encoders.is_empty() {
+        s.push_str(
+            "\nEncoders of the rendered frame:\n\n| encoding | ms | bytes |\n|---|---:|---:|\n",
+        );
+        for e in &r.encoders {
+            s.push_str(&format!(
+                "| {} | {:.1} | {} |\n",
+                e.encoding, e.median_ms, e.bytes
+            ));
+        }
+    }
+    s
+}
+
+/// The caption, the header row and the rule of the main table.
+fn table_header(r: &BenchReport) -> String {
     let mut s = format!(
         "Run time against colour error: `{}` renderer, sensor `{}`, {}×{} frame ({:.1} Mpix) → sRGB 8-bit, \
          median of {} runs, 1 thread and {} threads; ΔE2000 of patch means on the {} chart.\n\n",
@@ -43,46 +69,50 @@ pub fn markdown_table(r: &BenchReport) -> String {
         s.push_str("---:|---:|---:|---:|");
     }
     s.push_str("---:|---:|---:|---:|---|\n");
-    for c in &r.configs {
-        let name = match c.kind {
-            ConfigKind::L3 => c.name.clone(),
-            _ => format!("*{}*", c.name),
-        };
-        s.push_str(&format!("| {name} | {} |", opt(c.training_seconds, 1)));
-        for a in &r.acquisitions {
-            let col = c.colour_under(a);
-            s.push_str(&format!(
-                " {} | {} | {} | {} |",
-                opt(col.map(|x| x.mean), 2),
-                opt(col.map(|x| x.p90), 2),
-                opt(col.map(|x| x.pixel_mean), 2),
-                opt(col.and_then(|x| x.low_light_pixel_mean), 2)
-            ));
-        }
-        let fronts: Vec<&str> = r
-            .pareto
-            .iter()
-            .filter(|f| f.names.contains(&c.name))
-            .map(|f| f.illuminant.as_str())
-            .collect();
+    s
+}
+
+/// One configuration's row of the main table.
+fn config_row(r: &BenchReport, c: &ConfigResult) -> String {
+    let name = match c.kind {
+        ConfigKind::L3 => c.name.clone(),
+        _ => format!("*{}*", c.name),
+    };
+    let mut s = format!("| {name} | {} |", opt(c.training_seconds, 1));
+    for a in &r.acquisitions {
+        let col = c.colour_under(a);
         s.push_str(&format!(
-            " {} | {} | {} | {} | {} |\n",
-            opt(Some(c.one_thread.mpix_per_s), 1),
-            opt(Some(c.all_threads.mpix_per_s), 1),
-            opt(Some(c.all_threads.ms_per_mpix), 2),
-            opt(Some(c.time_vs_copy), 1),
-            if fronts.is_empty() {
-                "—".to_string()
-            } else {
-                fronts.join(", ")
-            }
+            " {} | {} | {} | {} |",
+            opt(col.map(|x| x.mean), 2),
+            opt(col.map(|x| x.p90), 2),
+            opt(col.map(|x| x.pixel_mean), 2),
+            opt(col.and_then(|x| x.low_light_pixel_mean), 2)
         ));
     }
+    let fronts: Vec<&str> = r
+        .pareto
+        .iter()
+        .filter(|f| f.names.contains(&c.name))
+        .map(|f| f.illuminant.as_str())
+        .collect();
     s.push_str(&format!(
-        "\nTraining: {} scenes of {}×{} px per table (the I-tables row trains one table per illuminant; its time is the sum). \
-         Throughput frame: {}. Whole run: {:.0} s.\n",
-        r.options.scenes, r.options.scene_size, r.options.scene_size, r.frame.source, r.total_seconds
+        " {} | {} | {} | {} | {} |\n",
+        opt(Some(c.one_thread.mpix_per_s), 1),
+        opt(Some(c.all_threads.mpix_per_s), 1),
+        opt(Some(c.all_threads.ms_per_mpix), 2),
+        opt(Some(c.time_vs_copy), 1),
+        if fronts.is_empty() {
+            "—".to_string()
+        } else {
+            fronts.join(", ")
+        }
     ));
+    s
+}
+
+/// The skips' table, when they were measured.
+fn skips_markdown(r: &BenchReport) -> String {
+    let mut s = String::new();
     if !r.skips.is_empty() {
         s.push_str(
             "\nSkips (DESIGN.md §9), default table, median ms with and without each skip, all threads:\n\n\
@@ -100,17 +130,6 @@ pub fn markdown_table(r: &BenchReport) -> String {
                 k.speedup,
                 k.max_diff,
                 k.diff_unit
-            ));
-        }
-    }
-    if !r.encoders.is_empty() {
-        s.push_str(
-            "\nEncoders of the rendered frame:\n\n| encoding | ms | bytes |\n|---|---:|---:|\n",
-        );
-        for e in &r.encoders {
-            s.push_str(&format!(
-                "| {} | {:.1} | {} |\n",
-                e.encoding, e.median_ms, e.bytes
             ));
         }
     }
@@ -180,7 +199,10 @@ pub fn sensor_sweep_markdown(sweep: &SensorSweep) -> String {
 
 #[cfg(test)]
 pub(super) mod test_support {
-    use crate::bench::sweep::*;
+    use crate::bench::{
+        BenchOptions, BenchReport, ColourResult, ConfigKind, ConfigResult, FrameInfo, L3Config,
+        ParetoFront, Throughput,
+    };
 
     fn tp(ms: f64, threads: usize) -> Throughput {
         Throughput {

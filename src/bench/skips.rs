@@ -1,18 +1,15 @@
 //! The skips of DESIGN.md §9, each timed with and without it on a frame where
 //! it applies and on one where it does not, with the output difference.
 
-use std::hint::black_box;
-use std::time::Instant;
-
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 
 use super::BenchError;
-use super::sweep::median;
+use super::stats::time_median;
 use crate::io::{PngCompression, encode_png_rgb8, encode_ppm_rgb8, encode_tiff_f32_rgb};
 use crate::l3::{
-    FastOptions, FastRenderer, IDENTITY, L3Table, Mat3, Mosaic, Region, WhiteLevel, fuse_kernels,
-    xyz_to_srgb8,
+    FastOptions, FastRenderer, Frame, IDENTITY, L3Table, Mat3, Mosaic, Region, WhiteLevel,
+    fuse_kernels, xyz_to_srgb8,
 };
 
 /// One skip measured on one frame.
@@ -49,20 +46,6 @@ pub struct SkipInputs<'a> {
     pub width: usize,
     pub height: usize,
     pub runs: usize,
-}
-
-fn time<T>(
-    runs: usize,
-    mut f: impl FnMut() -> Result<T, BenchError>,
-) -> Result<(f64, T), BenchError> {
-    let mut last = f()?;
-    let mut ms = Vec::with_capacity(runs);
-    for _ in 0..runs {
-        let t = Instant::now();
-        last = black_box(f()?);
-        ms.push(t.elapsed().as_secs_f64() * 1e3);
-    }
-    Ok((median(&ms), last))
 }
 
 fn max_abs(a: &[f32], b: &[f32]) -> f64 {
@@ -103,41 +86,66 @@ fn apply_matrix(xyz: &mut [f32], m: &Mat3) {
     });
 }
 
-#[allow(clippy::too_many_arguments)]
-fn result(
-    skip: &str,
-    case: &str,
+/// A skip and the case it is measured on.
+struct Case<'a> {
+    skip: &'a str,
+    case: &'a str,
+    /// Whether the skip can save work in this case.
     applies: bool,
-    with: f64,
-    without: f64,
-    diff: f64,
-    unit: &str,
-) -> SkipResult {
-    SkipResult {
-        skip: skip.into(),
-        case: case.into(),
-        applies,
-        with_ms: with,
-        without_ms: without,
-        speedup: without / with,
-        max_diff: diff,
-        diff_unit: unit.into(),
+}
+
+impl Case<'_> {
+    /// The result: median ms with and without the skip, and the largest output difference
+    /// in `unit`.
+    fn result(&self, with: f64, without: f64, diff: f64, unit: &str) -> SkipResult {
+        SkipResult {
+            skip: self.skip.into(),
+            case: self.case.into(),
+            applies: self.applies,
+            with_ms: with,
+            without_ms: without,
+            speedup: without / with,
+            max_diff: diff,
+            diff_unit: unit.into(),
+        }
     }
 }
+
+const XYZ_UNIT: &str = "|ΔXYZ|";
 
 /// Measure every skip. `progress(message)` reports each step.
 pub fn run_skips(
     inp: &SkipInputs<'_>,
     progress: &(dyn Fn(&str) + Sync),
 ) -> Result<(Vec<SkipResult>, Vec<EncoderResult>), BenchError> {
+    let mut out = Vec::new();
+    // 1. the illuminant correction fused into the kernels (or skipped for D65)
+    progress("skips: fused / identity correction");
+    fused_correction(inp, &mut out)?;
+    // 2. saturation tests only in tiles that reach the threshold
+    progress("skips: saturation tests only where a value clips");
+    let on = saturation_tests(inp, &mut out)?;
+    // 3. contrast only where a level's flat and texture kernels differ
+    progress("skips: contrast only where flat and texture kernels differ");
+    equal_contrast_kernels(inp, &mut out)?;
+    // 4. only the requested region
+    progress("skips: only the requested region");
+    region(inp, &on, &mut out)?;
+    // 5. only the requested output: 8-bit sRGB straight from fused kernels
+    progress("skips: sRGB without an XYZ image");
+    let rgb = srgb_output(inp, &on, &mut out)?;
+    // 6. encoders of the rendered frame
+    progress("encoders");
+    let enc = encoders(inp, &on, &rgb)?;
+    Ok((out, enc))
+}
+
+/// The correction fused into the kernels against a separate 3×3 pass, under tungsten and
+/// under D65.
+fn fused_correction(inp: &SkipInputs<'_>, out: &mut Vec<SkipResult>) -> Result<(), BenchError> {
     let (w, h, runs) = (inp.width, inp.height, inp.runs);
     let table = inp.table;
     let frame = Mosaic::Volts(inp.frame);
-    let mut out = Vec::new();
-    let xyz_unit = "|ΔXYZ|";
-
-    // 1. the illuminant correction fused into the kernels (or skipped for D65)
-    progress("skips: fused / identity correction");
     for (case, t, applies) in [
         ("Tungsten (T ≠ I): T fused into the kernels", inp.t, true),
         (
@@ -148,25 +156,30 @@ pub fn run_skips(
     ] {
         let fused = FastRenderer::new(table, &fuse_kernels(table, &t))?;
         let plain = FastRenderer::new(table, &table.kernels)?;
-        let (with, a) = time(runs, || Ok(fused.render_xyz(frame, w, h, None)?.0))?;
-        let (without, b) = time(runs, || {
+        let (with, a) = time_median(runs, || Ok(fused.render_xyz(frame, w, h, None)?.0))?;
+        let (without, b) = time_median(runs, || {
             let mut x = plain.render_xyz(frame, w, h, None)?.0;
             apply_matrix(&mut x, &t);
             Ok(x)
         })?;
-        out.push(result(
-            "correction fused into the kernels (vs a separate 3×3 pass)",
+        let c = Case {
+            skip: "correction fused into the kernels (vs a separate 3×3 pass)",
             case,
             applies,
-            with,
-            without,
-            max_abs(&a, &b),
-            xyz_unit,
-        ));
+        };
+        out.push(c.result(with, without, max_abs(&a, &b), XYZ_UNIT));
     }
+    Ok(())
+}
 
-    // 2. saturation tests only in tiles that reach the threshold
-    progress("skips: saturation tests only where a value clips");
+/// Saturation tests only in tiles that reach the threshold, on a dim and a bright frame;
+/// the renderer with every skip on (fused kernels), which the later steps use.
+fn saturation_tests(
+    inp: &SkipInputs<'_>,
+    out: &mut Vec<SkipResult>,
+) -> Result<FastRenderer, BenchError> {
+    let (w, h, runs) = (inp.width, inp.height, inp.runs);
+    let table = inp.table;
     let renderer = |opts: FastOptions, kernels: &[f32]| -> Result<FastRenderer, BenchError> {
         let mut r = FastRenderer::new(table, kernels)?;
         r.options = opts;
@@ -193,21 +206,27 @@ pub fn run_skips(
         ),
     ] {
         let m = Mosaic::Volts(v);
-        let (with, a) = time(runs, || Ok(on.render_xyz(m, w, h, None)?.0))?;
-        let (without, b) = time(runs, || Ok(sat_off.render_xyz(m, w, h, None)?.0))?;
-        out.push(result(
-            "saturation tests only in tiles that reach the threshold",
+        let (with, a) = time_median(runs, || Ok(on.render_xyz(m, w, h, None)?.0))?;
+        let (without, b) = time_median(runs, || Ok(sat_off.render_xyz(m, w, h, None)?.0))?;
+        let c = Case {
+            skip: "saturation tests only in tiles that reach the threshold",
             case,
             applies,
-            with,
-            without,
-            max_abs(&a, &b),
-            xyz_unit,
-        ));
+        };
+        out.push(c.result(with, without, max_abs(&a, &b), XYZ_UNIT));
     }
+    Ok(on)
+}
 
-    // 3. contrast only where a level's flat and texture kernels differ
-    progress("skips: contrast only where flat and texture kernels differ");
+/// Contrast only where a level's flat and texture kernels differ: the trained table, and
+/// the same table with its texture kernels set equal to the flat ones.
+fn equal_contrast_kernels(
+    inp: &SkipInputs<'_>,
+    out: &mut Vec<SkipResult>,
+) -> Result<(), BenchError> {
+    let (w, h, runs) = (inp.width, inp.height, inp.runs);
+    let table = inp.table;
+    let frame = Mosaic::Volts(inp.frame);
     let mut merged = table.clone();
     let nf3 = 3 * table.n_features();
     for g in 0..table.n_classes() / 2 {
@@ -231,21 +250,26 @@ pub fn run_skips(
         on.options = FastOptions::default();
         let mut off = FastRenderer::new(t, &k)?;
         off.options.skip_equal_contrast_kernels = false;
-        let (with, a) = time(runs, || Ok(on.render_xyz(frame, w, h, None)?.0))?;
-        let (without, b) = time(runs, || Ok(off.render_xyz(frame, w, h, None)?.0))?;
-        out.push(result(
-            "contrast only where flat and texture kernels differ",
+        let (with, a) = time_median(runs, || Ok(on.render_xyz(frame, w, h, None)?.0))?;
+        let (without, b) = time_median(runs, || Ok(off.render_xyz(frame, w, h, None)?.0))?;
+        let c = Case {
+            skip: "contrast only where flat and texture kernels differ",
             case,
             applies,
-            with,
-            without,
-            max_abs(&a, &b),
-            xyz_unit,
-        ));
+        };
+        out.push(c.result(with, without, max_abs(&a, &b), XYZ_UNIT));
     }
+    Ok(())
+}
 
-    // 4. only the requested region
-    progress("skips: only the requested region");
+/// Only the requested region against rendering all of the frame, then cropping.
+fn region(
+    inp: &SkipInputs<'_>,
+    on: &FastRenderer,
+    out: &mut Vec<SkipResult>,
+) -> Result<(), BenchError> {
+    let (w, h, runs) = (inp.width, inp.height, inp.runs);
+    let frame = Mosaic::Volts(inp.frame);
     let side = 1024.min(w).min(h);
     for (case, reg, applies) in [
         (
@@ -269,8 +293,8 @@ pub fn run_skips(
             false,
         ),
     ] {
-        let (with, a) = time(runs, || Ok(on.render_xyz(frame, w, h, Some(reg))?.0))?;
-        let (without, b) = time(runs, || {
+        let (with, a) = time_median(runs, || Ok(on.render_xyz(frame, w, h, Some(reg))?.0))?;
+        let (without, b) = time_median(runs, || {
             let all = on.render_xyz(frame, w, h, None)?.0;
             let mut c = Vec::with_capacity(reg.width * reg.height * 3);
             for r in reg.y..reg.y + reg.height {
@@ -278,57 +302,65 @@ pub fn run_skips(
             }
             Ok(c)
         })?;
-        out.push(result(
-            "only the requested region (vs render all, then crop)",
-            &case,
+        let c = Case {
+            skip: "only the requested region (vs render all, then crop)",
+            case: &case,
             applies,
-            with,
-            without,
-            max_abs(&a, &b),
-            xyz_unit,
-        ));
+        };
+        out.push(c.result(with, without, max_abs(&a, &b), XYZ_UNIT));
     }
+    Ok(())
+}
 
-    // 5. only the requested output: 8-bit sRGB straight from fused kernels
-    progress("skips: sRGB without an XYZ image");
+/// 8-bit sRGB straight from the kernels against an XYZ image then sRGB, and an XYZ request
+/// (nothing to skip); the sRGB frame.
+fn srgb_output(
+    inp: &SkipInputs<'_>,
+    on: &FastRenderer,
+    out: &mut Vec<SkipResult>,
+) -> Result<Frame, BenchError> {
+    let (w, h, runs) = (inp.width, inp.height, inp.runs);
+    let frame = Mosaic::Volts(inp.frame);
+    let skip = "8-bit sRGB straight from the kernels (vs XYZ image, then sRGB)";
     let white = WhiteLevel::Auto;
-    let (with, a) = time(runs, || Ok(on.render_srgb8(frame, w, h, None, white)?.0))?;
-    let (without, b) = time(runs, || {
+    let (with, a) = time_median(runs, || Ok(on.render_srgb8(frame, w, h, None, white)?.0))?;
+    let (without, b) = time_median(runs, || {
         let xyz = on.render_xyz(frame, w, h, None)?.0;
         let wy = on.white_y(frame, w, h, white)?;
         Ok(xyz_to_srgb8(&xyz, wy))
     })?;
-    out.push(result(
-        "8-bit sRGB straight from the kernels (vs XYZ image, then sRGB)",
-        "PNG request (sRGB 8-bit, auto white)",
-        true,
-        with,
-        without,
-        max_code(&a, &b),
-        "sRGB codes",
-    ));
-    let (with, _) = time(runs, || Ok(on.render_xyz(frame, w, h, None)?.0))?;
-    out.push(result(
-        "8-bit sRGB straight from the kernels (vs XYZ image, then sRGB)",
-        "XYZ request: nothing to skip (the same render)",
-        false,
-        with,
-        with,
-        0.0,
-        xyz_unit,
-    ));
+    let c = Case {
+        skip,
+        case: "PNG request (sRGB 8-bit, auto white)",
+        applies: true,
+    };
+    out.push(c.result(with, without, max_code(&a, &b), "sRGB codes"));
+    let (with, _) = time_median(runs, || Ok(on.render_xyz(frame, w, h, None)?.0))?;
+    let c = Case {
+        skip,
+        case: "XYZ request: nothing to skip (the same render)",
+        applies: false,
+    };
+    out.push(c.result(with, with, 0.0, XYZ_UNIT));
+    Ok(a)
+}
 
-    // 6. encoders of the rendered frame
-    progress("encoders");
+/// Each output encoding of the rendered frame (`rgb`: its sRGB).
+fn encoders(
+    inp: &SkipInputs<'_>,
+    on: &FastRenderer,
+    rgb: &[u8],
+) -> Result<Vec<EncoderResult>, BenchError> {
+    let (w, h, runs) = (inp.width, inp.height, inp.runs);
+    let frame = Mosaic::Volts(inp.frame);
     let xyz = on.render_xyz(frame, w, h, None)?.0;
-    let rgb = a;
     let mut enc = Vec::new();
     for (name, c) in [
         ("PNG fast (fdeflate)", PngCompression::Fast),
         ("PNG default", PngCompression::Default),
     ] {
-        let (ms, bytes) = time(runs, || {
-            encode_png_rgb8(w, h, &rgb, c).map_err(|e| BenchError::Invalid(e.to_string()))
+        let (ms, bytes) = time_median(runs, || {
+            encode_png_rgb8(w, h, rgb, c).map_err(|e| BenchError::Invalid(e.to_string()))
         })?;
         enc.push(EncoderResult {
             encoding: name.into(),
@@ -337,15 +369,15 @@ pub fn run_skips(
         });
     }
     // (the service sends a PPM's header and then the rendered frame itself, without this copy)
-    let (ms, bytes) = time(runs, || {
-        encode_ppm_rgb8(w, h, &rgb).map_err(|e| BenchError::Invalid(e.to_string()))
+    let (ms, bytes) = time_median(runs, || {
+        encode_ppm_rgb8(w, h, rgb).map_err(|e| BenchError::Invalid(e.to_string()))
     })?;
     enc.push(EncoderResult {
         encoding: "PPM sRGB 8-bit (header + copy)".into(),
         median_ms: ms,
         bytes: bytes.len(),
     });
-    let (ms, bytes) = time(runs, || {
+    let (ms, bytes) = time_median(runs, || {
         encode_tiff_f32_rgb(w, h, &xyz).map_err(|e| BenchError::Invalid(e.to_string()))
     })?;
     enc.push(EncoderResult {
@@ -353,7 +385,7 @@ pub fn run_skips(
         median_ms: ms,
         bytes: bytes.len(),
     });
-    let (ms, bytes) = time(runs, || {
+    let (ms, bytes) = time_median(runs, || {
         Ok(xyz
             .iter()
             .flat_map(|v| v.to_le_bytes())
@@ -364,5 +396,5 @@ pub fn run_skips(
         median_ms: ms,
         bytes: bytes.len(),
     });
-    Ok((out, enc))
+    Ok(enc)
 }

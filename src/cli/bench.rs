@@ -6,6 +6,7 @@ use super::{Cli, CliError, iset, load_sensor, write_file};
 use crate::bench::{
     BenchOptions, markdown_table, run_bench, run_sensor_sweep, sensor_sweep_markdown, svg_plot,
 };
+use crate::spectral::IsetData;
 
 #[derive(Args, Debug)]
 pub struct BenchArgs {
@@ -53,37 +54,9 @@ pub fn run(cli: &Cli, a: &BenchArgs) -> Result<(), CliError> {
     } else {
         a.sensor.clone()
     };
-    let mut opts = if a.quick {
-        BenchOptions::quick()
-    } else {
-        BenchOptions::full()
-    };
-    if let Some(s) = a.scenes {
-        opts.scenes = s;
-    }
-    if let Some(r) = a.runs {
-        if r < 1 {
-            return Err(CliError::Usage("--runs must be at least 1".into()));
-        }
-        opts.runs = r;
-    }
+    let opts = bench_options(a)?;
     if sensors.len() > 1 {
-        let designs = sensors
-            .iter()
-            .map(|p| load_sensor(&Some(p.clone()), iset.as_ref()))
-            .collect::<Result<Vec<_>, _>>()?;
-        let sweep = run_sensor_sweep(&designs, iset.as_ref(), &opts, &|m| eprintln!("… {m}"))?;
-        let mut md = sensor_sweep_markdown(&sweep);
-        for r in &sweep.reports {
-            md.push('\n');
-            md.push_str(&markdown_table(r));
-        }
-        let json = serde_json::to_vec_pretty(&sweep).map_err(|e| CliError::Usage(e.to_string()))?;
-        write_file(&a.out.join("sensors.json"), &json)?;
-        write_file(&a.out.join("sensors.md"), md.as_bytes())?;
-        println!("{md}");
-        println!("wrote {0}/sensors.json and {0}/sensors.md", a.out.display());
-        return Ok(());
+        return run_sensor_sweep_to(a, &sensors, iset.as_ref(), &opts);
     }
     let design = load_sensor(&sensors.first().cloned(), iset.as_ref())?;
     let report = run_bench(&design, iset.as_ref(), &opts, &|m| eprintln!("… {m}"))?;
@@ -98,5 +71,49 @@ pub fn run(cli: &Cli, a: &BenchArgs) -> Result<(), CliError> {
         "wrote {0}/bench.json, {0}/bench.md and {0}/bench.svg",
         a.out.display()
     );
+    Ok(())
+}
+
+/// The benchmark options: full or `--quick`, with `--scenes` and `--runs` over them.
+fn bench_options(a: &BenchArgs) -> Result<BenchOptions, CliError> {
+    let mut opts = if a.quick {
+        BenchOptions::quick()
+    } else {
+        BenchOptions::full()
+    };
+    if let Some(s) = a.scenes {
+        opts.scenes = s;
+    }
+    if let Some(r) = a.runs {
+        if r < 1 {
+            return Err(CliError::Usage("--runs must be at least 1".into()));
+        }
+        opts.runs = r;
+    }
+    Ok(opts)
+}
+
+/// The sensor sweep over `sensors`: sensors.json and sensors.md in `--out`.
+fn run_sensor_sweep_to(
+    a: &BenchArgs,
+    sensors: &[PathBuf],
+    iset: Option<&IsetData>,
+    opts: &BenchOptions,
+) -> Result<(), CliError> {
+    let designs = sensors
+        .iter()
+        .map(|p| load_sensor(&Some(p.clone()), iset))
+        .collect::<Result<Vec<_>, _>>()?;
+    let sweep = run_sensor_sweep(&designs, iset, opts, &|m| eprintln!("… {m}"))?;
+    let mut md = sensor_sweep_markdown(&sweep);
+    for r in &sweep.reports {
+        md.push('\n');
+        md.push_str(&markdown_table(r));
+    }
+    let json = serde_json::to_vec_pretty(&sweep).map_err(|e| CliError::Usage(e.to_string()))?;
+    write_file(&a.out.join("sensors.json"), &json)?;
+    write_file(&a.out.join("sensors.md"), md.as_bytes())?;
+    println!("{md}");
+    println!("wrote {0}/sensors.json and {0}/sensors.md", a.out.display());
     Ok(())
 }

@@ -5,12 +5,12 @@ use clap::Args;
 use super::{Cli, CliError, iset, load_sensor, write_file};
 use crate::camera::Camera;
 use crate::eval::{
-    ChartSetup, LightLevel, Method, PaperOptions, evaluate_method, fit_baseline_matrix,
+    ChartSetup, DeltaEReport, LightLevel, Method, MethodOnChart, PaperOptions, fit_baseline_matrix,
     noise_split, paper_summary, run_paper_table,
 };
 use crate::l3::{IlluminantRegistry, L3Table};
 use crate::render_pipeline::{CorrectionMode, correction_for, uses_own_kernels};
-use crate::spectral::WavelengthGrid;
+use crate::spectral::{IsetData, WavelengthGrid};
 
 #[derive(Args, Debug)]
 pub struct EvalArgs {
@@ -148,17 +148,28 @@ pub fn run(cli: &Cli, a: &EvalArgs) -> Result<(), CliError> {
         let report = evaluate_frame(a, frame, iset.as_ref(), &chart)?;
         return print_and_write(a, &report);
     }
-    let design = load_sensor(&a.sensor.first().cloned(), iset.as_ref())?;
+    let report = evaluate_simulated(a, iset.as_ref(), &chart)?;
+    print_and_write(a, &report)
+}
+
+/// `--method l3` (with `--table`) or `baseline` on the simulated chart under the first
+/// `--illuminant` (Tungsten).
+fn evaluate_simulated(
+    a: &EvalArgs,
+    iset: Option<&IsetData>,
+    chart: &ChartSetup,
+) -> Result<DeltaEReport, CliError> {
+    let design = load_sensor(&a.sensor.first().cloned(), iset)?;
     let acq = a
         .illuminant
         .first()
         .cloned()
         .unwrap_or_else(|| "Tungsten".into());
     let grid = WavelengthGrid::default();
-    let camera = Camera::new(&design, grid, iset.as_ref())?;
-    let mut registry = IlluminantRegistry::with_defaults(grid, iset.as_ref())?;
-    let corr = registry.resolve(&acq, iset.as_ref())?;
-    let report = match a.method.as_str() {
+    let camera = Camera::new(&design, grid, iset)?;
+    let mut registry = IlluminantRegistry::with_defaults(grid, iset)?;
+    let corr = registry.resolve(&acq, iset)?;
+    match a.method.as_str() {
         "l3" => {
             let path = a
                 .table
@@ -168,12 +179,12 @@ pub fn run(cli: &Cli, a: &EvalArgs) -> Result<(), CliError> {
             let table_camera;
             let camera = if a.sensor.is_empty() {
                 // evaluate on the sensor the table was trained for
-                table_camera = Camera::new(&table.sensor_design()?, grid, iset.as_ref())?;
+                table_camera = Camera::new(&table.sensor_design()?, grid, iset)?;
                 &table_camera
             } else {
                 &camera
             };
-            let corr = correction_for(&table, &corr, a.correction, iset.as_ref())?;
+            let corr = correction_for(&table, &corr, a.correction, iset)?;
             let name = format!(
                 "L3 {} ({}){}",
                 table.meta.kind,
@@ -183,37 +194,32 @@ pub fn run(cli: &Cli, a: &EvalArgs) -> Result<(), CliError> {
                     _ => "",
                 }
             );
-            evaluate_and_explain(
-                a,
+            let m = MethodOnChart {
                 camera,
-                &Method::Table(&table),
-                &name,
-                &acq,
-                &corr,
-                iset.as_ref(),
-                &chart,
-            )?
+                method: &Method::Table(&table),
+                method_name: &name,
+                acquisition: &acq,
+                correction: &corr,
+                iset,
+            };
+            evaluate_and_explain(a, &m, chart)
         }
         "baseline" => {
-            let m = fit_baseline_matrix(&camera, &["D65".to_string()], iset.as_ref())?;
-            evaluate_and_explain(
-                a,
-                &camera,
-                &Method::Baseline(&m),
-                "Baseline+T",
-                &acq,
-                &corr,
-                iset.as_ref(),
-                &chart,
-            )?
+            let matrix = fit_baseline_matrix(&camera, &["D65".to_string()], iset)?;
+            let m = MethodOnChart {
+                camera: &camera,
+                method: &Method::Baseline(&matrix),
+                method_name: "Baseline+T",
+                acquisition: &acq,
+                correction: &corr,
+                iset,
+            };
+            evaluate_and_explain(a, &m, chart)
         }
-        other => {
-            return Err(CliError::Usage(format!(
-                "--method '{other}': expected l3 or baseline"
-            )));
-        }
-    };
-    print_and_write(a, &report)
+        other => Err(CliError::Usage(format!(
+            "--method '{other}': expected l3 or baseline"
+        ))),
+    }
 }
 
 /// `--frame`: a captured chart frame rendered with `--table` under the light named by
@@ -221,9 +227,9 @@ pub fn run(cli: &Cli, a: &EvalArgs) -> Result<(), CliError> {
 fn evaluate_frame(
     a: &EvalArgs,
     frame: &std::path::Path,
-    iset: Option<&crate::spectral::IsetData>,
+    iset: Option<&IsetData>,
     chart: &ChartSetup,
-) -> Result<crate::eval::DeltaEReport, CliError> {
+) -> Result<DeltaEReport, CliError> {
     let path = a
         .table
         .as_ref()
@@ -263,7 +269,7 @@ fn evaluate_frame(
 }
 
 /// Print a report's summary line and write its JSON and SVG figure.
-fn print_and_write(a: &EvalArgs, report: &crate::eval::DeltaEReport) -> Result<(), CliError> {
+fn print_and_write(a: &EvalArgs, report: &DeltaEReport) -> Result<(), CliError> {
     let s = &report.summary;
     println!(
         "{} on {} under {}: mean ΔE2000 {:.2} (std {:.2}), median {:.2}, p90 {:.2}, max {:.2}; per-pixel mean {:.2}",
@@ -296,7 +302,7 @@ fn print_and_write(a: &EvalArgs, report: &crate::eval::DeltaEReport) -> Result<(
 /// `--estimate-illuminant`: the study, printed as markdown and written as JSON.
 fn run_estimation_study(
     a: &EvalArgs,
-    iset: Option<&crate::spectral::IsetData>,
+    iset: Option<&IsetData>,
     chart: &ChartSetup,
 ) -> Result<(), CliError> {
     let path = a.table.as_ref().ok_or_else(|| {
@@ -329,7 +335,7 @@ fn write_study(a: &EvalArgs, name: &str, study: &impl serde::Serialize) -> Resul
 /// `--illuminant` (Tungsten), printed as markdown and written as JSON.
 fn run_colour_class_study(
     a: &EvalArgs,
-    iset: Option<&crate::spectral::IsetData>,
+    iset: Option<&IsetData>,
     chart: &ChartSetup,
 ) -> Result<(), CliError> {
     if a.sensor.len() > 1 {
@@ -359,7 +365,7 @@ fn run_colour_class_study(
 /// one folder of JSON, markdown and figures per sensor, and a summary.
 fn run_paper_tables(
     a: &EvalArgs,
-    iset: Option<&crate::spectral::IsetData>,
+    iset: Option<&IsetData>,
     chart: ChartSetup,
 ) -> Result<(), CliError> {
     let sensors: Vec<Option<PathBuf>> = if a.sensor.is_empty() {
@@ -425,23 +431,18 @@ fn run_paper_tables(
     Ok(())
 }
 
-/// Evaluate `method` on the chart and explain its error: the sensor's
+/// Evaluate `m` on the chart and explain its error: the sensor's
 /// error budget and, with `--captures N`, the noise split, both printed and
 /// added to the report's context.
-#[allow(clippy::too_many_arguments)]
 fn evaluate_and_explain(
     a: &EvalArgs,
-    camera: &Camera,
-    method: &Method,
-    name: &str,
-    acq: &str,
-    corr: &crate::l3::IlluminantEntry,
-    iset: Option<&crate::spectral::IsetData>,
+    m: &MethodOnChart,
     chart: &ChartSetup,
-) -> Result<crate::eval::DeltaEReport, CliError> {
-    let mut report = evaluate_method(camera, method, name, acq, corr, iset, chart)?;
+) -> Result<DeltaEReport, CliError> {
+    let (camera, acq, corr, iset) = (m.camera, m.acquisition, m.correction, m.iset);
+    let mut report = m.evaluate(chart)?;
     if let Some(n) = a.captures {
-        let split = noise_split(camera, method, name, acq, corr, iset, chart, n.into())?;
+        let split = noise_split(m, chart, n.into())?;
         println!(
             "noise split over {n} captures: one capture {:.2} (std {:.2}, {:.2}–{:.2}); patch means averaged over the captures {:.2}; noise-free {:.2}",
             split.per_capture_stats.mean,

@@ -10,7 +10,7 @@ use crate::io::{
 };
 use crate::l3::{WhiteLevel, white_y, xyz_to_srgb8};
 use crate::scene::{SceneKind, SceneOptions, training_reflectances};
-use crate::spectral::{IlluminantSpec, WavelengthGrid};
+use crate::spectral::{IlluminantSpec, IsetData, NamedSpd, WavelengthGrid};
 
 #[derive(Args, Debug)]
 pub struct SimulateArgs {
@@ -100,28 +100,7 @@ pub fn run(cli: &Cli, a: &SimulateArgs) -> Result<(), CliError> {
     write_png_gray16(&a.out.join("mosaic.png"), &frame)?;
     // the same mosaic as DNG, with the camera's white response under the light as
     // AsShotNeutral (CFAs of R, G, B and W only)
-    let dng = DngWriteInfo {
-        camera_model: Some(design.name.clone()),
-        as_shot_neutral: Some(camera.white_neutral(&named.spd)?),
-        calibration_illuminant: exif_light_source(&named.name),
-        color_matrix: Some(
-            camera
-                .cfa()
-                .channel_names
-                .iter()
-                .cloned()
-                .zip(
-                    camera.xyz_to_camera_matrix(
-                        &named.spd,
-                        &training_reflectances(&grid, iset.as_ref())?
-                            .into_iter()
-                            .map(|(_, s)| s)
-                            .collect::<Vec<_>>(),
-                    )?,
-                )
-                .collect(),
-        ),
-    };
+    let dng = dng_info(&camera, &design.name, &named, &grid, iset.as_ref())?;
     let dng_note = match write_dng(&a.out.join("mosaic.dng"), &frame, &meta, &dng) {
         Ok(()) => "mosaic.dng, ".to_string(),
         Err(IoError::InvalidMeta(why)) => format!("no mosaic.dng ({why}), "),
@@ -153,4 +132,38 @@ pub fn run(cli: &Cli, a: &SimulateArgs) -> Result<(), CliError> {
         a.out.display()
     );
     Ok(())
+}
+
+/// What the DNG twin of the mosaic records: the sensor's name, the camera's white response
+/// under the light, the light's EXIF code, and the XYZ → camera matrix fitted on the
+/// training reflectances under it.
+fn dng_info(
+    camera: &Camera,
+    sensor: &str,
+    named: &NamedSpd,
+    grid: &WavelengthGrid,
+    iset: Option<&IsetData>,
+) -> Result<DngWriteInfo, CliError> {
+    Ok(DngWriteInfo {
+        camera_model: Some(sensor.to_string()),
+        as_shot_neutral: Some(camera.white_neutral(&named.spd)?),
+        calibration_illuminant: exif_light_source(&named.name),
+        color_matrix: Some(
+            camera
+                .cfa()
+                .channel_names
+                .iter()
+                .cloned()
+                .zip(
+                    camera.xyz_to_camera_matrix(
+                        &named.spd,
+                        &training_reflectances(grid, iset)?
+                            .into_iter()
+                            .map(|(_, s)| s)
+                            .collect::<Vec<_>>(),
+                    )?,
+                )
+                .collect(),
+        ),
+    })
 }

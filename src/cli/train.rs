@@ -114,7 +114,42 @@ pub fn parse_kind(s: &str) -> Result<TableKind, CliError> {
 pub fn run(cli: &Cli, a: &TrainArgs) -> Result<(), CliError> {
     let iset = iset(&cli.iset_dir)?;
     let design = load_sensor(&a.sensor, iset.as_ref())?;
-    let spec = TrainingSpec {
+    let spec = training_spec(a)?;
+    let bar = ProgressBar::new(1000);
+    bar.set_style(
+        ProgressStyle::with_template("{spinner} [{elapsed_precise}] {bar:40} {percent:>3}% {msg}")
+            .unwrap_or_else(|_| ProgressStyle::default_bar()),
+    );
+    let cancel = AtomicBool::new(false);
+    let progress = |stage: &str, f: f64| {
+        bar.set_position((f * 1000.0) as u64);
+        bar.set_message(stage.to_string());
+    };
+    let run = TrainingRun::new(&design, &spec, iset.as_ref())?;
+    let mut table = if a.shards > 1 || a.shard_dir.is_some() || a.phase.is_some() {
+        bar.finish_and_clear();
+        match run_sharded(a, &run, &cancel)? {
+            Some(table) => table,
+            // one step of a sharded run: its partial is written
+            None => return Ok(()),
+        }
+    } else {
+        run.train(&progress, &cancel)?
+    };
+    bar.finish_and_clear();
+    let seconds = table.meta.training_seconds;
+    if a.reproducible {
+        table.meta.created_unix_s = 0;
+        table.meta.training_seconds = 0.0;
+    }
+    table.save(&a.out)?;
+    print_summary(&table, &design.name, seconds, a);
+    Ok(())
+}
+
+/// The training spec the arguments describe.
+fn training_spec(a: &TrainArgs) -> Result<TrainingSpec, CliError> {
+    Ok(TrainingSpec {
         kind: parse_kind(&a.kind)?,
         illuminants: a.illuminants.iter().map(|s| s.trim().to_string()).collect(),
         patch_size: a.patch,
@@ -132,59 +167,53 @@ pub fn run(cli: &Cli, a: &TrainArgs) -> Result<(), CliError> {
         }),
         chroma_classes: a.chroma_classes,
         ..TrainingSpec::default()
-    };
-    let bar = ProgressBar::new(1000);
-    bar.set_style(
-        ProgressStyle::with_template("{spinner} [{elapsed_precise}] {bar:40} {percent:>3}% {msg}")
-            .unwrap_or_else(|_| ProgressStyle::default_bar()),
-    );
-    let cancel = AtomicBool::new(false);
-    let progress = |stage: &str, f: f64| {
-        bar.set_position((f * 1000.0) as u64);
-        bar.set_message(stage.to_string());
-    };
-    let run = TrainingRun::new(&design, &spec, iset.as_ref())?;
-    let mut table = if a.shards > 1 || a.shard_dir.is_some() || a.phase.is_some() {
-        let dir = a.shard_dir.clone().unwrap_or_else(|| {
-            let mut p = a.out.clone().into_os_string();
-            p.push(".shards");
-            PathBuf::from(p)
-        });
-        bar.finish_and_clear();
-        let step = |shard: Option<usize>| -> Result<usize, CliError> {
-            match shard {
-                Some(k) if (1..=a.shards).contains(&k) => Ok(k - 1),
-                _ => Err(CliError::Usage(format!(
-                    "--phase survey or accumulate needs --shard 1 to {}",
-                    a.shards
-                ))),
-            }
-        };
-        let sharded = Sharded {
-            run: &run,
-            plan: run.plan(a.shards)?,
-            dir,
-            cancel: &cancel,
-        };
-        match a.phase {
-            None => sharded.all()?,
-            Some(Phase::Survey) => return sharded.survey(step(a.shard)?),
-            Some(Phase::Accumulate) => {
-                let classes = sharded.classes()?;
-                return sharded.accumulate(step(a.shard)?, &classes);
-            }
-            Some(Phase::Merge) => sharded.merge(sharded.classes()?)?,
+    })
+}
+
+/// A sharded run: every step (the table), or the one step `--phase` names (`None` once its
+/// partial is written, or the table after the merge).
+fn run_sharded(
+    a: &TrainArgs,
+    run: &TrainingRun,
+    cancel: &AtomicBool,
+) -> Result<Option<L3Table>, CliError> {
+    let dir = a.shard_dir.clone().unwrap_or_else(|| {
+        let mut p = a.out.clone().into_os_string();
+        p.push(".shards");
+        PathBuf::from(p)
+    });
+    let step = |shard: Option<usize>| -> Result<usize, CliError> {
+        match shard {
+            Some(k) if (1..=a.shards).contains(&k) => Ok(k - 1),
+            _ => Err(CliError::Usage(format!(
+                "--phase survey or accumulate needs --shard 1 to {}",
+                a.shards
+            ))),
         }
-    } else {
-        run.train(&progress, &cancel)?
     };
-    bar.finish_and_clear();
-    let seconds = table.meta.training_seconds;
-    if a.reproducible {
-        table.meta.created_unix_s = 0;
-        table.meta.training_seconds = 0.0;
-    }
-    table.save(&a.out)?;
+    let sharded = Sharded {
+        run,
+        plan: run.plan(a.shards)?,
+        dir,
+        cancel,
+    };
+    Ok(match a.phase {
+        None => Some(sharded.all()?),
+        Some(Phase::Survey) => {
+            sharded.survey(step(a.shard)?)?;
+            None
+        }
+        Some(Phase::Accumulate) => {
+            let classes = sharded.classes()?;
+            sharded.accumulate(step(a.shard)?, &classes)?;
+            None
+        }
+        Some(Phase::Merge) => Some(sharded.merge(sharded.classes()?)?),
+    })
+}
+
+/// What was trained, and where it was written.
+fn print_summary(table: &L3Table, sensor: &str, seconds: f64, a: &TrainArgs) {
     let reps = &table.reports;
     let filled = reps.iter().filter(|r| r.filled_from >= 0).count();
     let max_cond = reps.iter().map(|r| r.condition).fold(0.0, f64::max);
@@ -192,7 +221,7 @@ pub fn run(cli: &Cli, a: &TrainArgs) -> Result<(), CliError> {
     println!(
         "trained {} table for {} on {} in {:.1} s: {} classes ({} positions × {} levels × {} chroma classes × {} saturation cases × 2), {} samples",
         table.meta.kind,
-        design.name,
+        sensor,
         table.meta.train_illuminants.join("+"),
         seconds,
         table.n_classes(),
@@ -211,7 +240,6 @@ pub fn run(cli: &Cli, a: &TrainArgs) -> Result<(), CliError> {
         a.out.display(),
         std::fs::metadata(&a.out).map(|m| m.len()).unwrap_or(0)
     );
-    Ok(())
 }
 
 fn read_file(path: &Path) -> Result<Vec<u8>, CliError> {

@@ -20,7 +20,9 @@ pub use figure::report_svg;
 pub use illuminant_estimation::{
     EstimateResult, EstimationRow, STUDY_LIGHTS, estimation_markdown, illuminant_estimation_study,
 };
-pub use noise_split::{MAX_CAPTURES, MIN_CAPTURES, NoiseSplit, averaged_patch_means, noise_split};
+pub use noise_split::{
+    MAX_CAPTURES, MIN_CAPTURES, MethodOnChart, NoiseSplit, averaged_patch_means, noise_split,
+};
 pub use paper_table::{
     BaselineComparison, BaselineFamily, ExposurePoint, PAPER_TABLE1, PaperOptions, PaperRow,
     PaperTable, StorageComparison, paper_summary, run_paper_table,

@@ -52,17 +52,36 @@ pub struct NoiseSplit {
     pub noise_free: ErrorStats,
 }
 
-/// Evaluate `method` on `captures` noisy captures of the chart (seeds
+/// A method rendering the chart under one acquisition light: what [`noise_split`] splits.
+pub struct MethodOnChart<'a> {
+    pub camera: &'a Camera,
+    pub method: &'a Method<'a>,
+    pub method_name: &'a str,
+    pub acquisition: &'a str,
+    pub correction: &'a IlluminantEntry,
+    pub iset: Option<&'a IsetData>,
+}
+
+impl MethodOnChart<'_> {
+    /// The method's report on the chart simulated with `setup`.
+    pub fn evaluate(&self, setup: &ChartSetup) -> Result<DeltaEReport, EvalError> {
+        evaluate_method(
+            self.camera,
+            self.method,
+            self.method_name,
+            self.acquisition,
+            self.correction,
+            self.iset,
+            setup,
+        )
+    }
+}
+
+/// Evaluate `m` on `captures` noisy captures of the chart (seeds
 /// `setup.seed`, `setup.seed + 1`, …) and once without noise; see
 /// [`NoiseSplit`].
-#[allow(clippy::too_many_arguments)]
 pub fn noise_split(
-    camera: &Camera,
-    method: &Method,
-    method_name: &str,
-    acquisition: &str,
-    correction: &IlluminantEntry,
-    iset: Option<&IsetData>,
+    m: &MethodOnChart,
     setup: &ChartSetup,
     captures: usize,
 ) -> Result<NoiseSplit, EvalError> {
@@ -73,15 +92,7 @@ pub fn noise_split(
             noise,
             ..setup.clone()
         };
-        evaluate_method(
-            camera,
-            method,
-            method_name,
-            acquisition,
-            correction,
-            iset,
-            &s,
-        )
+        m.evaluate(&s)
     };
     let seeds: Vec<u64> = (0..captures as u64)
         .map(|k| setup.seed.wrapping_add(k))

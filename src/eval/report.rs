@@ -137,13 +137,13 @@ pub fn patch_means(patches: &[Patch], xyz: &[f32], width: usize) -> Vec<Xyz> {
         .collect()
 }
 
-/// The chart's white patch, which both sides are normalised by: the grey
-/// patch with the highest ideal Y (any patch, on a chart without greys).
 /// Which patches a chart's score counts: every patch but the grey strip.
 pub fn scored_patches(patches: &[Patch]) -> Vec<bool> {
     patches.iter().map(|p| p.category != "grey").collect()
 }
 
+/// The chart's white patch, which both sides are normalised by: the grey
+/// patch with the highest ideal Y (any patch, on a chart without greys).
 pub fn white_patch_index(patches: &[Patch], ideal: &[Xyz]) -> usize {
     let greys: Vec<usize> = (0..patches.len().min(ideal.len()))
         .filter(|&i| patches[i].category == "grey")
@@ -171,25 +171,7 @@ pub fn evaluate_chart(
     method: &str,
     context: serde_json::Value,
 ) -> Result<DeltaEReport, EvalError> {
-    if xyz.len() != width * height * 3 {
-        return Err(EvalError::Invalid(format!(
-            "image has {} values, {width}×{height}×3 expected",
-            xyz.len()
-        )));
-    }
-    if truth.patches.len() != truth.ideal_d65.len() || truth.patches.is_empty() {
-        return Err(EvalError::Invalid(
-            "patches and ideal values differ in number".into(),
-        ));
-    }
-    for p in truth.patches {
-        if p.row + p.height > height || p.col + p.width > width || p.height == 0 || p.width == 0 {
-            return Err(EvalError::Invalid(format!(
-                "patch {} lies outside the image",
-                p.name
-            )));
-        }
-    }
+    check_chart(truth, xyz, width, height)?;
     let wi = white_patch_index(truth.patches, truth.ideal_d65);
     let means = patch_means(truth.patches, xyz, width);
     let y_true = truth.ideal_d65[wi][1];
@@ -200,38 +182,20 @@ pub fn evaluate_chart(
             truth.patches[wi].name
         )));
     }
-    let white = D65_WHITE_XYZ;
+    let image = Normalised {
+        xyz,
+        width,
+        y_true,
+        y_est,
+    };
     let mut results = Vec::with_capacity(truth.patches.len());
     let mut pixel_all = Vec::new();
     for (i, p) in truth.patches.iter().enumerate() {
-        let t = truth.ideal_d65[i].map(|v| v / y_true);
-        let e = means[i].map(|v| v / y_est);
-        let tl = xyz_to_lab(t, white);
-        let el = xyz_to_lab(e, white);
-        let de = ciede2000(tl, el);
-        let (r0, c0, h, w) = interior(p);
-        let mut pix = Vec::with_capacity(h * w);
-        for r in r0..r0 + h {
-            for c in c0..c0 + w {
-                let o = (r * width + c) * 3;
-                let px = [xyz[o], xyz[o + 1], xyz[o + 2]].map(|v| v as f64 / y_est);
-                pix.push(ciede2000(tl, xyz_to_lab(px, white)));
-            }
-        }
-        let pmean = pix.iter().sum::<f64>() / pix.len().max(1) as f64;
+        let (result, pix) = image.patch(p, truth.ideal_d65[i], means[i]);
         if p.category != "grey" {
             pixel_all.extend_from_slice(&pix);
         }
-        results.push(PatchResult {
-            name: p.name.clone(),
-            category: p.category.clone(),
-            true_xyz: t,
-            est_xyz: e,
-            true_lab: tl,
-            est_lab: el,
-            delta_e: de,
-            pixel_delta_e: pmean,
-        });
+        results.push(result);
     }
     if results.iter().any(|r| !r.delta_e.is_finite()) {
         return Err(EvalError::Invalid(
@@ -269,6 +233,79 @@ pub fn evaluate_chart(
         patches: results,
         context,
     })
+}
+
+/// Refuse an image of the wrong size, a truth whose patches and values differ in number,
+/// and patches outside the image.
+fn check_chart(
+    truth: &ChartTruth,
+    xyz: &[f32],
+    width: usize,
+    height: usize,
+) -> Result<(), EvalError> {
+    if xyz.len() != width * height * 3 {
+        return Err(EvalError::Invalid(format!(
+            "image has {} values, {width}×{height}×3 expected",
+            xyz.len()
+        )));
+    }
+    if truth.patches.len() != truth.ideal_d65.len() || truth.patches.is_empty() {
+        return Err(EvalError::Invalid(
+            "patches and ideal values differ in number".into(),
+        ));
+    }
+    for p in truth.patches {
+        if p.row + p.height > height || p.col + p.width > width || p.height == 0 || p.width == 0 {
+            return Err(EvalError::Invalid(format!(
+                "patch {} lies outside the image",
+                p.name
+            )));
+        }
+    }
+    Ok(())
+}
+
+/// The rendered image and the white-patch Y of each side, which both are normalised by.
+struct Normalised<'a> {
+    xyz: &'a [f32],
+    width: usize,
+    y_true: f64,
+    y_est: f64,
+}
+
+impl Normalised<'_> {
+    /// One patch's result (from its ideal XYZ and its rendered mean) and the ΔE of each
+    /// pixel of its interior.
+    fn patch(&self, p: &Patch, ideal: Xyz, mean: Xyz) -> (PatchResult, Vec<f64>) {
+        let (xyz, width, y_est) = (self.xyz, self.width, self.y_est);
+        let white = D65_WHITE_XYZ;
+        let t = ideal.map(|v| v / self.y_true);
+        let e = mean.map(|v| v / y_est);
+        let tl = xyz_to_lab(t, white);
+        let el = xyz_to_lab(e, white);
+        let de = ciede2000(tl, el);
+        let (r0, c0, h, w) = interior(p);
+        let mut pix = Vec::with_capacity(h * w);
+        for r in r0..r0 + h {
+            for c in c0..c0 + w {
+                let o = (r * width + c) * 3;
+                let px = [xyz[o], xyz[o + 1], xyz[o + 2]].map(|v| v as f64 / y_est);
+                pix.push(ciede2000(tl, xyz_to_lab(px, white)));
+            }
+        }
+        let pmean = pix.iter().sum::<f64>() / pix.len().max(1) as f64;
+        let result = PatchResult {
+            name: p.name.clone(),
+            category: p.category.clone(),
+            true_xyz: t,
+            est_xyz: e,
+            true_lab: tl,
+            est_lab: el,
+            delta_e: de,
+            pixel_delta_e: pmean,
+        };
+        (result, pix)
+    }
 }
 
 #[cfg(test)]

@@ -403,6 +403,12 @@ impl Ifd {
     }
 }
 
+/// A tag of the raw image that must be there, as one unsigned integer.
+pub(super) fn required(t: &Tiff<'_>, ifd: &Ifd, tag: u16) -> IoResult<u64> {
+    t.uint(ifd, tag)?
+        .ok_or_else(|| dng_err(format!("the raw image has no {}", tag_name(tag))))
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

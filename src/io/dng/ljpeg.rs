@@ -236,7 +236,7 @@ pub(super) fn decode(data: &[u8], max_samples: usize) -> IoResult<Ljpeg> {
     }
     let mut pos = 2;
     let mut tables: [Option<Huffman>; 4] = [None, None, None, None];
-    let mut frame: Option<(u8, usize, usize, Vec<Component>)> = None;
+    let mut frame: Option<Frame> = None;
     let mut restart = 0usize;
     loop {
         // a marker: 0xFF (fill bytes allowed) then the code
@@ -264,63 +264,8 @@ pub(super) fn decode(data: &[u8], max_samples: usize) -> IoResult<Ljpeg> {
         let seg = data.get(pos + 2..pos + len).unwrap_or(&[]);
         pos += len;
         match marker {
-            0xC4 => {
-                let mut p = 0;
-                while p < seg.len() {
-                    let tc_th = byte(seg, p)?;
-                    let (class, id) = (tc_th >> 4, usize::from(tc_th & 15));
-                    if class != 0 || id > 3 {
-                        return Err(dng_err(format!(
-                            "lossless JPEG: Huffman table class {class} id {id} (DC tables 0–3 are used)"
-                        )));
-                    }
-                    let mut counts = [0u8; 16];
-                    for (i, c) in counts.iter_mut().enumerate() {
-                        *c = byte(seg, p + 1 + i)?;
-                    }
-                    let total: usize = counts.iter().map(|&c| usize::from(c)).sum();
-                    let vals = seg
-                        .get(p + 17..p + 17 + total)
-                        .ok_or_else(|| dng_err("lossless JPEG: a Huffman table ends early"))?;
-                    tables[id] = Some(Huffman::new(&counts, vals.to_vec())?);
-                    p += 17 + total;
-                }
-            }
-            0xC3 => {
-                let precision = byte(seg, 0)?;
-                let height = be16(seg, 1)?;
-                let width = be16(seg, 3)?;
-                let nf = usize::from(byte(seg, 5)?);
-                if !(2..=16).contains(&precision) {
-                    return Err(dng_err(format!(
-                        "lossless JPEG: sample precision {precision} (2–16 bits)"
-                    )));
-                }
-                if width == 0 || height == 0 {
-                    return Err(dng_err(format!(
-                        "lossless JPEG: the frame is {width}×{height}"
-                    )));
-                }
-                if !(1..=4).contains(&nf) {
-                    return Err(dng_err(format!(
-                        "lossless JPEG: {nf} components (1–4 are supported)"
-                    )));
-                }
-                let mut comps = Vec::with_capacity(nf);
-                for i in 0..nf {
-                    let id = byte(seg, 6 + 3 * i)?;
-                    let hv = byte(seg, 7 + 3 * i)?;
-                    if hv != 0x11 {
-                        return Err(dng_err(format!(
-                            "lossless JPEG: component {id} has sampling factors {}×{} (1×1 is supported)",
-                            hv >> 4,
-                            hv & 15
-                        )));
-                    }
-                    comps.push(Component { id, table: 0 });
-                }
-                frame = Some((precision, width, height, comps));
-            }
+            0xC4 => read_huffman_tables(seg, &mut tables)?,
+            0xC3 => frame = Some(read_frame(seg)?),
             0xC0..=0xCF if marker != 0xC4 && marker != 0xC8 && marker != 0xCC => {
                 return Err(dng_err(format!(
                     "lossless JPEG: frame type SOF{} is not lossless Huffman (SOF3)",
@@ -329,60 +274,152 @@ pub(super) fn decode(data: &[u8], max_samples: usize) -> IoResult<Ljpeg> {
             }
             0xDD => restart = be16(seg, 0)?,
             0xDA => {
-                let Some((precision, width, height, mut comps)) = frame.take() else {
+                let Some(frame) = frame.take() else {
                     return Err(dng_err(
                         "lossless JPEG: a scan comes before the frame header",
                     ));
                 };
-                let ns = usize::from(byte(seg, 0)?);
-                if ns != comps.len() {
-                    return Err(dng_err(format!(
-                        "lossless JPEG: the scan has {ns} of the frame's {} components (one interleaved scan is supported)",
-                        comps.len()
-                    )));
-                }
-                for i in 0..ns {
-                    let cs = byte(seg, 1 + 2 * i)?;
-                    let td = usize::from(byte(seg, 2 + 2 * i)? >> 4);
-                    let c = comps.iter_mut().find(|c| c.id == cs).ok_or_else(|| {
-                        dng_err(format!(
-                            "lossless JPEG: the scan names unknown component {cs}"
-                        ))
-                    })?;
-                    if td > 3 || tables[td].is_none() {
-                        return Err(dng_err(format!(
-                            "lossless JPEG: component {cs} uses Huffman table {td}, which is not defined"
-                        )));
-                    }
-                    c.table = td;
-                }
-                let predictor = byte(seg, 1 + 2 * ns)?;
-                let pt = byte(seg, 3 + 2 * ns)? & 15;
-                if !(1..=7).contains(&predictor) {
-                    return Err(dng_err(format!(
-                        "lossless JPEG: predictor {predictor} (1–7 are defined)"
-                    )));
-                }
-                if pt >= precision {
-                    return Err(dng_err(format!(
-                        "lossless JPEG: point transform {pt} for {precision}-bit samples"
-                    )));
-                }
-                let scan = Scan {
-                    precision,
-                    width,
-                    height,
-                    comps,
-                    predictor,
-                    pt,
-                    restart,
-                };
+                let scan = read_scan(seg, frame, &tables, restart)?;
                 let entropy = data.get(pos..).unwrap_or(&[]);
                 return scan.decode(entropy, &tables, max_samples);
             }
             _ => {}
         }
     }
+}
+
+/// A DHT segment: one or more DC Huffman tables.
+fn read_huffman_tables(seg: &[u8], tables: &mut [Option<Huffman>; 4]) -> IoResult<()> {
+    let mut p = 0;
+    while p < seg.len() {
+        let tc_th = byte(seg, p)?;
+        let (class, id) = (tc_th >> 4, usize::from(tc_th & 15));
+        if class != 0 || id > 3 {
+            return Err(dng_err(format!(
+                "lossless JPEG: Huffman table class {class} id {id} (DC tables 0–3 are used)"
+            )));
+        }
+        let mut counts = [0u8; 16];
+        for (i, c) in counts.iter_mut().enumerate() {
+            *c = byte(seg, p + 1 + i)?;
+        }
+        let total: usize = counts.iter().map(|&c| usize::from(c)).sum();
+        let vals = seg
+            .get(p + 17..p + 17 + total)
+            .ok_or_else(|| dng_err("lossless JPEG: a Huffman table ends early"))?;
+        tables[id] = Some(Huffman::new(&counts, vals.to_vec())?);
+        p += 17 + total;
+    }
+    Ok(())
+}
+
+/// The frame header (SOF3).
+struct Frame {
+    precision: u8,
+    width: usize,
+    height: usize,
+    comps: Vec<Component>,
+}
+
+/// An SOF3 segment: precision, size and components (1×1 sampling).
+fn read_frame(seg: &[u8]) -> IoResult<Frame> {
+    let precision = byte(seg, 0)?;
+    let height = be16(seg, 1)?;
+    let width = be16(seg, 3)?;
+    let nf = usize::from(byte(seg, 5)?);
+    if !(2..=16).contains(&precision) {
+        return Err(dng_err(format!(
+            "lossless JPEG: sample precision {precision} (2–16 bits)"
+        )));
+    }
+    if width == 0 || height == 0 {
+        return Err(dng_err(format!(
+            "lossless JPEG: the frame is {width}×{height}"
+        )));
+    }
+    if !(1..=4).contains(&nf) {
+        return Err(dng_err(format!(
+            "lossless JPEG: {nf} components (1–4 are supported)"
+        )));
+    }
+    let mut comps = Vec::with_capacity(nf);
+    for i in 0..nf {
+        let id = byte(seg, 6 + 3 * i)?;
+        let hv = byte(seg, 7 + 3 * i)?;
+        if hv != 0x11 {
+            return Err(dng_err(format!(
+                "lossless JPEG: component {id} has sampling factors {}×{} (1×1 is supported)",
+                hv >> 4,
+                hv & 15
+            )));
+        }
+        comps.push(Component { id, table: 0 });
+    }
+    Ok(Frame {
+        precision,
+        width,
+        height,
+        comps,
+    })
+}
+
+/// An SOS segment: the scan's components and their tables, the predictor and the point
+/// transform, over the `frame`.
+fn read_scan(
+    seg: &[u8],
+    frame: Frame,
+    tables: &[Option<Huffman>; 4],
+    restart: usize,
+) -> IoResult<Scan> {
+    let Frame {
+        precision,
+        width,
+        height,
+        mut comps,
+    } = frame;
+    let ns = usize::from(byte(seg, 0)?);
+    if ns != comps.len() {
+        return Err(dng_err(format!(
+            "lossless JPEG: the scan has {ns} of the frame's {} components (one interleaved scan is supported)",
+            comps.len()
+        )));
+    }
+    for i in 0..ns {
+        let cs = byte(seg, 1 + 2 * i)?;
+        let td = usize::from(byte(seg, 2 + 2 * i)? >> 4);
+        let c = comps.iter_mut().find(|c| c.id == cs).ok_or_else(|| {
+            dng_err(format!(
+                "lossless JPEG: the scan names unknown component {cs}"
+            ))
+        })?;
+        if td > 3 || tables[td].is_none() {
+            return Err(dng_err(format!(
+                "lossless JPEG: component {cs} uses Huffman table {td}, which is not defined"
+            )));
+        }
+        c.table = td;
+    }
+    let predictor = byte(seg, 1 + 2 * ns)?;
+    let pt = byte(seg, 3 + 2 * ns)? & 15;
+    if !(1..=7).contains(&predictor) {
+        return Err(dng_err(format!(
+            "lossless JPEG: predictor {predictor} (1–7 are defined)"
+        )));
+    }
+    if pt >= precision {
+        return Err(dng_err(format!(
+            "lossless JPEG: point transform {pt} for {precision}-bit samples"
+        )));
+    }
+    Ok(Scan {
+        precision,
+        width,
+        height,
+        comps,
+        predictor,
+        pt,
+        restart,
+    })
 }
 
 struct Scan {
@@ -520,107 +557,153 @@ pub(super) mod tests {
         predictor: u8,
         restart_rows: usize,
     ) -> Vec<u8> {
-        let mut out = vec![0xFF, 0xD8];
-        // DHT: 17 symbols (0–16), all 5-bit codes
-        let mut counts = [0u8; 16];
-        counts[4] = 17;
-        out.extend([0xFF, 0xC4]);
-        out.extend(((2 + 1 + 16 + 17) as u16).to_be_bytes());
-        out.push(0x00);
-        out.extend(counts);
-        out.extend(0u8..17);
-        // SOF3
-        out.extend([0xFF, 0xC3]);
-        out.extend(((8 + 3 * nc) as u16).to_be_bytes());
-        out.push(precision);
-        out.extend((height as u16).to_be_bytes());
-        out.extend((width as u16).to_be_bytes());
-        out.push(nc as u8);
-        for c in 0..nc {
-            out.extend([c as u8 + 1, 0x11, 0]);
-        }
-        if restart_rows > 0 {
-            out.extend([0xFF, 0xDD, 0, 4]);
-            out.extend(((restart_rows * width) as u16).to_be_bytes());
-        }
-        // SOS
-        out.extend([0xFF, 0xDA]);
-        out.extend(((6 + 2 * nc) as u16).to_be_bytes());
-        out.push(nc as u8);
-        for c in 0..nc {
-            out.extend([c as u8 + 1, 0x00]);
-        }
-        out.extend([predictor, 0, 0]);
-        // entropy data
-        let mut bitbuf: Vec<bool> = Vec::new();
-        let flush = |bitbuf: &mut Vec<bool>, out: &mut Vec<u8>| {
-            while !bitbuf.len().is_multiple_of(8) {
-                bitbuf.push(true);
-            }
-            for ch in bitbuf.chunks(8) {
-                let b = ch.iter().fold(0u8, |a, &x| (a << 1) | x as u8);
-                out.push(b);
-                if b == 0xFF {
-                    out.push(0);
-                }
-            }
-            bitbuf.clear();
+        let s = Stream {
+            samples,
+            width,
+            height,
+            nc,
+            precision,
+            predictor,
+            restart_rows,
         };
-        let row_len = width * nc;
-        let mut rst = 0u8;
-        let mut first = true;
-        for row in 0..height {
-            if restart_rows > 0 && row > 0 && row % restart_rows == 0 {
-                flush(&mut bitbuf, &mut out);
-                out.extend([0xFF, 0xD0 + (rst & 7)]);
-                rst += 1;
-                first = true;
-            }
-            for col in 0..width {
-                for c in 0..nc {
-                    let i = row * row_len + col * nc + c;
-                    let s = |j: usize| i32::from(samples[j]);
-                    let pred = if first {
-                        if col == 0 {
-                            1 << (precision - 1)
-                        } else {
-                            s(i - nc)
-                        }
-                    } else if col == 0 {
-                        s(i - row_len)
-                    } else {
-                        let (a, b, cc) = (s(i - nc), s(i - row_len), s(i - row_len - nc));
-                        match predictor {
-                            1 => a,
-                            _ => b + ((a - cc) >> 1),
-                        }
-                    };
-                    let d = (i32::from(samples[i]) - pred) as i16 as i32;
-                    let (ssss, extra) = if d == 0 {
-                        (0u32, 0u32)
-                    } else if d == -32768 {
-                        (16, 0)
-                    } else {
-                        let m = d.unsigned_abs();
-                        let ssss = 32 - m.leading_zeros();
-                        let v = if d > 0 { d } else { d + (1 << ssss) - 1 };
-                        (ssss, v as u32)
-                    };
-                    for k in (0..5).rev() {
-                        bitbuf.push((ssss >> k) & 1 == 1);
-                    }
-                    if ssss > 0 && ssss < 16 {
-                        for k in (0..ssss).rev() {
-                            bitbuf.push((extra >> k) & 1 == 1);
-                        }
-                    }
-                }
-            }
-            first = false;
-        }
-        flush(&mut bitbuf, &mut out);
+        let mut out = vec![0xFF, 0xD8];
+        s.headers(&mut out);
+        s.entropy(&mut out);
         out.extend([0xFF, 0xD9]);
         out
+    }
+
+    /// What [`encode`] encodes.
+    struct Stream<'a> {
+        samples: &'a [u16],
+        width: usize,
+        height: usize,
+        nc: usize,
+        precision: u8,
+        predictor: u8,
+        restart_rows: usize,
+    }
+
+    impl Stream<'_> {
+        /// DHT, SOF3, DRI (with restarts) and SOS.
+        fn headers(&self, out: &mut Vec<u8>) {
+            let (width, height, nc) = (self.width, self.height, self.nc);
+            // DHT: 17 symbols (0–16), all 5-bit codes
+            let mut counts = [0u8; 16];
+            counts[4] = 17;
+            out.extend([0xFF, 0xC4]);
+            out.extend(((2 + 1 + 16 + 17) as u16).to_be_bytes());
+            out.push(0x00);
+            out.extend(counts);
+            out.extend(0u8..17);
+            // SOF3
+            out.extend([0xFF, 0xC3]);
+            out.extend(((8 + 3 * nc) as u16).to_be_bytes());
+            out.push(self.precision);
+            out.extend((height as u16).to_be_bytes());
+            out.extend((width as u16).to_be_bytes());
+            out.push(nc as u8);
+            for c in 0..nc {
+                out.extend([c as u8 + 1, 0x11, 0]);
+            }
+            if self.restart_rows > 0 {
+                out.extend([0xFF, 0xDD, 0, 4]);
+                out.extend(((self.restart_rows * width) as u16).to_be_bytes());
+            }
+            // SOS
+            out.extend([0xFF, 0xDA]);
+            out.extend(((6 + 2 * nc) as u16).to_be_bytes());
+            out.push(nc as u8);
+            for c in 0..nc {
+                out.extend([c as u8 + 1, 0x00]);
+            }
+            out.extend([self.predictor, 0, 0]);
+        }
+
+        /// The entropy-coded data, with a restart marker every `restart_rows` rows.
+        fn entropy(&self, out: &mut Vec<u8>) {
+            let (width, nc, restart_rows) = (self.width, self.nc, self.restart_rows);
+            let mut bitbuf: Vec<bool> = Vec::new();
+            let mut rst = 0u8;
+            let mut first = true;
+            for row in 0..self.height {
+                if restart_rows > 0 && row > 0 && row % restart_rows == 0 {
+                    flush(&mut bitbuf, out);
+                    out.extend([0xFF, 0xD0 + (rst & 7)]);
+                    rst += 1;
+                    first = true;
+                }
+                for col in 0..width {
+                    for c in 0..nc {
+                        let i = row * width * nc + col * nc + c;
+                        let pred = self.predict(i, col, first);
+                        let d = (i32::from(self.samples[i]) - pred) as i16 as i32;
+                        push_diff(&mut bitbuf, d);
+                    }
+                }
+                first = false;
+            }
+            flush(&mut bitbuf, out);
+        }
+
+        /// The prediction of sample `i` (in column `col`; `first`: the first row of an
+        /// interval).
+        fn predict(&self, i: usize, col: usize, first: bool) -> i32 {
+            let (nc, row_len) = (self.nc, self.width * self.nc);
+            let s = |j: usize| i32::from(self.samples[j]);
+            if first {
+                if col == 0 {
+                    1 << (self.precision - 1)
+                } else {
+                    s(i - nc)
+                }
+            } else if col == 0 {
+                s(i - row_len)
+            } else {
+                let (a, b, cc) = (s(i - nc), s(i - row_len), s(i - row_len - nc));
+                match self.predictor {
+                    1 => a,
+                    _ => b + ((a - cc) >> 1),
+                }
+            }
+        }
+    }
+
+    /// A difference: its 5-bit SSSS code, then its extra bits.
+    fn push_diff(bitbuf: &mut Vec<bool>, d: i32) {
+        let (ssss, extra) = if d == 0 {
+            (0u32, 0u32)
+        } else if d == -32768 {
+            (16, 0)
+        } else {
+            let m = d.unsigned_abs();
+            let ssss = 32 - m.leading_zeros();
+            let v = if d > 0 { d } else { d + (1 << ssss) - 1 };
+            (ssss, v as u32)
+        };
+        for k in (0..5).rev() {
+            bitbuf.push((ssss >> k) & 1 == 1);
+        }
+        if ssss > 0 && ssss < 16 {
+            for k in (0..ssss).rev() {
+                bitbuf.push((extra >> k) & 1 == 1);
+            }
+        }
+    }
+
+    /// The bits as bytes (the last padded with ones), a zero stuffed after each 0xFF.
+    fn flush(bitbuf: &mut Vec<bool>, out: &mut Vec<u8>) {
+        while !bitbuf.len().is_multiple_of(8) {
+            bitbuf.push(true);
+        }
+        for ch in bitbuf.chunks(8) {
+            let b = ch.iter().fold(0u8, |a, &x| (a << 1) | x as u8);
+            out.push(b);
+            if b == 0xFF {
+                out.push(0);
+            }
+        }
+        bitbuf.clear();
     }
 
     fn ramp(n: usize, bits: u32) -> Vec<u16> {

@@ -14,6 +14,7 @@
 //! The writer uses the `tiff` crate's encoder: one uncompressed 16-bit strip with the CFA,
 //! levels, AsShotNeutral and CalibrationIlluminant1 tags.
 
+mod chunks;
 mod ifd;
 mod ljpeg;
 mod read;
@@ -220,66 +221,92 @@ pub fn encode_dng(frame: &RawFrame, meta: &RawMeta, info: &DngWriteInfo) -> IoRe
         format: "DNG",
         msg: format!("a {w}×{h} frame does not fit a classic TIFF strip"),
     })?;
-    let neutral = match &info.as_shot_neutral {
-        None => None,
-        Some(n) => {
-            let mut v = Vec::with_capacity(planes.len());
-            for p in &planes {
-                let x = n
-                    .iter()
-                    .find(|(name, _)| name.len() == 1 && name.starts_with(*p))
-                    .map(|(_, x)| *x)
-                    .ok_or_else(|| {
-                        IoError::InvalidMeta(format!("AsShotNeutral has no value for {p}"))
-                    })?;
-                v.push(x);
-            }
-            let max = v.iter().copied().fold(0.0, f64::max);
-            if !(max.is_finite() && max > 0.0) || v.iter().any(|x| x.is_nan() || *x <= 0.0) {
+    let tags = DngTags {
+        cfa_rows: rows.len(),
+        pattern,
+        plane_codes,
+        strip_bytes: bytes,
+        neutral: as_shot_neutral(info, &planes)?,
+        color_matrix: color_matrix(info, &planes)?,
+        model: camera_model(info, meta),
+    };
+    write_tiff(frame, meta, info, &tags)
+}
+
+/// The tags of a written DNG worked out from the metadata.
+struct DngTags {
+    /// CFA pattern rows, and the pattern's colour codes row by row.
+    cfa_rows: usize,
+    pattern: Vec<u8>,
+    /// CFAPlaneColor.
+    plane_codes: Vec<u8>,
+    /// The one strip's size.
+    strip_bytes: u32,
+    neutral: Option<Vec<Rational>>,
+    color_matrix: Option<Vec<SRational>>,
+    model: String,
+}
+
+/// AsShotNeutral in CFAPlaneColor order, normalised to a maximum of 1.
+fn as_shot_neutral(info: &DngWriteInfo, planes: &[char]) -> IoResult<Option<Vec<Rational>>> {
+    let Some(n) = &info.as_shot_neutral else {
+        return Ok(None);
+    };
+    let mut v = Vec::with_capacity(planes.len());
+    for p in planes {
+        let x = n
+            .iter()
+            .find(|(name, _)| name.len() == 1 && name.starts_with(*p))
+            .map(|(_, x)| *x)
+            .ok_or_else(|| IoError::InvalidMeta(format!("AsShotNeutral has no value for {p}")))?;
+        v.push(x);
+    }
+    let max = v.iter().copied().fold(0.0, f64::max);
+    if !(max.is_finite() && max > 0.0) || v.iter().any(|x| x.is_nan() || *x <= 0.0) {
+        return Err(IoError::InvalidMeta(format!(
+            "AsShotNeutral {v:?}: positive finite values are expected"
+        )));
+    }
+    Ok(Some(
+        v.iter()
+            .map(|x| Rational {
+                n: (x / max * 1e6).round().max(1.0) as u32,
+                d: 1_000_000,
+            })
+            .collect::<Vec<_>>(),
+    ))
+}
+
+/// ColorMatrix1, rows in CFAPlaneColor order.
+fn color_matrix(info: &DngWriteInfo, planes: &[char]) -> IoResult<Option<Vec<SRational>>> {
+    let Some(m) = &info.color_matrix else {
+        return Ok(None);
+    };
+    let mut v = Vec::with_capacity(3 * planes.len());
+    for p in planes {
+        let row = m
+            .iter()
+            .find(|(name, _)| name.len() == 1 && name.starts_with(*p))
+            .map(|(_, r)| *r)
+            .ok_or_else(|| IoError::InvalidMeta(format!("ColorMatrix1 has no row for {p}")))?;
+        for x in row {
+            if !(x.is_finite() && x.abs() < 1e4) {
                 return Err(IoError::InvalidMeta(format!(
-                    "AsShotNeutral {v:?}: positive finite values are expected"
+                    "ColorMatrix1 row {p} holds {x}; finite values below 1e4 are expected"
                 )));
             }
-            Some(
-                v.iter()
-                    .map(|x| Rational {
-                        n: (x / max * 1e6).round().max(1.0) as u32,
-                        d: 1_000_000,
-                    })
-                    .collect::<Vec<_>>(),
-            )
+            v.push(SRational {
+                n: (x * 1e4).round() as i32,
+                d: 10_000,
+            });
         }
-    };
-    let color_matrix = match &info.color_matrix {
-        None => None,
-        Some(m) => {
-            let mut v = Vec::with_capacity(3 * planes.len());
-            for p in &planes {
-                let row = m
-                    .iter()
-                    .find(|(name, _)| name.len() == 1 && name.starts_with(*p))
-                    .map(|(_, r)| *r)
-                    .ok_or_else(|| {
-                        IoError::InvalidMeta(format!("ColorMatrix1 has no row for {p}"))
-                    })?;
-                for x in row {
-                    if !(x.is_finite() && x.abs() < 1e4) {
-                        return Err(IoError::InvalidMeta(format!(
-                            "ColorMatrix1 row {p} holds {x}; finite values below 1e4 are expected"
-                        )));
-                    }
-                    v.push(SRational {
-                        n: (x * 1e4).round() as i32,
-                        d: 10_000,
-                    });
-                }
-            }
-            Some(v)
-        }
-    };
-    // an ASCII tag: other characters become '?'
-    let model: String = info
-        .camera_model
+    }
+    Ok(Some(v))
+}
+
+/// UniqueCameraModel: an ASCII tag, other characters become '?'.
+fn camera_model(info: &DngWriteInfo, meta: &RawMeta) -> String {
+    info.camera_model
         .clone()
         .or_else(|| meta.sensor.clone())
         .unwrap_or_else(|| "l3 simulated sensor".to_string())
@@ -291,9 +318,18 @@ pub fn encode_dng(frame: &RawFrame, meta: &RawMeta, info: &DngWriteInfo) -> IoRe
                 '?'
             }
         })
-        .collect();
+        .collect()
+}
 
-    let mut out = Cursor::new(Vec::with_capacity(bytes as usize + 4096));
+/// The TIFF: one directory, the frame as one strip, and the tags.
+fn write_tiff(
+    frame: &RawFrame,
+    meta: &RawMeta,
+    info: &DngWriteInfo,
+    tags: &DngTags,
+) -> IoResult<Vec<u8>> {
+    let (w, h) = (frame.width, frame.height);
+    let mut out = Cursor::new(Vec::with_capacity(tags.strip_bytes as usize + 4096));
     {
         let mut enc = TiffEncoder::new(&mut out).map_err(encode_err)?;
         let mut dir = enc.image_directory().map_err(encode_err)?;
@@ -313,28 +349,28 @@ pub fn encode_dng(frame: &RawFrame, meta: &RawMeta, info: &DngWriteInfo) -> IoRe
         put(dir.write_tag(t(273), offset))?;
         put(dir.write_tag(t(277), 1u16))?;
         put(dir.write_tag(t(278), h as u32))?;
-        put(dir.write_tag(t(279), bytes))?;
+        put(dir.write_tag(t(279), tags.strip_bytes))?;
         put(dir.write_tag(t(284), 1u16))?;
         put(dir.write_tag(t(305), "l3"))?;
         put(dir.write_tag(
             t(33421),
             &[
-                rows.len() as u16,
-                pattern.len() as u16 / rows.len().max(1) as u16,
+                tags.cfa_rows as u16,
+                tags.pattern.len() as u16 / tags.cfa_rows.max(1) as u16,
             ][..],
         ))?;
-        put(dir.write_tag(t(33422), &pattern[..]))?;
+        put(dir.write_tag(t(33422), &tags.pattern[..]))?;
         put(dir.write_tag(t(50706), &[1u8, 4, 0, 0][..]))?;
         put(dir.write_tag(t(50707), &[1u8, 1, 0, 0][..]))?;
-        put(dir.write_tag(t(50708), model.as_str()))?;
-        put(dir.write_tag(t(50710), &plane_codes[..]))?;
+        put(dir.write_tag(t(50708), tags.model.as_str()))?;
+        put(dir.write_tag(t(50710), &tags.plane_codes[..]))?;
         put(dir.write_tag(t(50711), 1u16))?;
         put(dir.write_tag(t(50714), meta.black_level))?;
         put(dir.write_tag(t(50717), u32::from(meta.white_level)))?;
-        if let Some(n) = &neutral {
+        if let Some(n) = &tags.neutral {
             put(dir.write_tag(t(50728), &n[..]))?;
         }
-        if let Some(m) = &color_matrix {
+        if let Some(m) = &tags.color_matrix {
             put(dir.write_tag(t(50721), &m[..]))?;
         }
         if let Some(code) = info.calibration_illuminant {

@@ -1,8 +1,8 @@
 //! The DNG reader: finds the full-resolution CFA image, decodes its strips or tiles, applies
 //! the linearization table, black levels and crops.
 
-use super::ifd::{Ifd, Tiff, dng_err, tag_name};
-use super::ljpeg;
+use super::chunks::{check_chunks, decode_chunks, layout};
+use super::ifd::{Ifd, Tiff, dng_err, required, tag_name};
 use super::{DngImage, DngInfo, cfa_letter};
 use crate::io::IoResult;
 use crate::io::limits::Limits;
@@ -19,14 +19,7 @@ const TAG_HEIGHT: u16 = 257;
 const TAG_BITS: u16 = 258;
 const TAG_COMPRESSION: u16 = 259;
 const TAG_PHOTOMETRIC: u16 = 262;
-const TAG_STRIP_OFFSETS: u16 = 273;
 const TAG_SAMPLES_PER_PIXEL: u16 = 277;
-const TAG_ROWS_PER_STRIP: u16 = 278;
-const TAG_STRIP_BYTES: u16 = 279;
-const TAG_TILE_WIDTH: u16 = 322;
-const TAG_TILE_LENGTH: u16 = 323;
-const TAG_TILE_OFFSETS: u16 = 324;
-const TAG_TILE_BYTES: u16 = 325;
 const TAG_SUB_IFDS: u16 = 330;
 const TAG_SAMPLE_FORMAT: u16 = 339;
 const TAG_CFA_REPEAT: u16 = 33421;
@@ -92,217 +85,6 @@ fn find_raw(t: &Tiff<'_>, ifd0: &Ifd) -> IoResult<Ifd> {
     }))
 }
 
-fn required(t: &Tiff<'_>, ifd: &Ifd, tag: u16) -> IoResult<u64> {
-    t.uint(ifd, tag)?
-        .ok_or_else(|| dng_err(format!("the raw image has no {}", tag_name(tag))))
-}
-
-/// How the raw image is cut into chunks (strips are tiles as wide as the image).
-struct Layout {
-    tile_w: usize,
-    tile_h: usize,
-    across: usize,
-    offsets: Vec<u64>,
-    counts: Vec<u64>,
-}
-
-fn layout(t: &Tiff<'_>, ifd: &Ifd, w: usize, h: usize, limits: &Limits) -> IoResult<Layout> {
-    let tiled = ifd.has(TAG_TILE_OFFSETS);
-    let (tile_w, tile_h, off_tag, count_tag) = if tiled {
-        let tw = required(t, ifd, TAG_TILE_WIDTH)?;
-        let th = required(t, ifd, TAG_TILE_LENGTH)?;
-        (tw, th, TAG_TILE_OFFSETS, TAG_TILE_BYTES)
-    } else {
-        let rps = t.uint(ifd, TAG_ROWS_PER_STRIP)?.unwrap_or(h as u64);
-        (
-            w as u64,
-            rps.min(h as u64),
-            TAG_STRIP_OFFSETS,
-            TAG_STRIP_BYTES,
-        )
-    };
-    let what = if tiled { "tile" } else { "strip" };
-    let (tile_w, tile_h) = (
-        usize::try_from(tile_w).unwrap_or(usize::MAX),
-        usize::try_from(tile_h).unwrap_or(usize::MAX),
-    );
-    limits
-        .check(tile_w, tile_h)
-        .map_err(|e| dng_err(format!("a {what} of {tile_w}×{tile_h} pixels: {e}")))?;
-    let across = w.div_ceil(tile_w);
-    let down = h.div_ceil(tile_h);
-    let n = across * down;
-    // (read whatever count the file holds, to name a mismatch clearly)
-    let offsets = t
-        .uints(ifd, off_tag, usize::MAX)?
-        .ok_or_else(|| dng_err(format!("the raw image has no {}", tag_name(off_tag))))?;
-    let counts = t
-        .uints(ifd, count_tag, usize::MAX)?
-        .ok_or_else(|| dng_err(format!("the raw image has no {}", tag_name(count_tag))))?;
-    if offsets.len() != n || counts.len() != n {
-        return Err(dng_err(format!(
-            "a {w}×{h} image in {tile_w}×{tile_h} {what}s needs {n} {what}s; {} lists {} and {} lists {}",
-            tag_name(off_tag),
-            offsets.len(),
-            tag_name(count_tag),
-            counts.len()
-        )));
-    }
-    Ok(Layout {
-        tile_w,
-        tile_h,
-        across,
-        offsets,
-        counts,
-    })
-}
-
-/// Checks, before the image is allocated, that the chunks' data can hold the image: every
-/// chunk lies inside the file, their bytes add up to no more than the file (chunks do not
-/// share data), and lossless JPEG chunks have at least one bit per sample.
-fn check_chunks(
-    t: &Tiff<'_>,
-    lay: &Layout,
-    compression: u64,
-    bits: u32,
-    w: usize,
-    h: usize,
-) -> IoResult<()> {
-    let mut bytes = 0u64;
-    let mut samples = 0u64;
-    for (k, (&off, &count)) in lay.offsets.iter().zip(&lay.counts).enumerate() {
-        let (x0, y0) = ((k % lay.across) * lay.tile_w, (k / lay.across) * lay.tile_h);
-        let vis_w = lay.tile_w.min(w.saturating_sub(x0)) as u64;
-        let vis_h = lay.tile_h.min(h.saturating_sub(y0)) as u64;
-        let len = if compression == 1 {
-            (lay.tile_w as u64 * u64::from(bits)).div_ceil(8) * vis_h
-        } else {
-            count
-        };
-        if t.slice(off, len).is_none() {
-            return Err(dng_err(format!(
-                "chunk {k} needs {len} bytes at offset {off} but the file has {}",
-                t.len()
-            )));
-        }
-        bytes = bytes.saturating_add(len);
-        samples = samples.saturating_add(vis_w * vis_h);
-    }
-    if bytes > t.len() as u64 {
-        return Err(dng_err(format!(
-            "the {} chunks need {bytes} bytes, more than the file's {}",
-            lay.offsets.len(),
-            t.len()
-        )));
-    }
-    if compression != 1 && samples > bytes.saturating_mul(8) {
-        return Err(dng_err(format!(
-            "{samples} samples cannot fit in {bytes} bytes of lossless JPEG data"
-        )));
-    }
-    Ok(())
-}
-
-/// Decodes every chunk into the `w × h` image.
-fn decode_chunks(
-    t: &Tiff<'_>,
-    lay: &Layout,
-    compression: u64,
-    bits: u32,
-    w: usize,
-    h: usize,
-    out: &mut [u16],
-) -> IoResult<()> {
-    let chunk_samples = lay.tile_w * lay.tile_h;
-    for (k, (&off, &count)) in lay.offsets.iter().zip(&lay.counts).enumerate() {
-        let (x0, y0) = ((k % lay.across) * lay.tile_w, (k / lay.across) * lay.tile_h);
-        let vis_w = lay.tile_w.min(w.saturating_sub(x0));
-        let vis_h = lay.tile_h.min(h.saturating_sub(y0));
-        let put = |out: &mut [u16], r: usize, c: usize, v: u16| {
-            if let Some(o) = out.get_mut((y0 + r) * w + x0 + c) {
-                *o = v;
-            }
-        };
-        if compression == 1 {
-            let row_bytes = (lay.tile_w as u64 * u64::from(bits)).div_ceil(8);
-            let need = row_bytes * vis_h as u64;
-            let data = t.slice(off, need).ok_or_else(|| {
-                dng_err(format!(
-                    "chunk {k} needs {need} bytes at offset {off} but the file has {}",
-                    t.len()
-                ))
-            })?;
-            for (r, row) in data.chunks(row_bytes as usize).enumerate().take(vis_h) {
-                match bits {
-                    8 => {
-                        for (c, &b) in row.iter().take(vis_w).enumerate() {
-                            put(out, r, c, u16::from(b));
-                        }
-                    }
-                    16 => {
-                        for (c, p) in row.chunks_exact(2).take(vis_w).enumerate() {
-                            let a = [
-                                p.first().copied().unwrap_or(0),
-                                p.get(1).copied().unwrap_or(0),
-                            ];
-                            let v = if t.big_endian() {
-                                u16::from_be_bytes(a)
-                            } else {
-                                u16::from_le_bytes(a)
-                            };
-                            put(out, r, c, v);
-                        }
-                    }
-                    _ => {
-                        // packed samples, most significant bit first, rows byte-aligned
-                        let mut acc = 0u32;
-                        let mut n = 0u32;
-                        let mut bytes = row.iter();
-                        for c in 0..vis_w {
-                            while n < bits {
-                                acc = (acc << 8) | u32::from(bytes.next().copied().unwrap_or(0));
-                                n += 8;
-                            }
-                            n -= bits;
-                            put(out, r, c, ((acc >> n) & ((1 << bits) - 1)) as u16);
-                        }
-                    }
-                }
-            }
-        } else {
-            let data = t.slice(off, count).ok_or_else(|| {
-                dng_err(format!(
-                    "chunk {k}: {count} bytes at offset {off} lie beyond the end of the file ({} bytes)",
-                    t.len()
-                ))
-            })?;
-            let j = ljpeg::decode(data, chunk_samples)?;
-            let need = (vis_h.saturating_sub(1)) * lay.tile_w + vis_w;
-            if j.samples.len() < need {
-                return Err(dng_err(format!(
-                    "chunk {k}: its lossless JPEG holds {} samples ({}×{}×{}); the {}×{} chunk needs {need}",
-                    j.samples.len(),
-                    j.width,
-                    j.height,
-                    j.components,
-                    lay.tile_w,
-                    lay.tile_h
-                )));
-            }
-            for r in 0..vis_h {
-                let row = j
-                    .samples
-                    .get(r * lay.tile_w..r * lay.tile_w + vis_w)
-                    .unwrap_or(&[]);
-                for (c, &v) in row.iter().enumerate() {
-                    put(out, r, c, v);
-                }
-            }
-        }
-    }
-    Ok(())
-}
-
 fn to_usize(v: f64) -> usize {
     if v.is_finite() && v > 0.0 {
         v.floor().min(usize::MAX as f64) as usize
@@ -315,43 +97,107 @@ fn to_usize(v: f64) -> usize {
 pub(super) fn decode(bytes: &[u8], limits: &Limits) -> IoResult<DngImage> {
     let t = Tiff::parse(bytes)?;
     let ifd0 = t.first_ifd()?;
+    let dng_version = version(&t, &ifd0)?;
+    let raw = find_raw(&t, &ifd0)?;
+    let s = stored(&t, &raw, limits)?;
+    let (w, h) = (s.width, s.height);
+    let cfa = cfa_pattern(&t, &raw)?;
+
+    // --- decode
+    let lay = layout(&t, &raw, w, h, limits)?;
+    check_chunks(&t, &lay, s.compression, s.bits, w, h)?;
+    let mut img = crate::buffers::zeroed::<u16>(w * h);
+    decode_chunks(&t, &lay, s.compression, s.bits, w, h, &mut img)?;
+
+    // --- linearization, areas, levels
+    let lin = linearization(&t, &raw)?;
+    let area = active_area(&t, &raw, w, h)?;
+    let crop = default_crop(&t, &raw, &area)?;
+    limits.check(crop.width, crop.height)?;
+    let levels = levels(&t, &raw, s.bits, &area)?;
+    let data = crop_and_level(&img, w, lin.as_deref(), &area, &crop, &levels);
+    if levels.black_level >= levels.white_level {
+        return Err(dng_err(format!(
+            "black level {} is not below the white level {}",
+            levels.black_level, levels.white_level
+        )));
+    }
+
+    let cam = camera_metadata(&t, &ifd0, &cfa.plane_colors)?;
+    let frame = RawFrame {
+        width: crop.width,
+        height: crop.height,
+        data,
+    };
+    Ok(DngImage {
+        frame,
+        cfa: cfa.seen_from(crop.x, crop.y),
+        black_level: levels.black_level,
+        white_level: levels.white_level,
+        info: DngInfo {
+            version: dng_version,
+            bits_per_sample: s.bits as u8,
+            compression: s.compression as u16,
+            plane_colors: cfa.plane_colors,
+            black_levels: levels.blacks,
+            as_shot_neutral: cam.as_shot_neutral,
+            calibration_illuminants: cam.calibration_illuminants,
+            color_matrices: cam.color_matrices,
+            unique_camera_model: cam.unique_camera_model,
+        },
+    })
+}
+
+/// DNGVersion of IFD0, which a DNG must have.
+fn version(t: &Tiff<'_>, ifd0: &Ifd) -> IoResult<[u8; 4]> {
     let version = t
-        .uints(&ifd0, TAG_DNG_VERSION, 4)?
+        .uints(ifd0, TAG_DNG_VERSION, 4)?
         .ok_or_else(|| dng_err("not a DNG: IFD0 has no DNGVersion (50706) tag"))?;
     let mut dng_version = [0u8; 4];
     for (d, v) in dng_version.iter_mut().zip(&version) {
         *d = *v as u8;
     }
-    let raw = find_raw(&t, &ifd0)?;
+    Ok(dng_version)
+}
 
-    // --- the stored image
-    let w = required(&t, &raw, TAG_WIDTH)?;
-    let h = required(&t, &raw, TAG_HEIGHT)?;
+/// How the raw image's samples are stored.
+struct Stored {
+    width: usize,
+    height: usize,
+    bits: u32,
+    compression: u64,
+}
+
+/// The stored image's size (checked against `limits`), sample layout and compression, of
+/// the kinds this reader decodes.
+fn stored(t: &Tiff<'_>, raw: &Ifd, limits: &Limits) -> IoResult<Stored> {
+    let w = required(t, raw, TAG_WIDTH)?;
+    let h = required(t, raw, TAG_HEIGHT)?;
     let (w, h) = (
         usize::try_from(w).unwrap_or(usize::MAX),
         usize::try_from(h).unwrap_or(usize::MAX),
     );
     limits.check(w, h)?;
-    let spp = t.uint(&raw, TAG_SAMPLES_PER_PIXEL)?.unwrap_or(1);
+    let spp = t.uint(raw, TAG_SAMPLES_PER_PIXEL)?.unwrap_or(1);
     if spp != 1 {
         return Err(dng_err(format!(
             "the CFA image has {spp} samples per pixel; 1 is expected"
         )));
     }
-    let bits = t.uint(&raw, TAG_BITS)?.unwrap_or(1);
+    let bits = t.uint(raw, TAG_BITS)?.unwrap_or(1);
     if !(8..=16).contains(&bits) {
         return Err(dng_err(format!(
             "{bits} bits per sample; 8 to 16 are supported"
         )));
     }
     let bits = bits as u32;
-    let format = t.uint(&raw, TAG_SAMPLE_FORMAT)?.unwrap_or(1);
+    let format = t.uint(raw, TAG_SAMPLE_FORMAT)?.unwrap_or(1);
     if format != 1 {
         return Err(dng_err(format!(
             "sample format {format} (floating point or signed); unsigned integers are supported"
         )));
     }
-    let compression = t.uint(&raw, TAG_COMPRESSION)?.unwrap_or(1);
+    let compression = t.uint(raw, TAG_COMPRESSION)?.unwrap_or(1);
     if compression != 1 && compression != 7 {
         let what = match compression {
             8 => " (deflate)",
@@ -363,16 +209,52 @@ pub(super) fn decode(bytes: &[u8], limits: &Limits) -> IoResult<DngImage> {
             "compression {compression}{what}; uncompressed (1) and lossless JPEG (7) are supported"
         )));
     }
+    Ok(Stored {
+        width: w,
+        height: h,
+        bits,
+        compression,
+    })
+}
 
-    // --- the CFA
-    let layout_tag = t.uint(&raw, TAG_CFA_LAYOUT)?.unwrap_or(1);
+/// The CFA: its repeat pattern as letters from the stored image's origin, and CFAPlaneColor.
+struct CfaPattern {
+    rows: usize,
+    cols: usize,
+    pattern: Vec<char>,
+    plane_colors: String,
+}
+
+impl CfaPattern {
+    /// The CFA seen from pixel (`x`, `y`), rows separated by '/'.
+    fn seen_from(&self, x: usize, y: usize) -> String {
+        let (rows, cols) = (self.rows, self.cols);
+        (0..rows)
+            .map(|r| {
+                (0..cols)
+                    .map(|c| {
+                        self.pattern
+                            .get(((r + y) % rows) * cols + (c + x) % cols)
+                            .copied()
+                            .unwrap_or('?')
+                    })
+                    .collect::<String>()
+            })
+            .collect::<Vec<_>>()
+            .join("/")
+    }
+}
+
+/// CFALayout, CFARepeatPatternDim, CFAPattern and CFAPlaneColor, checked.
+fn cfa_pattern(t: &Tiff<'_>, raw: &Ifd) -> IoResult<CfaPattern> {
+    let layout_tag = t.uint(raw, TAG_CFA_LAYOUT)?.unwrap_or(1);
     if layout_tag != 1 {
         return Err(dng_err(format!(
             "CFALayout {layout_tag}; only the rectangular layout (1) is supported"
         )));
     }
     let dims = t
-        .uints(&raw, TAG_CFA_REPEAT, 2)?
+        .uints(raw, TAG_CFA_REPEAT, 2)?
         .ok_or_else(|| dng_err("the raw image has no CFARepeatPatternDim (33421)"))?;
     let [rows, cols] = dims[..] else {
         return Err(dng_err("CFARepeatPatternDim (33421) needs 2 values"));
@@ -384,7 +266,7 @@ pub(super) fn decode(bytes: &[u8], limits: &Limits) -> IoResult<DngImage> {
     }
     let (rows, cols) = (rows as usize, cols as usize);
     let codes = t
-        .uints(&raw, TAG_CFA_PATTERN, rows * cols)?
+        .uints(raw, TAG_CFA_PATTERN, rows * cols)?
         .ok_or_else(|| dng_err("the raw image has no CFAPattern (33422)"))?;
     if codes.len() != rows * cols {
         return Err(dng_err(format!(
@@ -404,8 +286,24 @@ pub(super) fn decode(bytes: &[u8], limits: &Limits) -> IoResult<DngImage> {
             ))
         })?);
     }
+    let plane_colors = plane_colors(t, raw)?;
+    if let Some(&l) = pattern.iter().find(|l| !plane_colors.contains(**l)) {
+        return Err(dng_err(format!(
+            "CFAPattern uses {l}, which CFAPlaneColor ({plane_colors}) does not list"
+        )));
+    }
+    Ok(CfaPattern {
+        rows,
+        cols,
+        pattern,
+        plane_colors,
+    })
+}
+
+/// CFAPlaneColor as letters (R, G, B by default), each listed once.
+fn plane_colors(t: &Tiff<'_>, raw: &Ifd) -> IoResult<String> {
     let planes = t
-        .uints(&raw, TAG_CFA_PLANE_COLOR, 16)?
+        .uints(raw, TAG_CFA_PLANE_COLOR, 16)?
         .unwrap_or_else(|| vec![0, 1, 2]);
     let mut plane_colors = String::new();
     for &code in &planes {
@@ -420,20 +318,12 @@ pub(super) fn decode(bytes: &[u8], limits: &Limits) -> IoResult<DngImage> {
         }
         plane_colors.push(l);
     }
-    if let Some(&l) = pattern.iter().find(|l| !plane_colors.contains(**l)) {
-        return Err(dng_err(format!(
-            "CFAPattern uses {l}, which CFAPlaneColor ({plane_colors}) does not list"
-        )));
-    }
+    Ok(plane_colors)
+}
 
-    // --- decode
-    let lay = layout(&t, &raw, w, h, limits)?;
-    check_chunks(&t, &lay, compression, bits, w, h)?;
-    let mut img = crate::buffers::zeroed::<u16>(w * h);
-    decode_chunks(&t, &lay, compression, bits, w, h, &mut img)?;
-
-    // --- linearization, areas, levels
-    let lin = t.uints(&raw, TAG_LINEARIZATION, 1 << 16)?.map(|v| {
+/// LinearizationTable, when there is one (it may not be empty).
+fn linearization(t: &Tiff<'_>, raw: &Ifd) -> IoResult<Option<Vec<u16>>> {
+    let lin = t.uints(raw, TAG_LINEARIZATION, 1 << 16)?.map(|v| {
         v.into_iter()
             .map(|x| x.min(65535) as u16)
             .collect::<Vec<u16>>()
@@ -441,7 +331,19 @@ pub(super) fn decode(bytes: &[u8], limits: &Limits) -> IoResult<DngImage> {
     if lin.as_ref().is_some_and(|l| l.is_empty()) {
         return Err(dng_err("LinearizationTable (50712) is empty"));
     }
-    let (top, left, bottom, right) = match t.uints(&raw, TAG_ACTIVE_AREA, 4)? {
+    Ok(lin)
+}
+
+/// ActiveArea in the stored image (the whole image by default).
+struct ActiveArea {
+    top: usize,
+    left: usize,
+    width: usize,
+    height: usize,
+}
+
+fn active_area(t: &Tiff<'_>, raw: &Ifd, w: usize, h: usize) -> IoResult<ActiveArea> {
+    let (top, left, bottom, right) = match t.uints(raw, TAG_ACTIVE_AREA, 4)? {
         None => (0, 0, h, w),
         Some(v) => match v[..] {
             [a, b, c, d] => {
@@ -456,9 +358,26 @@ pub(super) fn decode(bytes: &[u8], limits: &Limits) -> IoResult<DngImage> {
             "ActiveArea (top {top}, left {left}, bottom {bottom}, right {right}) is not inside the {w}×{h} image"
         )));
     }
-    let (aw, ah) = (right - left, bottom - top);
+    Ok(ActiveArea {
+        top,
+        left,
+        width: right - left,
+        height: bottom - top,
+    })
+}
+
+/// DefaultCropOrigin and DefaultCropSize, in the active area (all of it by default).
+struct Crop {
+    x: usize,
+    y: usize,
+    width: usize,
+    height: usize,
+}
+
+fn default_crop(t: &Tiff<'_>, raw: &Ifd, area: &ActiveArea) -> IoResult<Crop> {
+    let (aw, ah) = (area.width, area.height);
     let crop = |tag: u16| -> IoResult<Option<(usize, usize)>> {
-        Ok(match t.reals(&raw, tag, 2)? {
+        Ok(match t.reals(raw, tag, 2)? {
             None => None,
             Some(v) => match v[..] {
                 [x, y] if x >= 0.0 && y >= 0.0 => Some((to_usize(x), to_usize(y))),
@@ -478,9 +397,46 @@ pub(super) fn decode(bytes: &[u8], limits: &Limits) -> IoResult<DngImage> {
             "the default crop ({cw}×{ch} at {cx},{cy}) is not inside the {aw}×{ah} active area"
         )));
     }
-    limits.check(cw, ch)?;
+    Ok(Crop {
+        x: cx,
+        y: cy,
+        width: cw,
+        height: ch,
+    })
+}
 
-    let (br, bc) = match t.uints(&raw, TAG_BLACK_REPEAT, 2)? {
+/// The black and white levels, and the one black level the frame gets.
+struct Levels {
+    /// BlackLevel, `br × bc` values.
+    blacks: Vec<f64>,
+    br: usize,
+    bc: usize,
+    /// BlackLevelDeltaH (per active-area column) and BlackLevelDeltaV (per row).
+    delta_h: Vec<f64>,
+    delta_v: Vec<f64>,
+    white: f64,
+    white_level: u16,
+    /// The lowest black, floored: the frame's one black level.
+    black_level: u16,
+    /// Whether every pixel has `black_level` as its black (the values are kept as stored).
+    exact: bool,
+}
+
+impl Levels {
+    /// The black of an output pixel, relative to the active area's origin.
+    fn black_at(&self, r: usize, c: usize) -> f64 {
+        self.blacks
+            .get((r % self.br) * self.bc + c % self.bc)
+            .copied()
+            .unwrap_or(0.0)
+            + self.delta_v.get(r).copied().unwrap_or(0.0)
+            + self.delta_h.get(c).copied().unwrap_or(0.0)
+    }
+}
+
+/// BlackLevelRepeatDim, BlackLevel, BlackLevelDeltaH/V and WhiteLevel, checked.
+fn levels(t: &Tiff<'_>, raw: &Ifd, bits: u32, area: &ActiveArea) -> IoResult<Levels> {
+    let (br, bc) = match t.uints(raw, TAG_BLACK_REPEAT, 2)? {
         None => (1, 1),
         Some(v) => match v[..] {
             [r, c] if (1..=MAX_REPEAT).contains(&r) && (1..=MAX_REPEAT).contains(&c) => {
@@ -493,7 +449,7 @@ pub(super) fn decode(bytes: &[u8], limits: &Limits) -> IoResult<DngImage> {
             }
         },
     };
-    let blacks = match t.reals(&raw, TAG_BLACK, (MAX_REPEAT * MAX_REPEAT) as usize)? {
+    let blacks = match t.reals(raw, TAG_BLACK, (MAX_REPEAT * MAX_REPEAT) as usize)? {
         None => vec![0.0; br * bc],
         Some(v) if v.len() == br * bc => v,
         Some(v) if v.len() == 1 => vec![v.first().copied().unwrap_or(0.0); br * bc],
@@ -506,7 +462,7 @@ pub(super) fn decode(bytes: &[u8], limits: &Limits) -> IoResult<DngImage> {
         }
     };
     let delta = |tag: u16, n: usize| -> IoResult<Vec<f64>> {
-        match t.reals(&raw, tag, n)? {
+        match t.reals(raw, tag, n)? {
             None => Ok(vec![0.0; n]),
             Some(v) if v.len() == n => Ok(v),
             Some(v) => Err(dng_err(format!(
@@ -516,9 +472,9 @@ pub(super) fn decode(bytes: &[u8], limits: &Limits) -> IoResult<DngImage> {
             ))),
         }
     };
-    let delta_h = delta(TAG_BLACK_DELTA_H, aw)?;
-    let delta_v = delta(TAG_BLACK_DELTA_V, ah)?;
-    let white = match t.reals(&raw, TAG_WHITE, 1)? {
+    let delta_h = delta(TAG_BLACK_DELTA_H, area.width)?;
+    let delta_v = delta(TAG_BLACK_DELTA_V, area.height)?;
+    let white = match t.reals(raw, TAG_WHITE, 1)? {
         None => f64::from((1u32 << bits) - 1),
         Some(v) => v.first().copied().unwrap_or(0.0),
     };
@@ -528,12 +484,6 @@ pub(super) fn decode(bytes: &[u8], limits: &Limits) -> IoResult<DngImage> {
         )));
     }
     let white_level = white.round() as u16;
-    // the black of each output pixel, relative to the active area's origin
-    let black_at = |r: usize, c: usize| -> f64 {
-        blacks.get((r % br) * bc + c % bc).copied().unwrap_or(0.0)
-            + delta_v.get(r).copied().unwrap_or(0.0)
-            + delta_h.get(c).copied().unwrap_or(0.0)
-    };
     // one black level for the frame: the lowest; pixels are rescaled to it unless every
     // pixel has the same, whole-numbered black
     let lowest = |v: &[f64]| v.iter().copied().fold(f64::INFINITY, f64::min);
@@ -548,21 +498,46 @@ pub(super) fn decode(bytes: &[u8], limits: &Limits) -> IoResult<DngImage> {
     }
     let black_level = min_black.floor() as u16;
     let exact = uniform && first_black == f64::from(black_level);
+    Ok(Levels {
+        blacks,
+        br,
+        bc,
+        delta_h,
+        delta_v,
+        white,
+        white_level,
+        black_level,
+        exact,
+    })
+}
 
+/// The default crop of the `w`-wide stored image, linearised and, unless every pixel has the
+/// frame's black level, rescaled to it.
+fn crop_and_level(
+    img: &[u16],
+    w: usize,
+    lin: Option<&[u16]>,
+    area: &ActiveArea,
+    crop: &Crop,
+    levels: &Levels,
+) -> Vec<u16> {
+    let (cx, cy, cw, ch) = (crop.x, crop.y, crop.width, crop.height);
+    let (top, left) = (area.top, area.left);
+    let (white, black_level) = (levels.white, levels.black_level);
     let mut data = crate::buffers::zeroed::<u16>(cw * ch);
     for r in 0..ch {
         let (ar, sr) = (cy + r, top + cy + r);
         for c in 0..cw {
             let (ac, sc) = (cx + c, left + cx + c);
             let mut v = img.get(sr * w + sc).copied().unwrap_or(0);
-            if let Some(l) = &lin {
+            if let Some(l) = lin {
                 v = l.get(usize::from(v)).or(l.last()).copied().unwrap_or(v);
             }
-            if !exact {
+            if !levels.exact {
                 // one black level for the frame: rescale (v − b) / (white − b) to
                 // (white − black_level) so that every pixel keeps its place between its own
                 // black and the white
-                let b = black_at(ar, ac);
+                let b = levels.black_at(ar, ac);
                 let scale = (white - f64::from(black_level)) / (white - b).max(1e-9);
                 let x = (f64::from(v) - b) * scale + f64::from(black_level);
                 v = x.round().clamp(0.0, 65535.0) as u16;
@@ -572,30 +547,22 @@ pub(super) fn decode(bytes: &[u8], limits: &Limits) -> IoResult<DngImage> {
             }
         }
     }
-    if black_level >= white_level {
-        return Err(dng_err(format!(
-            "black level {black_level} is not below the white level {white_level}"
-        )));
-    }
+    data
+}
 
-    // the CFA seen from the default crop's origin (the pattern starts at the active area)
-    let cfa: String = (0..rows)
-        .map(|r| {
-            (0..cols)
-                .map(|c| {
-                    pattern
-                        .get(((r + cy) % rows) * cols + (c + cx) % cols)
-                        .copied()
-                        .unwrap_or('?')
-                })
-                .collect::<String>()
-        })
-        .collect::<Vec<_>>()
-        .join("/");
+/// The camera metadata of IFD0.
+struct CameraMetadata {
+    as_shot_neutral: Option<Vec<f64>>,
+    calibration_illuminants: [Option<u16>; 2],
+    color_matrices: [Option<Vec<f64>>; 2],
+    unique_camera_model: Option<String>,
+}
 
-    // --- camera metadata (IFD0)
+/// AsShotNeutral, CalibrationIlluminant1/2, ColorMatrix1/2 (one value, or row, per plane of
+/// `plane_colors`) and UniqueCameraModel.
+fn camera_metadata(t: &Tiff<'_>, ifd0: &Ifd, plane_colors: &str) -> IoResult<CameraMetadata> {
     let n_planes = plane_colors.len();
-    let as_shot_neutral = match t.reals(&ifd0, TAG_AS_SHOT_NEUTRAL, 16)? {
+    let as_shot_neutral = match t.reals(ifd0, TAG_AS_SHOT_NEUTRAL, 16)? {
         None => None,
         Some(v) if v.len() == n_planes && v.iter().all(|&x| x > 0.0) => Some(v),
         Some(v) => {
@@ -608,9 +575,9 @@ pub(super) fn decode(bytes: &[u8], limits: &Limits) -> IoResult<DngImage> {
     let mut color_matrices = [None, None];
     for k in 0..2 {
         calibration_illuminants[k] = t
-            .uint(&ifd0, TAG_CALIBRATION_ILLUMINANT[k])?
+            .uint(ifd0, TAG_CALIBRATION_ILLUMINANT[k])?
             .map(|v| v.min(u64::from(u16::MAX)) as u16);
-        color_matrices[k] = match t.reals(&ifd0, TAG_COLOR_MATRIX[k], 3 * 16)? {
+        color_matrices[k] = match t.reals(ifd0, TAG_COLOR_MATRIX[k], 3 * 16)? {
             None => None,
             Some(v) if v.len() == 3 * n_planes => Some(v),
             Some(v) => {
@@ -622,28 +589,11 @@ pub(super) fn decode(bytes: &[u8], limits: &Limits) -> IoResult<DngImage> {
             }
         };
     }
-    let unique_camera_model = t.ascii(&ifd0, TAG_CAMERA_MODEL, 1024)?;
-
-    let frame = RawFrame {
-        width: cw,
-        height: ch,
-        data,
-    };
-    Ok(DngImage {
-        frame,
-        cfa,
-        black_level,
-        white_level,
-        info: DngInfo {
-            version: dng_version,
-            bits_per_sample: bits as u8,
-            compression: compression as u16,
-            plane_colors,
-            black_levels: blacks,
-            as_shot_neutral,
-            calibration_illuminants,
-            color_matrices,
-            unique_camera_model,
-        },
+    let unique_camera_model = t.ascii(ifd0, TAG_CAMERA_MODEL, 1024)?;
+    Ok(CameraMetadata {
+        as_shot_neutral,
+        calibration_illuminants,
+        color_matrices,
+        unique_camera_model,
     })
 }
