@@ -6,7 +6,7 @@
 
 For every bayer_*.dng under the folder, LibRaw's raw values (the visible area), black and
 white levels and CFA are compared with the file's raw twin (bayer_*.raw + .json), which is
-what `l3`'s reader gives for the DNG: tests/dng_fixtures.rs asserts that the decoded DNG
+what `l3`'s reader gives for the DNG: tests/io/dng_fixtures.rs asserts that the decoded DNG
 equals its twin pixel for pixel. LibRaw does not read RGBW CFAs (colour code 6), so only the
 Bayer files are compared. Exits non-zero on any difference.
 """

@@ -1,7 +1,7 @@
 #!/usr/bin/env python3
 """Writes the DNG fixtures under tests/fixtures/dng/ with a third-party writer (PiDNG), each
 beside its raw twin: the same mosaic as little-endian u16 `.raw` plus the JSON sidecar that
-`l3` reads, with the same levels. tests/dng_fixtures.rs checks that every DNG decodes and
+`l3` reads, with the same levels. tests/io/dng_fixtures.rs checks that every DNG decodes and
 renders exactly as its twin.
 
     python3.9 -m pip install 'pidng>=4,<5' numpy

@@ -142,13 +142,6 @@ fn lab_strategy() -> impl Strategy<Value = Lab> {
 }
 
 proptest! {
-    #![proptest_config(ProptestConfig {
-        failure_persistence: Some(Box::new(
-            proptest::test_runner::FileFailurePersistence::WithSource("proptest-regressions"),
-        )),
-        ..ProptestConfig::default()
-    })]
-
     #[test]
     fn ciede2000_is_a_symmetric_nonnegative_distance(a in lab_strategy(), b in lab_strategy()) {
         let d = ciede2000(a, b);

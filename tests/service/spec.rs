@@ -2,12 +2,10 @@
 //! route is served, and the response check every service test runs its JSON answers through
 //! (`service_support::openapi`) fails on bodies that break the document.
 
-mod service_support;
-
 use std::collections::BTreeSet;
 
+use crate::service_support::openapi::{check_response, route_template};
 use serde_json::json;
-use service_support::openapi::{check_response, route_template};
 
 #[test]
 fn openapi_documents_exactly_the_served_routes() {

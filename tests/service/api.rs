@@ -1,12 +1,10 @@
 //! The render service end to end on a real listener: render parity with `l3 render`, every
 //! table / illuminant / evaluation / health endpoint, limits, auth and hostile input.
 
-mod service_support;
-
 use std::path::Path;
 use std::process::Command;
 
-use service_support::*;
+use crate::service_support::*;
 
 fn l3_cli(args: &[&str], dir: &Path) {
     let out = Command::new(env!("CARGO_BIN_EXE_l3"))

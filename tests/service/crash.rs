@@ -7,16 +7,14 @@
 //! `L3_DEBUG_PAUSE_ACTIVATION_MS`, which makes the service pause (and log) just before the
 //! rename of a new table file and just before recording a table switch.
 
-mod service_support;
-
 use std::io::{BufRead, BufReader};
 use std::path::{Path, PathBuf};
 use std::process::{Child, Command, Stdio};
 use std::sync::{Arc, Mutex};
 use std::time::{Duration, Instant};
 
+use crate::service_support::checked_json;
 use serde_json::{Value, json};
-use service_support::checked_json;
 
 /// A running `l3 serve` child with its captured log lines.
 struct Service {

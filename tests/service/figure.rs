@@ -1,9 +1,7 @@
 //! `GET /v1/evaluations/{id}` with `Accept: image/svg+xml` answers the report's figure; JSON
 //! stays the default.
 
-mod service_support;
-
-use service_support::*;
+use crate::service_support::*;
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn evaluation_figure_is_served_as_svg() {

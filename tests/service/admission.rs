@@ -2,11 +2,9 @@
 //! slot; a full queue and a wait past the limit get 503 with Retry-After; a body past the
 //! body budget gets 503 before it is read; a render abandoned by its request is canceled.
 
-mod service_support;
-
 use std::time::Duration;
 
-use service_support::*;
+use crate::service_support::*;
 use tokio::io::{AsyncReadExt, AsyncWriteExt};
 use tokio::net::TcpStream;
 

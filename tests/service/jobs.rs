@@ -1,9 +1,7 @@
 //! Training jobs over HTTP: submit (idempotent) → running with progress → succeeded →
 //! activated → used for a render; cancel; restart with a queued and a running job.
 
-mod service_support;
-
-use service_support::*;
+use crate::service_support::*;
 
 fn gradient_raw(w: usize, h: usize) -> Vec<u8> {
     (0..w * h)

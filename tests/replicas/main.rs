@@ -6,6 +6,7 @@
 //! both at once each run exactly once; the default table is trained once per cluster, and a
 //! replica caches table bytes from the database (a damaged cache file is fetched again).
 
+#[path = "../service_support/mod.rs"]
 mod service_support;
 
 use std::io::{BufRead, BufReader};
@@ -640,7 +641,7 @@ async fn kill9_of_a_replica_running_a_shard_and_the_other_retries_it() {
 /// The figures of the README: one moderately sized job (`L3_SHARD_BENCH_SCENES`, 48 by default,
 /// otherwise the default table's spec) unsharded on one replica, in 2 shards on one replica,
 /// and in 2 shards on two replicas, `L3_SHARD_BENCH_ROUNDS` times (3) in turn; every replica
-/// has a background pool of every core (so two replicas share them). `cargo test --test service_replicas -- --ignored
+/// has a background pool of every core (so two replicas share them). `cargo test --test replicas -- --ignored
 /// --nocapture sharding_figures`.
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 #[ignore = "a measurement, about a minute or more"]

@@ -16,7 +16,7 @@
 // Index loops read best in numeric code (as in the library).
 #![allow(clippy::needless_range_loop)]
 
-mod iset_reference;
+use crate::iset_reference;
 
 use std::sync::atomic::AtomicBool;
 

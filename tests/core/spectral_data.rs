@@ -1,7 +1,7 @@
 //! The built-in spectral data (`config/spectra/`) against its source, the
 //! ISET data directory: every built-in ISET table holds the same numbers.
 
-mod iset_reference;
+use crate::iset_reference;
 
 use l3::spectral::{bundled_paths, bundled_table, load_csv};
 
