@@ -1,11 +1,13 @@
 //! Checks on the repository itself rather than on the crate's behaviour: the documentation's
 //! relative links resolve (`links`), and the code's citations of the design notes point at
-//! `docs/design.md` and at sections it has (`design_refs`).
+//! `docs/design.md` and at sections it has (`design_refs`), and `src/` keeps its floor plan:
+//! file and function sizes, no long argument lists, no import cycle between files (`structure`).
 //!
 //! `cargo test --test repo`; one of them with e.g. `cargo test --test repo links`.
 
 mod design_refs;
 mod links;
+mod structure;
 
 use std::path::{Path, PathBuf};
 
