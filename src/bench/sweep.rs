@@ -11,14 +11,17 @@ use super::render::{
 };
 use super::skips::{EncoderResult, SkipInputs, SkipResult, run_skips};
 use super::{BenchError, pareto_front};
+use crate::baseline::ColourMatrix;
 use crate::camera::{Camera, NoiseSwitches, SensorDesign, mosaic};
 use crate::eval::{
     ChannelSet, ChartCapture, ChartSetup, ColourFit, LightLevel, fit_colour_matrix, simulate_chart,
 };
-use crate::l3::{ColourMatrix, IlluminantEntry, IlluminantRegistry, L3Table, TableKind};
+use crate::l3::L3Table;
+use crate::l3::correct::{IlluminantEntry, IlluminantRegistry};
+use crate::l3::learn::{TrainingSpec, train_table};
+use crate::l3::table::TableKind;
 use crate::scene::{DeadLeavesParams, SceneOptions, dead_leaves, training_reflectances};
 use crate::spectral::{IlluminantSpec, IsetData, WavelengthGrid};
-use crate::training::{TrainingSpec, train_table};
 
 /// Which tables an L3 configuration trains.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
@@ -447,7 +450,7 @@ impl ChartCase {
     ) -> Result<Self, BenchError> {
         // the camera's neutral under the light, which balanced chroma classes need
         let correction =
-            crate::training::with_neutral(camera, &registry.resolve(acquisition, iset)?)?;
+            crate::l3::correct::with_neutral(camera, &registry.resolve(acquisition, iset)?)?;
         let full = simulate_chart(camera, acquisition, iset, &opts.chart)?;
         let low_setup = LightLevel::ExposureFactor(opts.low_light_factor).apply(&opts.chart)?;
         let low = simulate_chart(camera, acquisition, iset, &low_setup)?;

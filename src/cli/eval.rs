@@ -8,7 +8,8 @@ use crate::eval::{
     ChartSetup, LightLevel, Method, PaperOptions, evaluate_method, fit_baseline_matrix,
     noise_split, paper_summary, run_paper_table,
 };
-use crate::l3::{IlluminantRegistry, L3Table};
+use crate::l3::L3Table;
+use crate::l3::correct::IlluminantRegistry;
 use crate::render_pipeline::{CorrectionMode, correction_for, uses_own_kernels};
 use crate::spectral::WavelengthGrid;
 
@@ -435,7 +436,7 @@ fn evaluate_and_explain(
     method: &Method,
     name: &str,
     acq: &str,
-    corr: &crate::l3::IlluminantEntry,
+    corr: &crate::l3::correct::IlluminantEntry,
     iset: Option<&crate::spectral::IsetData>,
     chart: &ChartSetup,
 ) -> Result<crate::eval::DeltaEReport, CliError> {

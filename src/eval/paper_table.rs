@@ -2,7 +2,7 @@
 //! conventional baseline on the Natural-100 chart, under tungsten and again
 //! under fluorescent, beside the published figures; and the SI tables again
 //! with the camera-aware correction C in place of T (`+C` rows, see
-//! `crate::l3::camera_correction`).
+//! `crate::l3::correct::camera_correction`).
 
 use std::collections::BTreeMap;
 use std::sync::atomic::AtomicBool;
@@ -16,9 +16,13 @@ use super::workflow::{
 };
 use super::{DeltaEReport, EvalError, summarize};
 use crate::camera::{Camera, SensorDesign};
-use crate::l3::{IlluminantEntry, IlluminantRegistry, L3Table, LevelMap, TableKind};
+use crate::l3::L3Table;
+use crate::l3::correct::{
+    IlluminantEntry, IlluminantRegistry, LevelMap, camera_corrected, noise_model,
+};
+use crate::l3::learn::{TrainingSpec, train_table};
+use crate::l3::table::TableKind;
 use crate::spectral::{IsetData, WavelengthGrid};
-use crate::training::{TrainingSpec, camera_corrected, noise_model, train_table};
 
 /// The paper's Table 1 (tungsten acquisition): mean, std, p90 of ΔE2000.
 pub const PAPER_TABLE1: [(&str, f64, f64, f64); 4] = [
@@ -61,7 +65,7 @@ pub struct PaperOptions {
     /// evaluated; the smallest is the low-light column.
     #[serde(default = "default_exposures")]
     pub exposures: Vec<f64>,
-    /// Chroma classes of every table (1: none; see `src/l3/chroma.rs`).
+    /// Chroma classes of every table (1: none; see `src/l3/classify/chroma.rs`).
     #[serde(default = "one")]
     pub chroma_classes: usize,
     /// Noisy captures of the chart every row is evaluated on at full
@@ -665,8 +669,8 @@ pub fn run_paper_table(
         let acq_rgb = fit_matrix(&acq_list, TableKind::CrossIlluminant, ChannelSet::Rgb)?;
         let acq_all = fit_matrix(&acq_list, TableKind::CrossIlluminant, ChannelSet::All)?;
         // the acquisition-fit baselines are white-balanced cross maps: no T
-        let identity = crate::l3::IlluminantEntry {
-            t: crate::l3::IDENTITY,
+        let identity = crate::l3::correct::IlluminantEntry {
+            t: crate::l3::correct::IDENTITY,
             ..corr.clone()
         };
         methods.push(("Baseline+T".into(), Method::Baseline(&d65_rgb), None));

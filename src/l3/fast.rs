@@ -36,10 +36,11 @@ mod frames;
 
 pub use frames::Frame;
 
-use super::classify::sat_case_index;
-use super::output::{WhiteLevel, white_from_samples, white_sample_points};
-use super::render::{dot, fuse_matrix};
-use super::{L3Error, L3Table, PatchGeometry, RenderStats};
+use super::classify::{PatchGeometry, sat_case_index};
+use super::render::error::RenderError;
+use super::render::output::{WhiteLevel, white_from_samples, white_sample_points};
+use super::render::reference::{RenderStats, dot, fuse_matrix};
+use super::table::L3Table;
 use crate::colour::{SrgbLut, XYZ_TO_LINEAR_SRGB};
 
 /// Rows per rayon task.
@@ -438,7 +439,7 @@ impl FastRenderer {
     /// Prepare `table` with `kernels` (its own, or fused with a correction matrix
     /// by [`fuse_kernels`](super::fuse_kernels)), its chroma classes under their
     /// reference light.
-    pub fn new(table: &L3Table, kernels: &[f32]) -> Result<Self, L3Error> {
+    pub fn new(table: &L3Table, kernels: &[f32]) -> Result<Self, RenderError> {
         Self::under_light(table, kernels, None)
     }
 
@@ -448,15 +449,15 @@ impl FastRenderer {
         table: &L3Table,
         kernels: &[f32],
         light: Option<&[f64]>,
-    ) -> Result<Self, L3Error> {
+    ) -> Result<Self, RenderError> {
         if kernels.len() != table.kernels.len() {
-            return Err(L3Error::KernelMismatch {
+            return Err(RenderError::KernelMismatch {
                 got: kernels.len(),
                 expected: table.kernels.len(),
             });
         }
         if kernels.iter().any(|v| !v.is_finite()) {
-            return Err(L3Error::Table("a kernel weight is not finite".into()));
+            return Err(RenderError::Table("a kernel weight is not finite".into()));
         }
         let geo = table.geometry_under(light)?;
         let nf = table.n_features();
@@ -540,12 +541,12 @@ impl FastRenderer {
         width: usize,
         height: usize,
         region: Option<Region>,
-    ) -> Result<(Vec<f32>, RenderStats), L3Error> {
+    ) -> Result<(Vec<f32>, RenderStats), RenderError> {
         self.render_xyz_until(mosaic, width, height, region, &AtomicBool::new(false))
     }
 
     /// [`render_xyz`](Self::render_xyz) that stops between bands of rows once `cancel` is
-    /// set, with [`L3Error::RenderCanceled`].
+    /// set, with [`RenderError::RenderCanceled`].
     pub fn render_xyz_until(
         &self,
         mosaic: Mosaic<'_>,
@@ -553,7 +554,7 @@ impl FastRenderer {
         height: usize,
         region: Option<Region>,
         cancel: &AtomicBool,
-    ) -> Result<(Vec<f32>, RenderStats), L3Error> {
+    ) -> Result<(Vec<f32>, RenderStats), RenderError> {
         let (src, clamped) = self.source(mosaic, width, height)?;
         let reg = check_region(region, width, height)?;
         let mut out = crate::buffers::zeroed::<f32>(reg.width * reg.height * 3);
@@ -573,7 +574,7 @@ impl FastRenderer {
         height: usize,
         region: Option<Region>,
         white: WhiteLevel,
-    ) -> Result<(Frame, f64, RenderStats), L3Error> {
+    ) -> Result<(Frame, f64, RenderStats), RenderError> {
         self.render_srgb8_until(
             mosaic,
             width,
@@ -585,7 +586,7 @@ impl FastRenderer {
     }
 
     /// [`render_srgb8`](Self::render_srgb8) that stops between bands of rows once `cancel`
-    /// is set, with [`L3Error::RenderCanceled`].
+    /// is set, with [`RenderError::RenderCanceled`].
     pub fn render_srgb8_until(
         &self,
         mosaic: Mosaic<'_>,
@@ -594,7 +595,7 @@ impl FastRenderer {
         region: Option<Region>,
         white: WhiteLevel,
         cancel: &AtomicBool,
-    ) -> Result<(Frame, f64, RenderStats), L3Error> {
+    ) -> Result<(Frame, f64, RenderStats), RenderError> {
         let reg = check_region(region, width, height)?;
         let mut out = Frame::take(reg.width * reg.height * 3);
         let (wy, stats) =
@@ -613,7 +614,7 @@ impl FastRenderer {
         region: Option<Region>,
         white: WhiteLevel,
         out: &mut [u8],
-    ) -> Result<(f64, RenderStats), L3Error> {
+    ) -> Result<(f64, RenderStats), RenderError> {
         self.srgb8_into(
             mosaic,
             width,
@@ -635,11 +636,11 @@ impl FastRenderer {
         white: WhiteLevel,
         out: &mut [u8],
         cancel: &AtomicBool,
-    ) -> Result<(f64, RenderStats), L3Error> {
+    ) -> Result<(f64, RenderStats), RenderError> {
         let reg = check_region(region, width, height)?;
         let need = reg.width * reg.height * 3;
         if out.len() != need {
-            return Err(L3Error::OutputBuffer {
+            return Err(RenderError::OutputBuffer {
                 got: out.len(),
                 need,
                 width: reg.width,
@@ -668,7 +669,7 @@ impl FastRenderer {
         width: usize,
         height: usize,
         white: WhiteLevel,
-    ) -> Result<f64, L3Error> {
+    ) -> Result<f64, RenderError> {
         let (src, _) = self.source(mosaic, width, height)?;
         Ok(self.white_of(&src, white))
     }
@@ -829,13 +830,15 @@ impl FastRenderer {
         mosaic: Mosaic<'a>,
         width: usize,
         height: usize,
-    ) -> Result<(Source<'a>, u64), L3Error> {
+    ) -> Result<(Source<'a>, u64), RenderError> {
         if width == 0 || height == 0 {
-            return Err(L3Error::InvalidInput(format!("frame is {width}×{height}")));
+            return Err(RenderError::InvalidInput(format!(
+                "frame is {width}×{height}"
+            )));
         }
-        let n = width
-            .checked_mul(height)
-            .ok_or_else(|| L3Error::InvalidInput(format!("frame {width}×{height} is too large")))?;
+        let n = width.checked_mul(height).ok_or_else(|| {
+            RenderError::InvalidInput(format!("frame {width}×{height} is too large"))
+        })?;
         let swing = self.swing;
         let (len, dn, clamped) = match mosaic {
             Mosaic::Volts(v) => {
@@ -854,7 +857,7 @@ impl FastRenderer {
                     .reduce(|| (0, 0), |a, b| (a.0 + b.0, a.1 + b.1));
                 if bad > 0 {
                     let i = v.par_iter().position_first(|x| !x.is_finite()).unwrap_or(0);
-                    return Err(L3Error::InvalidInput(format!(
+                    return Err(RenderError::InvalidInput(format!(
                         "input value at row {}, column {} is not finite",
                         i / width,
                         i % width
@@ -864,7 +867,7 @@ impl FastRenderer {
             }
             Mosaic::Dn { data, black, white } => {
                 if white <= black {
-                    return Err(L3Error::InvalidInput(format!(
+                    return Err(RenderError::InvalidInput(format!(
                         "white level {white} must exceed black level {black}"
                     )));
                 }
@@ -878,7 +881,7 @@ impl FastRenderer {
             }
         };
         if len != n {
-            return Err(L3Error::InvalidInput(format!(
+            return Err(RenderError::InvalidInput(format!(
                 "{len} values for a {width}×{height} frame ({n} expected)"
             )));
         }
@@ -904,7 +907,7 @@ impl FastRenderer {
         out: &mut [T],
         sink: &S,
         cancel: &AtomicBool,
-    ) -> Result<RenderStats, L3Error> {
+    ) -> Result<RenderStats, RenderError> {
         let chans = 3;
         let row_len = reg.width * chans;
         let simd = if self.uses_avx512() {
@@ -944,7 +947,7 @@ impl FastRenderer {
                 a
             });
         if cancel.load(Ordering::Relaxed) {
-            return Err(L3Error::RenderCanceled);
+            return Err(RenderError::RenderCanceled);
         }
         Ok(stats)
     }
@@ -1933,7 +1936,11 @@ fn gather_frame(geo: &PatchGeometry, src: &Source<'_>, r: usize, c: usize, out: 
     }
 }
 
-fn check_region(region: Option<Region>, width: usize, height: usize) -> Result<Region, L3Error> {
+fn check_region(
+    region: Option<Region>,
+    width: usize,
+    height: usize,
+) -> Result<Region, RenderError> {
     let reg = region.unwrap_or(Region {
         x: 0,
         y: 0,
@@ -1945,7 +1952,7 @@ fn check_region(region: Option<Region>, width: usize, height: usize) -> Result<R
         && reg.x.checked_add(reg.width).is_some_and(|e| e <= width)
         && reg.y.checked_add(reg.height).is_some_and(|e| e <= height);
     if !inside {
-        return Err(L3Error::InvalidInput(format!(
+        return Err(RenderError::InvalidInput(format!(
             "region {},{} {}×{} is empty or not inside the {width}×{height} frame",
             reg.x, reg.y, reg.width, reg.height
         )));
