@@ -11,13 +11,13 @@ use std::sync::atomic::AtomicBool;
 
 use criterion::{Criterion, Throughput, criterion_group, criterion_main};
 use l3::camera::{Camera, NoiseSwitches, SensorDesign, mosaic};
-use l3::l3::{
-    FastRenderer, IlluminantRegistry, Mosaic, WhiteLevel, fuse_kernels, render_reference,
-    xyz_to_srgb8,
+use l3::l3::correct::IlluminantRegistry;
+use l3::l3::learn::{TrainingSpec, train_table};
+use l3::l3::render::{
+    FastRenderer, Mosaic, WhiteLevel, fuse_kernels, render_reference, xyz_to_srgb8,
 };
 use l3::scene::{DeadLeavesParams, SceneOptions, dead_leaves};
 use l3::spectral::{Extrapolation, WavelengthGrid, ces_reflectances, cie_illuminant};
-use l3::training::{TrainingSpec, train_table};
 
 const W: usize = 4000;
 const H: usize = 3000;

@@ -16,7 +16,9 @@ use crate::io::{
     DecodedMosaic, DngWriteInfo, Limits, MosaicFormat, RawMeta, decode_dng,
     decode_mosaic_with_info, decode_raw_u16_le, detect_format, encode_dng,
 };
-use crate::l3::{IlluminantRegistry, L3Table, WhiteLevel, render_reference, white_y, xyz_to_srgb8};
+use crate::l3::L3Table;
+use crate::l3::correct::IlluminantRegistry;
+use crate::l3::render::{WhiteLevel, render_reference, white_y, xyz_to_srgb8};
 use crate::service::{IlluminantDefinition, RenderQuery, apply_illuminant, parse_job_request};
 use crate::spectral::{Extrapolation, WavelengthGrid, ces_reflectances};
 use crate::test_support::tiny_table;
@@ -73,8 +75,8 @@ fn render_small(volts: &[f32], w: usize, h: usize, white: WhiteLevel) {
             let wy = white_y(&xyz, w, h, white);
             assert!(wy.is_finite() && wy > 0.0, "white Y {wy}");
             // the fast renderer agrees with the reference on whatever the fuzzer sends
-            if let Ok(fast) = crate::l3::FastRenderer::new(t, &t.kernels) {
-                let got = fast.render_xyz(crate::l3::Mosaic::Volts(volts), w, h, None);
+            if let Ok(fast) = crate::l3::render::FastRenderer::new(t, &t.kernels) {
+                let got = fast.render_xyz(crate::l3::render::Mosaic::Volts(volts), w, h, None);
                 let Ok((got, _)) = got else {
                     panic!("the fast renderer refused a frame the reference rendered")
                 };
@@ -352,7 +354,7 @@ fn check_table_bytes(data: &[u8]) {
     }
 }
 
-/// A training job's JSON body (the [`TrainingSpec`](crate::training::TrainingSpec)
+/// A training job's JSON body (the [`TrainingSpec`](crate::l3::learn::TrainingSpec)
 /// fields plus `sensor` and `activate`), parsed and validated as the service does,
 /// then turned into L3 parameters. Nothing is trained.
 pub fn fuzz_training_json(data: &[u8]) {
@@ -418,7 +420,7 @@ pub fn fuzz_illuminant_upload(data: &[u8]) {
             );
             // fusing T into kernels keeps them finite (what rendering uses)
             let t = tiny_table();
-            let fused = crate::l3::fuse_kernels(t, &entry.t);
+            let fused = crate::l3::render::fuse_kernels(t, &entry.t);
             assert!(
                 fused.iter().all(|v| v.is_finite()),
                 "T {:?} makes fused kernels non-finite",

@@ -7,6 +7,7 @@
 //!   [`camera`] (optics and sensor simulation),
 //!   [`scene`] (charts, textures and images as spectral scenes),
 //!   [`l3`] (classification, training, tables, rendering, illuminant correction),
+//!   [`baseline`] (the conventional pipeline L3 is compared with),
 //!   [`eval`] (ΔE2000 reports, the paper's Table 1);
 //! - file formats in [`io`];
 //! - [`render_pipeline`]: a decoded mosaic to encoded output, the one path `l3 render`, the
@@ -20,6 +21,7 @@
 // Index loops read best in numeric kernels.
 #![allow(clippy::needless_range_loop)]
 
+pub mod baseline;
 pub mod bench;
 pub mod buffers;
 pub mod camera;
@@ -36,4 +38,3 @@ pub mod service;
 pub mod spectral;
 #[cfg(any(test, feature = "test-support"))]
 pub mod test_support;
-pub mod training;

@@ -17,12 +17,16 @@ use crate::io::{
     IoError, PngCompression, encode_png_rgb8, encode_ppm_rgb8, encode_tiff_f32_rgb,
     encode_tiff_rgb16, ppm_header,
 };
-use crate::l3::{
-    FastRenderer, Frame, IlluminantEntry, L3Error, L3Table, Mosaic, Region, RenderStats, TableKind,
-    WhiteLevel, fuse_entry, xyz_to_srgb8, xyz_to_srgb16,
+use crate::l3::L3Table;
+use crate::l3::correct::{
+    CorrectError, IlluminantEntry, camera_corrected, noise_model, with_neutral,
 };
+use crate::l3::render::{
+    FastRenderer, Frame, Mosaic, Region, RenderError, RenderStats, WhiteLevel, fuse_entry,
+    xyz_to_srgb8, xyz_to_srgb16,
+};
+use crate::l3::table::{TableError, TableKind};
 use crate::spectral::{IsetData, WavelengthGrid};
-use crate::training::{TrainError, camera_corrected, noise_model, with_neutral};
 
 /// Largest preview downscale factor.
 pub const MAX_PREVIEW: usize = 16;
@@ -35,10 +39,10 @@ pub enum PipelineError {
     #[error("{0}")]
     Options(String),
     #[error(transparent)]
-    Render(#[from] L3Error),
+    Render(#[from] RenderError),
     /// The camera-aware correction could not be fitted for the table's sensor.
     #[error("camera-aware correction: {0}")]
-    Correction(#[from] TrainError),
+    Correction(#[from] CorrectError),
     #[error(transparent)]
     Encode(#[from] IoError),
 }
@@ -198,7 +202,7 @@ pub enum CorrectionMode {
     #[serde(alias = "t")]
     Colorimetric,
     /// C, fitted per level on the table's own colour maps and its sensor's response under the light
-    /// (`crate::l3::camera_correction`), wherever the light's spectrum is known; T for a
+    /// (`crate::l3::correct::camera_correction`), wherever the light's spectrum is known; T for a
     /// correction given only as a matrix.
     #[default]
     Camera,
@@ -246,14 +250,17 @@ pub fn correction_for(
     let design = match table.sensor_design() {
         Ok(d) => d,
         // a table with no sensor description has nothing to fit C on: T
-        Err(L3Error::NoSensor) => return Ok(entry.clone()),
-        Err(e) => return Err(e.into()),
+        Err(TableError::NoSensor) => return Ok(entry.clone()),
+        Err(e) => return Err(RenderError::from(e).into()),
     };
-    let camera = Camera::new(&design, WavelengthGrid::default(), iset).map_err(TrainError::from)?;
+    let camera =
+        Camera::new(&design, WavelengthGrid::default(), iset).map_err(CorrectError::from)?;
     if camera_aware {
         Ok(camera_corrected(
             &camera,
-            &table.level_colour_maps(&noise_model(&design))?,
+            &table
+                .level_colour_maps(&noise_model(&design))
+                .map_err(RenderError::from)?,
             entry,
             iset,
         )?)
@@ -263,7 +270,7 @@ pub fn correction_for(
 }
 
 /// The XYZ kernels `table` renders with under `entry`.
-pub fn kernels_for(table: &L3Table, entry: &IlluminantEntry) -> Result<Vec<f32>, L3Error> {
+pub fn kernels_for(table: &L3Table, entry: &IlluminantEntry) -> Result<Vec<f32>, RenderError> {
     if uses_own_kernels(table) {
         Ok(table.kernels.clone())
     } else {
@@ -328,7 +335,7 @@ enum Pixels {
 
 impl RenderPipeline {
     /// Prepares `table` for `entry` (kernel selection: [`kernels_for`]).
-    pub fn new(table: &L3Table, entry: &IlluminantEntry) -> Result<Self, L3Error> {
+    pub fn new(table: &L3Table, entry: &IlluminantEntry) -> Result<Self, RenderError> {
         Ok(Self {
             renderer: FastRenderer::under_light(
                 table,
@@ -339,7 +346,7 @@ impl RenderPipeline {
     }
 
     /// Prepares `table` with explicit XYZ kernels.
-    pub fn with_kernels(table: &L3Table, kernels: &[f32]) -> Result<Self, L3Error> {
+    pub fn with_kernels(table: &L3Table, kernels: &[f32]) -> Result<Self, RenderError> {
         Ok(Self {
             renderer: FastRenderer::new(table, kernels)?,
         })
@@ -356,7 +363,7 @@ impl RenderPipeline {
     }
 
     /// Renders `mosaic` (`width × height`) to `format` under `opts`. Stops between bands of
-    /// rows once `cancel` is set ([`L3Error::RenderCanceled`]).
+    /// rows once `cancel` is set ([`RenderError::RenderCanceled`]).
     pub fn render(
         &self,
         mosaic: Mosaic<'_>,

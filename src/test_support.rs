@@ -7,10 +7,11 @@ use std::sync::OnceLock;
 use std::sync::atomic::AtomicBool;
 
 use crate::camera::Cfa;
-use crate::l3::{
-    L3Error, L3Params, L3Table, Learned, NoiseModel, PatchGeometry, TABLE_FORMAT_VERSION,
-    TableKind, TableMeta, TrainControl, TrainingFrame, learn, package,
-};
+use crate::l3::classify::PatchGeometry;
+use crate::l3::correct::NoiseModel;
+use crate::l3::learn::{LearnError, Learned, TrainControl, TrainingFrame, learn, package};
+use crate::l3::table::{TABLE_FORMAT_VERSION, TableKind, TableMeta};
+use crate::l3::{L3Params, L3Table};
 use crate::spectral::WavelengthGrid;
 
 /// Linear responses of the synthetic sensor's R, G, W, B channels to XYZ.
@@ -118,8 +119,8 @@ pub fn synthetic_frame_with_blocks(
 }
 
 /// Table metadata for a table learned from synthetic `RG/WB` frames.
-pub fn synthetic_meta(params: &L3Params) -> Result<TableMeta, L3Error> {
-    let cfa = Cfa::parse("RG/WB").map_err(|e| L3Error::InvalidParams(e.to_string()))?;
+pub fn synthetic_meta(params: &L3Params) -> Result<TableMeta, LearnError> {
+    let cfa = Cfa::parse("RG/WB").map_err(|e| LearnError::InvalidParams(e.to_string()))?;
     Ok(TableMeta {
         format: "l3-table".into(),
         version: TABLE_FORMAT_VERSION,
@@ -158,11 +159,11 @@ pub fn learn_synthetic<F>(
     noise: NoiseModel,
     n: usize,
     frames: F,
-) -> Result<Learned, L3Error>
+) -> Result<Learned, LearnError>
 where
-    F: Fn(usize) -> Result<Vec<TrainingFrame>, L3Error> + Sync,
+    F: Fn(usize) -> Result<Vec<TrainingFrame>, LearnError> + Sync,
 {
-    let cfa = Cfa::parse("RG/WB").map_err(|e| L3Error::InvalidParams(e.to_string()))?;
+    let cfa = Cfa::parse("RG/WB").map_err(|e| LearnError::InvalidParams(e.to_string()))?;
     let geo = PatchGeometry::new(
         params.patch_size,
         &cfa,
@@ -183,9 +184,13 @@ where
 
 /// A table learned from `n` batches of synthetic frames (`frames(i)`, read noise only) and
 /// packaged with [`synthetic_meta`].
-pub fn train_synthetic_table<F>(params: &L3Params, n: usize, frames: F) -> Result<L3Table, L3Error>
+pub fn train_synthetic_table<F>(
+    params: &L3Params,
+    n: usize,
+    frames: F,
+) -> Result<L3Table, LearnError>
 where
-    F: Fn(usize) -> Result<Vec<TrainingFrame>, L3Error> + Sync,
+    F: Fn(usize) -> Result<Vec<TrainingFrame>, LearnError> + Sync,
 {
     let learned = learn_synthetic(params, synthetic_noise(), n, frames)?;
     package(synthetic_meta(params)?, learned)
@@ -193,7 +198,7 @@ where
 
 /// Learn a small table (3×3 patches, 4 levels) from synthetic frames: a
 /// fraction of a second, no spectral data needed.
-pub fn train_tiny_table() -> Result<L3Table, L3Error> {
+pub fn train_tiny_table() -> Result<L3Table, LearnError> {
     let params = L3Params {
         patch_size: 3,
         levels: L3Params::levels_for(4, 1.8)?,

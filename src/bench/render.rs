@@ -2,11 +2,11 @@
 //! colour figure goes through these wrappers, so swapping the renderer here
 //! changes both at once.
 
+use crate::baseline::{BaselineError, ColourMatrix, render_baseline};
 use crate::camera::Cfa;
-use crate::l3::{
-    ColourMatrix, FastRenderer, Frame, IlluminantEntry, L3Error, L3Table, Mosaic, WhiteLevel,
-    render_baseline, xyz_to_srgb8,
-};
+use crate::l3::L3Table;
+use crate::l3::correct::IlluminantEntry;
+use crate::l3::render::{FastRenderer, Frame, Mosaic, RenderError, WhiteLevel, xyz_to_srgb8};
 use crate::render_pipeline::RenderPipeline;
 
 /// Name of the L3 renderer the wrappers call (recorded in the JSON).
@@ -20,7 +20,7 @@ pub const BENCH_WHITE_Y: f64 = 1.0;
 /// prepare it ([`RenderPipeline::new`]: its own kernels or fused with the light's
 /// correction, chroma classes balanced by the light's neutral), once per table and
 /// illuminant.
-pub fn prepare(table: &L3Table, entry: &IlluminantEntry) -> Result<FastRenderer, L3Error> {
+pub fn prepare(table: &L3Table, entry: &IlluminantEntry) -> Result<FastRenderer, RenderError> {
     Ok(RenderPipeline::new(table, entry)?.into_renderer())
 }
 
@@ -30,7 +30,7 @@ pub fn render_xyz(
     volts: &[f32],
     width: usize,
     height: usize,
-) -> Result<Vec<f32>, L3Error> {
+) -> Result<Vec<f32>, RenderError> {
     Ok(renderer
         .render_xyz(Mosaic::Volts(volts), width, height, None)?
         .0)
@@ -42,7 +42,7 @@ pub fn render_srgb8(
     volts: &[f32],
     width: usize,
     height: usize,
-) -> Result<Frame, L3Error> {
+) -> Result<Frame, RenderError> {
     Ok(renderer
         .render_srgb8(
             Mosaic::Volts(volts),
@@ -61,7 +61,7 @@ pub fn render_baseline_xyz(
     height: usize,
     cfa: &Cfa,
     m: &ColourMatrix,
-) -> Result<Vec<f32>, L3Error> {
+) -> Result<Vec<f32>, BaselineError> {
     render_baseline(volts, width, height, cfa, m)
 }
 
@@ -72,7 +72,7 @@ pub fn render_baseline_srgb8(
     height: usize,
     cfa: &Cfa,
     m: &ColourMatrix,
-) -> Result<Vec<u8>, L3Error> {
+) -> Result<Vec<u8>, BaselineError> {
     let xyz = render_baseline_xyz(volts, width, height, cfa, m)?;
     Ok(xyz_to_srgb8(&xyz, BENCH_WHITE_Y))
 }
@@ -80,7 +80,9 @@ pub fn render_baseline_srgb8(
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::l3::{ChromaClasses, IDENTITY, L3Params};
+    use crate::l3::L3Params;
+    use crate::l3::classify::ChromaClasses;
+    use crate::l3::correct::IDENTITY;
     use crate::test_support::{synthetic_frame_with_blocks, train_synthetic_table};
 
     #[test]

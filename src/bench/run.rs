@@ -20,10 +20,13 @@ use super::stats::time_runs;
 use super::sweep::{BaselineChoice, BenchOptions, L3Config, TableChoice, sensor_sweep_configs};
 use crate::camera::{Camera, NoiseSwitches, SensorDesign, mosaic};
 use crate::eval::{ChartCapture, DeltaEReport, LightLevel, simulate_chart};
-use crate::l3::{IlluminantEntry, IlluminantRegistry, L3Table, TableKind};
+use crate::l3::L3Table;
+use crate::l3::correct::with_neutral;
+use crate::l3::correct::{IlluminantEntry, IlluminantRegistry};
+use crate::l3::learn::{TrainingSpec, train_table};
+use crate::l3::table::TableKind;
 use crate::scene::{DeadLeavesParams, SceneOptions, dead_leaves, training_reflectances};
 use crate::spectral::{IlluminantSpec, IsetData, WavelengthGrid};
-use crate::training::{TrainingSpec, train_table, with_neutral};
 
 /// The chart simulated once under one acquisition illuminant, at full
 /// exposure and at the low-light exposure.

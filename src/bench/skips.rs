@@ -7,9 +7,10 @@ use serde::{Deserialize, Serialize};
 use super::BenchError;
 use super::stats::time_median;
 use crate::io::{PngCompression, encode_png_rgb8, encode_ppm_rgb8, encode_tiff_f32_rgb};
-use crate::l3::{
-    FastOptions, FastRenderer, Frame, IDENTITY, L3Table, Mat3, Mosaic, Region, WhiteLevel,
-    fuse_kernels, xyz_to_srgb8,
+use crate::l3::L3Table;
+use crate::l3::correct::{IDENTITY, Mat3};
+use crate::l3::render::{
+    FastOptions, FastRenderer, Frame, Mosaic, Region, WhiteLevel, fuse_kernels, xyz_to_srgb8,
 };
 
 /// One skip measured on one frame.

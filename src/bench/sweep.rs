@@ -3,9 +3,11 @@
 use serde::{Deserialize, Serialize};
 
 use super::BenchError;
+use crate::baseline::ColourMatrix;
 use crate::camera::Camera;
 use crate::eval::{ChannelSet, ChartSetup, ColourFit, fit_colour_matrix};
-use crate::l3::{ColourMatrix, IlluminantEntry, TableKind};
+use crate::l3::correct::IlluminantEntry;
+use crate::l3::table::TableKind;
 use crate::spectral::IsetData;
 
 /// Which tables an L3 configuration trains.

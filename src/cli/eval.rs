@@ -8,7 +8,8 @@ use crate::eval::{
     ChartSetup, DeltaEReport, LightLevel, Method, MethodOnChart, PaperOptions, fit_baseline_matrix,
     noise_split, paper_summary, run_paper_table,
 };
-use crate::l3::{IlluminantRegistry, L3Table};
+use crate::l3::L3Table;
+use crate::l3::correct::IlluminantRegistry;
 use crate::render_pipeline::{CorrectionMode, correction_for, uses_own_kernels};
 use crate::spectral::{IsetData, WavelengthGrid};
 

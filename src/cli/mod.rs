@@ -55,13 +55,23 @@ pub enum CliError {
     #[error(transparent)]
     Spectral(#[from] crate::spectral::SpectralError),
     #[error(transparent)]
-    L3(#[from] crate::l3::L3Error),
+    Table(#[from] crate::l3::table::TableError),
+    #[error(transparent)]
+    Correct(#[from] crate::l3::correct::CorrectError),
+    #[error(transparent)]
+    Render(#[from] crate::l3::render::RenderError),
+    #[error(transparent)]
+    Baseline(#[from] crate::baseline::BaselineError),
+    #[error(transparent)]
+    Params(#[from] crate::l3::params::ParamsError),
+    #[error(transparent)]
+    Classify(#[from] crate::l3::classify::ClassifyError),
     #[error(transparent)]
     Io(#[from] crate::io::IoError),
     #[error(transparent)]
     Eval(#[from] crate::eval::EvalError),
     #[error(transparent)]
-    Train(#[from] crate::training::TrainError),
+    Learn(#[from] crate::l3::learn::LearnError),
     #[error(transparent)]
     Bench(#[from] crate::bench::BenchError),
     /// The service could not start (its address, its database, its data directory) or

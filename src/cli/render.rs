@@ -8,10 +8,12 @@ use crate::io::{
     DecodedMosaic, Limits, PngCompression, encode_png_rgb8, encode_ppm_rgb8, encode_tiff_f32_rgb,
     encode_tiff_rgb16, read_mosaic,
 };
-use crate::l3::{
-    IlluminantRegistry, L3Table, Mosaic, RenderStats, TableKind, WhiteLevel,
-    render_reference_under, white_y, xyz_to_srgb8, xyz_to_srgb16,
+use crate::l3::L3Table;
+use crate::l3::correct::IlluminantRegistry;
+use crate::l3::render::{
+    Mosaic, RenderStats, WhiteLevel, render_reference_under, white_y, xyz_to_srgb8, xyz_to_srgb16,
 };
+use crate::l3::table::TableKind;
 use crate::render_pipeline::{
     CorrectionMode, OutputFormat, PipelineError, RenderOptions, RenderPipeline, check_preview,
     correction_for, kernels_for, parse_region,
@@ -106,13 +108,13 @@ impl MosaicInput {
         if let Some(s) = named {
             return Ok((s.to_string(), "--illuminant"));
         }
-        let metadata = crate::l3::FrameMetadata {
+        let metadata = crate::l3::correct::FrameMetadata {
             illuminant: self.illuminant.as_deref(),
             neutral: self.neutral.as_deref(),
         };
         let (spec, source) = table.frame_illuminant(
             metadata,
-            &crate::l3::Mosaic::Volts(&self.volts),
+            &crate::l3::render::Mosaic::Volts(&self.volts),
             self.width,
             self.height,
             iset,

@@ -8,7 +8,7 @@ use crate::io::{
     DngWriteInfo, IoError, PngCompression, RawFrame, RawMeta, exif_light_source, write_dng,
     write_png_gray16, write_png_rgb8, write_raw, write_tiff_f32_rgb,
 };
-use crate::l3::{WhiteLevel, white_y, xyz_to_srgb8};
+use crate::l3::render::{WhiteLevel, white_y, xyz_to_srgb8};
 use crate::scene::{SceneKind, SceneOptions, training_reflectances};
 use crate::spectral::{IlluminantSpec, IsetData, NamedSpd, WavelengthGrid};
 

@@ -6,8 +6,10 @@ use clap::Args;
 use indicatif::{ProgressBar, ProgressStyle};
 
 use super::{Cli, CliError, iset, load_sensor, write_file};
-use crate::l3::{Classes, ColourLoss, GramPartial, L3Table, ShardSpec, SurveyPartial, TableKind};
-use crate::training::{TrainingRun, TrainingSpec};
+use crate::l3::L3Table;
+use crate::l3::learn::{Classes, GramPartial, ShardSpec, SurveyPartial, TrainingRun, TrainingSpec};
+use crate::l3::params::ColourLoss;
+use crate::l3::table::TableKind;
 
 /// `--colour-loss`: [`ColourLoss`] by a short name.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]

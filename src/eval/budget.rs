@@ -8,9 +8,10 @@ use super::workflow::{
     ChannelSet, ChartSetup, ColourFit, acquisition_and_d65, chart_scene, fit_colour_matrix,
 };
 use super::{ErrorStats, EvalError, summarize};
+use crate::baseline::ColourMatrix;
 use crate::camera::Camera;
 use crate::colour::{Cmfs, D65_WHITE_XYZ, Xyz, ciede2000, mat3_mul_vec, xyz_to_lab};
-use crate::l3::{ColourMatrix, IlluminantEntry};
+use crate::l3::correct::IlluminantEntry;
 use crate::spectral::IsetData;
 
 /// ΔE2000 statistics of the error budget's rows.
@@ -111,7 +112,7 @@ pub fn error_budget(
     let acq_list = [acquisition.to_string()];
     let si_fit = ColourFit {
         illuminants: &acq_list,
-        kind: crate::l3::TableKind::SameIlluminant,
+        kind: crate::l3::table::TableKind::SameIlluminant,
         channels: ChannelSet::All,
         preserve_white: false,
         // the paper's SI map: XYZ under the light, then T (T's cost shows)
@@ -120,7 +121,7 @@ pub fn error_budget(
     let si_m = fit_colour_matrix(camera, &si_fit, iset)?.then(&correction.t);
     let si: Vec<Xyz> = chans.iter().map(|c| apply(&si_m, c)).collect();
     let cross_fit = ColourFit {
-        kind: crate::l3::TableKind::CrossIlluminant,
+        kind: crate::l3::table::TableKind::CrossIlluminant,
         ..si_fit
     };
     let cross_m = fit_colour_matrix(camera, &cross_fit, iset)?;

@@ -9,7 +9,7 @@
 //! order, that map applied to the patch's channel means, and its noise is
 //! the channel means' noise through the map. The study therefore
 //! - fits the maps exactly as the trainer fits a cross table's
-//!   (`training::colour_samples` on the natural reflectances, the
+//!   (`l3::correct::colour_samples` on the natural reflectances, the
 //!   trainer's levels, [`CROSS_AVERAGING_PX`], the mean-ΔE loss), once per
 //!   chroma class on the class's surfaces;
 //! - takes each chart patch's channel means as its surface's ideal
@@ -40,14 +40,15 @@ use super::budget::per_patch;
 use super::captured_floor::interior_channel_means;
 use super::report::{scored_patches, white_patch_index};
 use super::workflow::{ChartSetup, acquisition_and_d65, simulate_chart};
+use crate::baseline::ColourMatrix;
 use crate::camera::Camera;
 use crate::colour::{Cmfs, Xyz};
-use crate::l3::{
-    CROSS_AVERAGING_PX, ChromaClasses, ColourLoss, ColourMapFit, ColourMatrix, L3Params,
-    MIN_SURFACES_PER_CHANNEL, NoiseModel, band_maps, level_maps,
-};
+use crate::l3::L3Params;
+use crate::l3::classify::{ChromaClasses, MIN_SURFACES_PER_CHANNEL};
+use crate::l3::correct::{ColourTarget, NoiseModel, colour_samples, noise_model};
+use crate::l3::learn::{band_maps, level_maps};
+use crate::l3::params::{CROSS_AVERAGING_PX, ColourLoss, ColourMapFit};
 use crate::spectral::{IsetData, Spectrum};
-use crate::training::{ColourTarget, colour_samples, noise_model};
 
 /// Draws of a patch's classification noise (the patch mean averages pixels
 /// whose 5×5 neighbourhoods fall in different classes).

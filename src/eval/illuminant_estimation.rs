@@ -10,7 +10,10 @@ use serde::Serialize;
 
 use super::{ChartSetup, EvalError, Method, evaluate_capture, simulate_chart};
 use crate::camera::Camera;
-use crate::l3::{IlluminantRegistry, L3Table, Mosaic, NeutralStatistic, TableKind};
+use crate::l3::L3Table;
+use crate::l3::correct::{IlluminantRegistry, NeutralStatistic};
+use crate::l3::render::Mosaic;
+use crate::l3::table::TableKind;
 use crate::scene::{SceneKind, SceneOptions};
 use crate::spectral::{IlluminantSpec, IsetData};
 
@@ -84,7 +87,7 @@ pub fn illuminant_estimation_study(
         let known = registry.resolve(light, iset)?;
         let named = IlluminantSpec::parse(light)?.resolve(iset)?;
         let true_cct = known.cct;
-        let delta_e = |entry: &crate::l3::IlluminantEntry,
+        let delta_e = |entry: &crate::l3::correct::IlluminantEntry,
                        cap: &super::ChartCapture|
          -> Result<f64, EvalError> {
             Ok(evaluate_capture(&camera, cap, &method, "L3", entry, setup)?

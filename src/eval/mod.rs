@@ -44,7 +44,17 @@ pub enum EvalError {
     #[error("invalid evaluation input: {0}")]
     Invalid(String),
     #[error(transparent)]
-    L3(#[from] crate::l3::L3Error),
+    Table(#[from] crate::l3::table::TableError),
+    #[error(transparent)]
+    Correct(#[from] crate::l3::correct::CorrectError),
+    #[error(transparent)]
+    Render(#[from] crate::l3::render::RenderError),
+    #[error(transparent)]
+    Baseline(#[from] crate::baseline::BaselineError),
+    #[error(transparent)]
+    Params(#[from] crate::l3::params::ParamsError),
+    #[error(transparent)]
+    Classify(#[from] crate::l3::classify::ClassifyError),
     #[error(transparent)]
     Spectral(#[from] crate::spectral::SpectralError),
     #[error(transparent)]
@@ -52,5 +62,5 @@ pub enum EvalError {
     #[error(transparent)]
     Scene(#[from] crate::scene::SceneError),
     #[error(transparent)]
-    Train(#[from] crate::training::TrainError),
+    Learn(#[from] crate::l3::learn::LearnError),
 }

@@ -16,7 +16,7 @@ use super::workflow::{ChartSetup, Method, evaluate_method};
 use super::{DeltaEReport, ErrorStats, EvalError, summarize};
 use crate::camera::Camera;
 use crate::colour::{D65_WHITE_XYZ, Xyz, ciede2000, xyz_to_lab};
-use crate::l3::IlluminantEntry;
+use crate::l3::correct::IlluminantEntry;
 use crate::spectral::IsetData;
 
 /// Fewest captures a split is computed from.

@@ -6,13 +6,16 @@ use nalgebra::{DMatrix, DVector};
 use serde::{Deserialize, Serialize};
 
 use super::{ChartTruth, DeltaEReport, EvalError, evaluate_chart};
+use crate::baseline::{ColourMatrix, render_baseline};
 use crate::camera::{Camera, Exposure, NoiseSwitches, simulate};
-use crate::l3::{
-    ColourMatrix, ColourSamples, IlluminantEntry, L3Table, Mosaic, TableKind, render_baseline,
+use crate::l3::L3Table;
+use crate::l3::correct::{
+    ColourSamples, ColourTarget, IlluminantEntry, colour_samples, same_illuminant_corrections,
 };
+use crate::l3::render::Mosaic;
+use crate::l3::table::TableKind;
 use crate::scene::{Scene, SceneOptions, natural100_chart};
 use crate::spectral::{Extrapolation, IlluminantSpec, IsetData, Spectrum, cie_illuminant};
-use crate::training::{ColourTarget, colour_samples, same_illuminant_corrections};
 
 /// A rendering method under evaluation.
 pub enum Method<'a> {
@@ -326,7 +329,7 @@ pub fn evaluate_capture(
     let balanced;
     let correction = match method {
         Method::Table(t) if t.chroma_balances() && correction.neutral.is_none() => {
-            balanced = crate::training::with_neutral(camera, correction)?;
+            balanced = crate::l3::correct::with_neutral(camera, correction)?;
             &balanced
         }
         _ => correction,
@@ -406,7 +409,7 @@ pub struct ColourFit<'a> {
 /// The colour samples of the natural reflectances (the set every colour
 /// map and matrix is fitted on, [`crate::scene::natural_reflectances`])
 /// under `illuminants` (see
-/// [`crate::training::colour_samples`]), with the white's own samples
+/// [`crate::l3::correct::colour_samples`]), with the white's own samples
 /// (`whites`: the perfect white under each light, same normalisation).
 fn training_samples(
     camera: &Camera,
@@ -431,7 +434,7 @@ fn training_samples(
     let d65 = cie_illuminant("D65")
         .ok_or_else(|| EvalError::Invalid("D65 missing".into()))?
         .resample(&grid, Extrapolation::Zero);
-    let err = |e: crate::training::TrainError| EvalError::Invalid(e.to_string());
+    let err = |e: crate::l3::correct::CorrectError| EvalError::Invalid(e.to_string());
     let corrections = if fit.through_correction {
         same_illuminant_corrections(fit.kind, grid, &refl, &spds).map_err(err)?
     } else {
@@ -606,7 +609,7 @@ mod tests {
         table.meta.params.transfer_maps = Some(Vec::new());
         let own = matching_linear_map(&camera, &table, "tungsten", None).unwrap();
         let foreign = matching_linear_map(&camera, &table, "Fluorescent", None).unwrap();
-        let t = crate::l3::IlluminantRegistry::with_defaults(*camera.grid(), None)
+        let t = crate::l3::correct::IlluminantRegistry::with_defaults(*camera.grid(), None)
             .unwrap()
             .resolve("Tungsten", None)
             .unwrap()

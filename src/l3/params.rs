@@ -1,6 +1,21 @@
+//! The parameters of an L3 table ([`L3Params`]) and the configuration they hold: how the
+//! ridge of every class is chosen ([`RidgeChoice`]) and how each level's colour map is
+//! fitted ([`ColourMapFit`], [`ColourLoss`]). A table file stores them; the trainer reads
+//! them; the renderer needs only the classification a table derives from them.
+
 use serde::{Deserialize, Serialize};
 
-use super::{ChromaClasses, ColourMapFit, ColourMatrix, L3Error, RidgeChoice};
+use super::classify::{ChromaClasses, ClassifyError};
+use crate::baseline::ColourMatrix;
+
+/// Errors of the parameters: a value out of range, or chroma classes that do not fit.
+#[derive(Debug, thiserror::Error)]
+pub enum ParamsError {
+    #[error("invalid parameters: {0}")]
+    Invalid(String),
+    #[error(transparent)]
+    Classify(#[from] ClassifyError),
+}
 
 /// ISET's tuned RGBW luminance levels for a 1.8 V swing (DESIGN.md §5), volts.
 pub const DEFAULT_LEVELS_1V8: [f64; 20] = [
@@ -32,11 +47,11 @@ pub struct L3Params {
     /// Average flat kernels with their mirror images where the CFA allows.
     pub symmetrize_flat: bool,
     /// How the per-level colour maps that fix the channel sums of every
-    /// unsaturated kernel were fitted (see [`super::colour_map`]); `None`
+    /// unsaturated kernel were fitted (see `src/l3/learn/colour_map.rs`); `None`
     /// when the kernels were learned without them.
     #[serde(default)]
     pub colour_map: Option<ColourMapFit>,
-    /// Chroma classes splitting every level (see [`super::chroma`]); `None`
+    /// Chroma classes splitting every level (see [`super::classify::chroma`]); `None`
     /// (a single class) in tables without a chroma split, whose files do
     /// not name the field.
     #[serde(default, skip_serializing_if = "Option::is_none")]
@@ -46,9 +61,9 @@ pub struct L3Params {
     /// aimed at XYZ under the training lights (the paper's target), not
     /// through their T as the table's own maps are, with the fit that
     /// renders standard lights held out from training better
-    /// (`training::transfer_fit`). Under such a light,
+    /// (`src/l3/learn/transfer_fit.rs`). Under such a light,
     /// corrected by one T, the table's unsaturated kernels' channel sums are
-    /// moved to these maps ([`super::L3Table::transfer_kernels`]). `None` in
+    /// moved to these maps (`L3Table::transfer_kernels`). `None` in
     /// cross-illuminant tables and in tables trained before the field.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub transfer_maps: Option<Vec<ColourMatrix>>,
@@ -78,14 +93,14 @@ impl L3Params {
     /// `n` levels spread like the ISET list over a swing: the default 20 are
     /// scaled by `swing / 1.8`; other counts are interpolated in log space
     /// between the first and last default level.
-    pub fn levels_for(n: usize, swing: f64) -> Result<Vec<f64>, L3Error> {
+    pub fn levels_for(n: usize, swing: f64) -> Result<Vec<f64>, ParamsError> {
         if !(2..=256).contains(&n) {
-            return Err(L3Error::InvalidParams(format!(
+            return Err(ParamsError::Invalid(format!(
                 "{n} luminance levels: between 2 and 256 are supported"
             )));
         }
         if !(swing.is_finite() && swing > 0.0) {
-            return Err(L3Error::InvalidParams(format!("voltage swing {swing}")));
+            return Err(ParamsError::Invalid(format!("voltage swing {swing}")));
         }
         let k = swing / 1.8;
         if n == DEFAULT_LEVELS_1V8.len() {
@@ -106,8 +121,8 @@ impl L3Params {
             .collect())
     }
 
-    pub fn validate(&self) -> Result<(), L3Error> {
-        let bad = |m: String| Err(L3Error::InvalidParams(m));
+    pub fn validate(&self) -> Result<(), ParamsError> {
+        let bad = |m: String| Err(ParamsError::Invalid(m));
         if ![3, 5, 7, 9].contains(&self.patch_size) {
             return bad(format!("patch size {} (3, 5, 7 or 9)", self.patch_size));
         }
@@ -152,6 +167,116 @@ impl L3Params {
             }
         }
         self.ridge.validate()
+    }
+}
+
+/// How the ridge parameter λ of a class is chosen.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(tag = "method", rename_all = "snake_case")]
+pub enum RidgeChoice {
+    /// Generalised cross-validation over a log grid of λ.
+    Gcv,
+    /// λ = `relative` × the mean eigenvalue of the centred covariance.
+    Fixed { relative: f64 },
+    /// λ = the sensor's noise variance at the class level (volts²): the
+    /// analytic noise-aware ridge for tables trained on noise-free patches.
+    NoiseVariance,
+}
+
+impl RidgeChoice {
+    pub fn validate(&self) -> Result<(), ParamsError> {
+        match self {
+            Self::Fixed { relative } if !(relative.is_finite() && *relative >= 0.0) => {
+                Err(ParamsError::Invalid(format!("ridge relative λ {relative}")))
+            }
+            _ => Ok(()),
+        }
+    }
+}
+
+/// How each level's colour map is fitted.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+pub struct ColourMapFit {
+    /// Pixels per channel whose mean the map is made best for under the
+    /// sensor's noise; `None` fits the noise-free map at every level.
+    pub averaging_px: Option<f64>,
+    /// Weight errors by the CIELAB Jacobian (otherwise plain XYZ error).
+    pub perceptual: bool,
+    /// What the fit minimises over the samples (absent in tables trained
+    /// before the choice existed, which minimised the squared error).
+    #[serde(default = "ColourLoss::squared")]
+    pub loss: ColourLoss,
+}
+
+/// The loss a colour map minimises over its samples, each sample's error
+/// measured as its expected first-order ΔE00 (bias and noise).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum ColourLoss {
+    /// The sum of squared errors: one weighted least-squares solve.
+    SquaredDeltaE,
+    /// The mean error of every light, the mean ΔE an evaluation reports:
+    /// `Σ_light (Σ_sample ΔE)²`, by iteratively reweighted least squares.
+    #[default]
+    MeanDeltaE,
+}
+
+impl ColourLoss {
+    fn squared() -> Self {
+        Self::SquaredDeltaE
+    }
+}
+
+impl Default for ColourMapFit {
+    fn default() -> Self {
+        Self {
+            averaging_px: Some(UNDER_LIGHT_AVERAGING_PX),
+            perceptual: true,
+            loss: ColourLoss::default(),
+        }
+    }
+}
+
+/// The averaging of the maps a same-illuminant table keeps for lights it
+/// was not trained under ([`L3Params::transfer_maps`]), aimed at XYZ
+/// under the light, and the default [`ColourMapFit`]. Such a
+/// map has no white-balance gain, so it takes a lighter noise term than a
+/// cross map. Measured on ISET's RGBW under tungsten when every
+/// same-illuminant map was aimed so (SI_Tun+T, 16 captures; one capture's
+/// mean / noise-free / per-pixel): 64 gave 3.17 / 2.98 / 4.91, 128 gave 3.25
+/// / 2.89 / 6.05, 256 gave 3.42 / 2.84 / 7.28; on rgbw-ar0132at 2.52, 2.55
+/// and 2.58. 128 was chosen with the earlier ΔE76 maps, where 64 cost two
+/// fluorescent `+C` rows on rgbw-ar0132at.
+pub const UNDER_LIGHT_AVERAGING_PX: f64 = 128.0;
+
+/// The averaging of the maps a table renders with under its own lights: a
+/// cross-illuminant table's, and a same-illuminant table's aimed through T
+/// (`l3::correct::ColourTarget::ThroughCorrection`), which carry the same
+/// white-balance gain. The lighter noise term of 128 left such maps noisy.
+/// The value is measured, not derived: a 16×16-pixel patch interior holds
+/// 64 pixels per channel (2×2 CFA), and over 16 noisy captures of the chart
+/// the mean patch-mean ΔE2000 of one capture is lowest near 48 with the
+/// mean-ΔE loss. I_Tun (one capture's mean / noise-free / per-pixel),
+/// mean-ΔE loss: on ISET's RGBW 32 gave 2.81 / 2.72 / 3.72, 48 gave 2.77 /
+/// 2.62 / 4.21, 64 gave 2.77 / 2.54 / 4.71, 96 gave 2.81 / 2.40 / 5.61; on
+/// rgbw-ar0132at 2.21, 2.20, 2.20 and 2.21. (With the squared loss 32 was
+/// best: 2.80 / 2.62 / 4.46 on ISET's RGBW, 2.29 on rgbw-ar0132at.) The
+/// aimed same-illuminant maps took 128 until they were measured with it:
+/// on the six sensors' Table 1, 48 moved 29 rows by 0.01 or more for the
+/// better and 6 for the worse (mean −0.014), ISET's RGBW SI_Tun+T 2.73 →
+/// 2.67 (per pixel 6.37 → 4.21, the cross table's figures: with the same
+/// averaging an SI_Tun table followed by T is the cross table), and its
+/// `+C` rows by 0.10–0.30.
+pub const CROSS_AVERAGING_PX: f64 = 48.0;
+
+impl ColourMapFit {
+    pub fn validate(&self) -> Result<(), ParamsError> {
+        match self.averaging_px {
+            Some(n) if !(n.is_finite() && n >= 1.0) => Err(ParamsError::Invalid(format!(
+                "colour map averaging {n} px (at least 1)"
+            ))),
+            _ => Ok(()),
+        }
     }
 }
 

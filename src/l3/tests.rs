@@ -3,7 +3,14 @@
 
 use std::sync::atomic::AtomicBool;
 
-use super::*;
+use super::classify::ChromaClasses;
+use super::correct::{IDENTITY, IlluminantEntry, Mat3};
+use super::render::{
+    FastRenderer, Mosaic, Region, RenderError, WhiteLevel, fuse_entry, fuse_kernels,
+    render_reference, render_reference_under, white_y, xyz_to_srgb8,
+};
+use super::{L3Params, L3Table};
+use crate::baseline::ColourMatrix;
 use crate::test_support::{synthetic_frame_with_blocks, train_synthetic_table};
 
 /// Block size of the synthetic scenes (the crate's one fixture, [`crate::test_support`]).
@@ -329,11 +336,11 @@ fn a_canceled_render_stops_with_render_canceled() {
     assert!(fast.render_xyz_until(frame, 64, 64, None, &go).is_ok());
     assert!(matches!(
         fast.render_xyz_until(frame, 64, 64, None, &stop),
-        Err(L3Error::RenderCanceled)
+        Err(RenderError::RenderCanceled)
     ));
     assert!(matches!(
         fast.render_srgb8_until(frame, 64, 64, None, WhiteLevel::Auto, &stop),
-        Err(L3Error::RenderCanceled)
+        Err(RenderError::RenderCanceled)
     ));
 }
 

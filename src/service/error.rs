@@ -228,26 +228,12 @@ impl ServiceError {
     /// (the caller picks the 4xx that fits where the input came from: a body, a query, a
     /// table the request named), a render abandoned by its request a timeout, and the rest
     /// (the table, the server) a 500 `internal`.
-    pub fn from_l3(
-        e: crate::l3::L3Error,
-        input: impl FnOnce(String) -> ServiceError,
-    ) -> ServiceError {
-        use crate::l3::L3Error::*;
-        let is_input = match &e {
-            InvalidParams(_) | InvalidInput(_) | NoSensor | Neutral(_) => true,
-            Spectral(s) => spectral_input_fault(s),
-            // nobody waits for the answer of a canceled render any more
-            RenderCanceled => {
-                return ServiceError::Timeout("the render was abandoned by its request".into());
-            }
-            BadTable { .. }
-            | Table(_)
-            | Write(_)
-            | Canceled
-            | PartialSums(_)
-            | KernelMismatch { .. }
-            | OutputBuffer { .. } => false,
-        };
+    pub fn from_l3(e: impl CoreFault, input: impl FnOnce(String) -> ServiceError) -> ServiceError {
+        // nobody waits for the answer of a canceled render any more
+        if e.is_abandoned() {
+            return ServiceError::Timeout("the render was abandoned by its request".into());
+        }
+        let is_input = e.is_input();
         by_fault(e, is_input, input)
     }
 
@@ -259,14 +245,25 @@ impl ServiceError {
         use crate::eval::EvalError::*;
         use crate::scene::SceneError;
         let is_input = match &e {
-            L3(_) | Invalid(_) | Scene(SceneError::Invalid(_)) => true,
+            Invalid(_) | Scene(SceneError::Invalid(_)) => true,
             Spectral(s) | Scene(SceneError::Spectral(s)) => spectral_input_fault(s),
             Colour(c) => colour_input_fault(c),
             // the camera-aware correction of a table that cannot be fitted: the table's fault
-            Scene(SceneError::Image { .. }) | Train(_) => false,
+            Scene(SceneError::Image { .. }) | Learn(_) => false,
+            Table(e) => e.is_input(),
+            Correct(e) => e.is_input(),
+            Render(e) => e.is_input(),
+            Baseline(e) => e.is_input(),
+            Params(e) => e.is_input(),
+            Classify(e) => e.is_input(),
         };
         match e {
-            L3(e) => ServiceError::from_l3(e, input),
+            Table(e) => ServiceError::from_l3(e, input),
+            Correct(e) => ServiceError::from_l3(e, input),
+            Render(e) => ServiceError::from_l3(e, input),
+            Baseline(e) => ServiceError::from_l3(e, input),
+            Params(e) => ServiceError::from_l3(e, input),
+            Classify(e) => ServiceError::from_l3(e, input),
             e => by_fault(e, is_input, input),
         }
     }
@@ -283,6 +280,78 @@ impl ServiceError {
             Toml { .. } | Io { .. } => false,
         };
         by_fault(e, is_input, input)
+    }
+}
+
+/// An L3 core error sorted by whose fault it is, for [`ServiceError::from_l3`]: the
+/// request's (its input, its parameters, a light it named), or the table's or the server's.
+pub trait CoreFault: std::fmt::Display {
+    /// Whether the request got it wrong.
+    fn is_input(&self) -> bool;
+    /// Whether the request abandoned the work (a canceled render).
+    fn is_abandoned(&self) -> bool {
+        false
+    }
+}
+
+impl CoreFault for crate::l3::classify::ClassifyError {
+    fn is_input(&self) -> bool {
+        // invalid parameters or an invalid input (a light's neutral)
+        true
+    }
+}
+
+impl CoreFault for crate::l3::params::ParamsError {
+    fn is_input(&self) -> bool {
+        true
+    }
+}
+
+impl CoreFault for crate::l3::table::TableError {
+    fn is_input(&self) -> bool {
+        use crate::l3::table::TableError::*;
+        match self {
+            NoSensor => true,
+            Classify(e) => e.is_input(),
+            BadFile { .. } | Unusable(_) | Write(_) => false,
+        }
+    }
+}
+
+impl CoreFault for crate::l3::correct::CorrectError {
+    fn is_input(&self) -> bool {
+        use crate::l3::correct::CorrectError::*;
+        match self {
+            InvalidParams(_) | InvalidInput(_) | Neutral(_) => true,
+            Table(e) => e.is_input(),
+            Spectral(s) => spectral_input_fault(s),
+            Samples(_) | Fit(_) | Camera(_) => false,
+        }
+    }
+}
+
+impl CoreFault for crate::l3::render::RenderError {
+    fn is_input(&self) -> bool {
+        use crate::l3::render::RenderError::*;
+        match self {
+            InvalidInput(_) => true,
+            Prepare(e) => e.is_input(),
+            Table(_) | RenderCanceled | KernelMismatch { .. } | OutputBuffer { .. } => false,
+        }
+    }
+
+    fn is_abandoned(&self) -> bool {
+        matches!(self, crate::l3::render::RenderError::RenderCanceled)
+    }
+}
+
+impl CoreFault for crate::baseline::BaselineError {
+    fn is_input(&self) -> bool {
+        use crate::baseline::BaselineError::*;
+        match self {
+            InvalidParams(_) | InvalidInput(_) => true,
+            Singular(_) => false,
+        }
     }
 }
 
@@ -353,38 +422,39 @@ mod tests {
     /// server's to 500 `internal` (not every render error is `invalid_image`).
     #[test]
     fn render_errors_map_by_kind() {
-        use crate::l3::L3Error;
+        use crate::l3::render::RenderError;
+        use crate::l3::table::TableError;
         use crate::render_pipeline::PipelineError;
-        let code = |e: L3Error| ServiceError::from(PipelineError::Render(e));
-        let e = code(L3Error::InvalidInput(
+        let code = |e: RenderError| ServiceError::from(PipelineError::Render(e));
+        let e = code(RenderError::InvalidInput(
             "input value at row 0 is not finite".into(),
         ));
         assert_eq!((e.status().as_u16(), e.code()), (400, "invalid_image"));
         for internal in [
-            L3Error::KernelMismatch {
+            RenderError::KernelMismatch {
                 got: 1,
                 expected: 2,
             },
-            L3Error::OutputBuffer {
+            RenderError::OutputBuffer {
                 got: 1,
                 need: 3,
                 width: 1,
                 height: 1,
             },
-            L3Error::Table("a kernel weight is not finite".into()),
+            RenderError::Table("a kernel weight is not finite".into()),
         ] {
             let e = code(internal);
             assert_eq!((e.status().as_u16(), e.code()), (500, "internal"), "{e}");
         }
-        let e = code(L3Error::RenderCanceled);
+        let e = code(RenderError::RenderCanceled);
         assert_eq!(e.code(), "request_timeout");
         let e = ServiceError::from(PipelineError::Options("preview 17".into()));
         assert_eq!(e.code(), "bad_request");
         // the caller chooses the 4xx of an input fault
-        let e = ServiceError::from_l3(L3Error::NoSensor, ServiceError::Unprocessable);
+        let e = ServiceError::from_l3(TableError::NoSensor, ServiceError::Unprocessable);
         assert_eq!((e.status().as_u16(), e.code()), (422, "unprocessable"));
         let e = ServiceError::from_l3(
-            L3Error::Table("metadata".into()),
+            TableError::Unusable("metadata".into()),
             ServiceError::Unprocessable,
         );
         assert_eq!(e.code(), "internal");

@@ -13,7 +13,7 @@ use serde_json::{Value, json};
 use super::ServiceError;
 use super::state::{AppState, Inner, now_ms};
 use super::store::IlluminantRow;
-use crate::l3::{CorrectionSource, IlluminantEntry, IlluminantRegistry, Mat3};
+use crate::l3::correct::{CorrectionSource, IlluminantEntry, IlluminantRegistry, Mat3};
 use crate::spectral::Samples;
 
 /// A user illuminant's definition: exactly one of a matrix, an SPD or a CCT.

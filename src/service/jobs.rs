@@ -18,8 +18,8 @@ use super::store::{
 };
 use super::tables::{StoredTable, activate_table, insert_table, write_table_file};
 use crate::camera::SensorDesign;
-use crate::l3::{L3Error, L3Table};
-use crate::training::{TrainError, TrainingSpec, train_table};
+use crate::l3::L3Table;
+use crate::l3::learn::{LearnError, TrainingSpec, train_table};
 use axum::Json;
 use axum::body::Bytes;
 use axum::extract::rejection::BytesRejection;
@@ -825,7 +825,7 @@ async fn run_job(state: &AppState, id: &str, request: &str) {
                 Ok((table, stored)) => Outcome::Done(Box::new(table), stored),
                 Err(e) => Outcome::Failed(e.to_string()),
             },
-            Err(TrainError::L3(L3Error::Canceled)) => Outcome::Canceled,
+            Err(LearnError::Canceled) => Outcome::Canceled,
             Err(e) => Outcome::Failed(e.to_string()),
         };
     let outcome = on_background(state, id, train).await;

@@ -45,9 +45,9 @@ pub use state::{ActiveTable, AppState, Inner, sha256_hex};
 pub use store::{JobStatus, Store};
 pub use tables::{StoredTable, write_table_file};
 
-use crate::l3::IlluminantRegistry;
+use crate::l3::correct::IlluminantRegistry;
+use crate::l3::learn::TrainingSpec;
 use crate::spectral::{IsetData, WavelengthGrid};
-use crate::training::TrainingSpec;
 
 /// Evaluations running at once; more get 503 with Retry-After.
 const EVALUATION_SLOTS: usize = 2;

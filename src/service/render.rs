@@ -27,7 +27,8 @@ use super::state::AppState;
 use crate::io::{
     DecodedMosaic, Limits, UnknownPngCompression, decode_mosaic_with_meta, decode_raw_u16_le,
 };
-use crate::l3::{FrameMetadata, Mosaic, WhiteLevel};
+use crate::l3::correct::FrameMetadata;
+use crate::l3::render::{Mosaic, WhiteLevel};
 use crate::render_pipeline::{
     CorrectionMode, Encoded, OutputFormat as PipelineFormat, PipelineError, RenderOptions,
     check_preview, parse_region,
@@ -276,7 +277,7 @@ pub async fn render(
         None => WhiteLevel::Auto,
         Some(s) => s
             .parse()
-            .map_err(|e: crate::l3::L3Error| ServiceError::BadRequest(e.to_string()))?,
+            .map_err(|e: crate::l3::render::RenderError| ServiceError::BadRequest(e.to_string()))?,
     };
     let pipeline_format = match (format, q.tiff.as_deref()) {
         (OutputFormat::Png, _) => PipelineFormat::Png,
@@ -369,7 +370,7 @@ pub async fn render(
         let run = || -> Result<Rendered, ServiceError> {
             if cancel.load(Ordering::Relaxed) {
                 // abandoned while it waited for a thread
-                return Err(PipelineError::Render(crate::l3::L3Error::RenderCanceled).into());
+                return Err(PipelineError::Render(crate::l3::render::RenderError::RenderCanceled).into());
             }
             #[cfg(feature = "fault-injection")]
             if inject_panic {

@@ -17,7 +17,7 @@
 //! A shard whose partial is already stored (an earlier attempt got that far) does not compute
 //! it again. Every stored partial is checked against its recorded SHA-256 when it is read back
 //! (and the format checks its own checksum). The table bytes do not depend on the number of
-//! shards (`src/l3/shards.rs`).
+//! shards (`src/l3/learn/shards.rs`).
 
 use std::sync::Arc;
 use std::sync::atomic::Ordering;
@@ -33,14 +33,13 @@ use super::store::{
     JOB_KIND_ACCUMULATE_SHARD, JOB_KIND_SURVEY_SHARD, JobRow, JobStatus, NewPartial,
     ShardCompletion, shard_stage,
 };
-use crate::l3::{Classes, GramPartial, L3Error, ShardSpec, SurveyPartial};
-use crate::training::{TrainError, TrainingRun};
+use crate::l3::learn::{Classes, GramPartial, LearnError, ShardSpec, SurveyPartial, TrainingRun};
 
 /// What stops a shard.
 #[derive(Debug, thiserror::Error)]
 pub enum ShardError {
     #[error(transparent)]
-    Train(#[from] TrainError),
+    Learn(#[from] LearnError),
     #[error(transparent)]
     Service(#[from] ServiceError),
     /// Stored partial sums that are missing, damaged or not of this job.
@@ -60,13 +59,7 @@ pub enum ShardError {
 
 impl ShardError {
     fn is_canceled(&self) -> bool {
-        matches!(self, ShardError::Train(TrainError::L3(L3Error::Canceled)))
-    }
-}
-
-impl From<L3Error> for ShardError {
-    fn from(e: L3Error) -> Self {
-        ShardError::Train(TrainError::L3(e))
+        matches!(self, ShardError::Learn(LearnError::Canceled))
     }
 }
 
@@ -355,7 +348,7 @@ async fn compute_part(
     .await
     .map_err(ShardError::Task)??;
     if lease.canceled() {
-        return Err(L3Error::Canceled.into());
+        return Err(LearnError::Canceled.into());
     }
     let sha = sha256_hex(&bytes);
     state
@@ -408,7 +401,7 @@ async fn merge(
     .await
     .map_err(ShardError::Task)??;
     if lease.canceled() {
-        return Err(L3Error::Canceled.into());
+        return Err(LearnError::Canceled.into());
     }
     let still_running = state
         .store

@@ -15,7 +15,8 @@ use super::ServiceError;
 use super::config::ServiceConfig;
 use super::metrics::Metrics;
 use super::store::{IlluminantRow, Store};
-use crate::l3::{IlluminantEntry, IlluminantRegistry, L3Table};
+use crate::l3::L3Table;
+use crate::l3::correct::{IlluminantEntry, IlluminantRegistry};
 use crate::render_pipeline::{CorrectionMode, RenderPipeline, correction_for, uses_own_kernels};
 use crate::spectral::IsetData;
 
@@ -79,7 +80,7 @@ pub struct Inner {
     pub running_jobs: Mutex<HashMap<String, Arc<AtomicBool>>>,
     /// The training run this replica prepared last, by its sharded job's id: the shards of a
     /// job that run here share it.
-    pub training_run: Mutex<Option<(String, Arc<crate::training::TrainingRun>)>>,
+    pub training_run: Mutex<Option<(String, Arc<crate::l3::learn::TrainingRun>)>>,
     pub shutting_down: AtomicBool,
     pub shutdown_notify: Notify,
 }

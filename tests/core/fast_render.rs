@@ -5,13 +5,15 @@
 use std::sync::atomic::AtomicBool;
 
 use l3::camera::{Camera, Exposure, NoiseSwitches, SensorDesign, simulate};
-use l3::l3::{
-    FastOptions, FastRenderer, IlluminantRegistry, L3Table, Mosaic, Region, WhiteLevel,
-    fuse_kernels, render_reference, white_y, xyz_to_srgb8,
+use l3::l3::L3Table;
+use l3::l3::correct::IlluminantRegistry;
+use l3::l3::learn::{TrainingSpec, train_table};
+use l3::l3::render::{
+    FastOptions, FastRenderer, Mosaic, Region, WhiteLevel, fuse_kernels, render_reference, white_y,
+    xyz_to_srgb8,
 };
 use l3::scene::{DeadLeavesParams, SceneOptions, dead_leaves};
 use l3::spectral::{Extrapolation, WavelengthGrid, ces_reflectances, cie_illuminant};
-use l3::training::{TrainingSpec, train_table};
 use proptest::prelude::*;
 
 fn design(name: &str) -> SensorDesign {

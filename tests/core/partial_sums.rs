@@ -2,8 +2,8 @@
 //! f64 bit, signed zeros, NaN payloads), and truncated or corrupt bytes
 //! refused with an error, never a panic.
 
-use l3::l3::{
-    Gram, GramPartial, L3Error, Node, SurveyPartial, SurveyShape, cover, merge_partials,
+use l3::l3::learn::{
+    Gram, GramPartial, LearnError, Node, SurveyPartial, SurveyShape, cover, merge_partials,
     merge_surveys,
 };
 use proptest::prelude::*;
@@ -88,7 +88,7 @@ fn survey_partial(start: usize, end: usize, seed: u64) -> SurveyPartial {
 /// Every truncation and every byte flipped is refused.
 fn assert_refuses_damage<T: std::fmt::Debug>(
     bytes: &[u8],
-    read: impl Fn(&[u8]) -> Result<T, L3Error>,
+    read: impl Fn(&[u8]) -> Result<T, LearnError>,
 ) {
     assert!(read(bytes).is_ok());
     for len in 0..bytes.len() {
@@ -98,7 +98,7 @@ fn assert_refuses_damage<T: std::fmt::Debug>(
         let mut b = bytes.to_vec();
         b[i] ^= 0xff;
         assert!(
-            matches!(read(&b), Err(L3Error::PartialSums(_))),
+            matches!(read(&b), Err(LearnError::PartialSums(_))),
             "byte {i} flipped"
         );
     }
@@ -132,7 +132,7 @@ fn survey_shards_merge_to_the_sum_of_their_counts() {
 
 #[test]
 fn merge_refuses_nodes_outside_their_shard() {
-    let classes = l3::l3::Classes {
+    let classes = l3::l3::learn::Classes {
         sat_cases: vec![0],
         thresholds: vec![0.0; 3],
     };

@@ -16,7 +16,8 @@ use l3::colour::{
     Cmfs, D65_WHITE_XYZ, encode_srgb8, lab_to_xyz, linear_srgb_to_xyz, srgb_decode, xyz_to_lab,
     xyz_to_linear_srgb,
 };
-use l3::l3::{IDENTITY, correction_matrix, default_reflectances, fuse_kernels, render_reference};
+use l3::l3::correct::{IDENTITY, correction_matrix, default_reflectances};
+use l3::l3::render::{fuse_kernels, render_reference};
 use l3::spectral::{Extrapolation, Spectrum, WavelengthGrid, cie_illuminant};
 use l3::test_support::tiny_table;
 use proptest::prelude::*;

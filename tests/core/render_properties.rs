@@ -7,10 +7,12 @@ use std::sync::atomic::AtomicBool;
 
 use l3::camera::{Camera, Exposure, NoiseSwitches, SensorDesign, simulate};
 use l3::colour::{D65_WHITE_XYZ, xy};
-use l3::l3::{IlluminantRegistry, L3Table, fuse_kernels, render_reference};
+use l3::l3::L3Table;
+use l3::l3::correct::IlluminantRegistry;
+use l3::l3::learn::{TrainingSpec, train_table};
+use l3::l3::render::{fuse_kernels, render_reference};
 use l3::scene::{SceneOptions, uniform};
 use l3::spectral::{Extrapolation, Spectrum, WavelengthGrid, cie_illuminant};
-use l3::training::{TrainingSpec, train_table};
 use proptest::prelude::*;
 
 fn table() -> &'static L3Table {

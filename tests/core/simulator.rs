@@ -495,7 +495,7 @@ fn mosaic_error_on_chart(samples_per_pixel: u32) -> (f64, f64) {
     let raw: Vec<f32> = (0..rows * cols)
         .map(|i| rates[[cfa.channel_at(i / cols, i % cols), i / cols, i % cols]])
         .collect();
-    let dm = l3::l3::bilinear_demosaic(&raw, cols, rows, cfa).unwrap();
+    let dm = l3::baseline::bilinear_demosaic(&raw, cols, rows, cfa).unwrap();
     let (mut worst, mut sum, mut n) = (0f64, 0f64, 0usize);
     for p in &scene.patches {
         let (r0, c0, h, w) = l3::eval::interior(p);

@@ -23,16 +23,19 @@ use std::sync::atomic::AtomicBool;
 use l3::camera::{Camera, NoiseSwitches, SensorDesign, mosaic};
 use l3::colour::{Cmfs, D65_WHITE_XYZ, ciede2000, xyz_to_lab};
 use l3::io::{Limits, RawMeta, decode_mosaic, decode_raw_u16_le};
-use l3::l3::{
-    IDENTITY, L3Error, L3Params, L3Table, Learned, NoiseModel, PatchGeometry, RidgeChoice,
-    TrainControl, TrainingFrame, correction_matrix, default_reflectances, fuse_kernels, learn,
-    package, render_reference,
+use l3::l3::classify::PatchGeometry;
+use l3::l3::correct::{IDENTITY, NoiseModel, correction_matrix, default_reflectances};
+use l3::l3::learn::{
+    LearnError, Learned, TrainControl, TrainingFrame, TrainingScenes, TrainingSpec, learn, package,
+    train_table,
 };
+use l3::l3::params::RidgeChoice;
+use l3::l3::render::{fuse_kernels, render_reference};
+use l3::l3::{L3Params, L3Table};
 use l3::spectral::{Extrapolation, Spectrum, WavelengthGrid, cie_illuminant};
 use l3::test_support::{
     synthetic_channel, synthetic_frame, synthetic_meta, synthetic_volts, tiny_table,
 };
-use l3::training::{TrainingScenes, TrainingSpec, train_table};
 use nalgebra::{DMatrix, DVector};
 
 /// Every kernel's Frobenius norm (3 outputs × patch + constant) stays below
@@ -63,9 +66,9 @@ fn small_params() -> L3Params {
 }
 
 /// Learn from synthetic `RG/WB` frames produced by `frames(i)` (the paper's noise).
-fn learn_synthetic<F>(params: &L3Params, n: usize, frames: F) -> Result<Learned, L3Error>
+fn learn_synthetic<F>(params: &L3Params, n: usize, frames: F) -> Result<Learned, LearnError>
 where
-    F: Fn(usize) -> Result<Vec<TrainingFrame>, L3Error> + Sync,
+    F: Fn(usize) -> Result<Vec<TrainingFrame>, LearnError> + Sync,
 {
     l3::test_support::learn_synthetic(params, noise_model(), n, frames)
 }
@@ -383,7 +386,7 @@ fn learn_camera(
     design: &SensorDesign,
     n: usize,
     frames: impl Fn(usize) -> Vec<TrainingFrame> + Sync,
-) -> Result<L3Table, L3Error> {
+) -> Result<L3Table, LearnError> {
     let grid = WavelengthGrid::default();
     let camera = Camera::new(design, grid, None).unwrap();
     let geo = PatchGeometry::new(

@@ -5,8 +5,11 @@
 use std::sync::atomic::{AtomicBool, Ordering};
 
 use l3::camera::SensorDesign;
-use l3::l3::{Classes, GramPartial, L3Error, L3Table, SurveyPartial, TableKind};
-use l3::training::{TrainError, TrainingRun, TrainingSpec, train_table};
+use l3::l3::L3Table;
+use l3::l3::learn::{
+    Classes, GramPartial, LearnError, SurveyPartial, TrainingRun, TrainingSpec, train_table,
+};
+use l3::l3::table::TableKind;
 
 fn tiny(seed: u64) -> TrainingSpec {
     TrainingSpec {
@@ -55,11 +58,7 @@ fn cancel_stops_training() {
         }
     };
     let r = train_table(&design, &tiny(1), None, &progress, &cancel);
-    assert!(
-        matches!(r, Err(TrainError::L3(L3Error::Canceled))),
-        "{:?}",
-        r.err()
-    );
+    assert!(matches!(r, Err(LearnError::Canceled)), "{:?}", r.err());
 }
 
 #[test]
@@ -180,7 +179,7 @@ fn sharded_training_gives_the_single_run_table_byte_for_byte() {
 
 #[test]
 fn the_colour_loss_defaults_by_illuminant_count_and_is_recorded_in_the_table() {
-    use l3::l3::ColourLoss;
+    use l3::l3::params::ColourLoss;
     let design = SensorDesign::paper_default();
     let cancel = AtomicBool::new(false);
     let one_light = TrainingSpec {

@@ -10,7 +10,7 @@ use l3::io::{
     DecodedMosaic, Limits, MosaicFormat, PngCompression, decode_mosaic_with_meta, encode_png_rgb8,
     read_mosaic,
 };
-use l3::l3::{FastRenderer, Mosaic, WhiteLevel};
+use l3::l3::render::{FastRenderer, Mosaic, WhiteLevel};
 use l3::test_support::tiny_table;
 
 fn fixtures() -> Vec<PathBuf> {

@@ -1406,7 +1406,7 @@ async fn racing_puts_and_deletes_leave_memory_equal_to_the_database() {
 fn as_shot_neutral_of_a_tungsten_frame_corrects_natural100_like_tungsten() {
     use l3::camera::Camera;
     use l3::eval::{ChartSetup, Method, evaluate_capture, simulate_chart};
-    use l3::l3::IlluminantRegistry;
+    use l3::l3::correct::IlluminantRegistry;
     let table = tiny_table();
     let design = table.sensor_design().unwrap();
     let camera = Camera::new(&design, table.meta.grid, None).unwrap();

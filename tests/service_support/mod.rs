@@ -8,8 +8,8 @@ use std::sync::atomic::AtomicBool;
 
 use l3::camera::SensorDesign;
 use l3::l3::L3Table;
+use l3::l3::learn::{TrainingSpec, train_table};
 use l3::service::{Server, ServiceConfig};
-use l3::training::{TrainingSpec, train_table};
 
 /// A small, quick training spec.
 pub fn tiny_spec(illuminants: &[&str]) -> TrainingSpec {

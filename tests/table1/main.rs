@@ -164,16 +164,17 @@ fn table1_on_the_papers_sensor() {
 struct D65TableUnderTheLamp {
     table: l3::l3::L3Table,
     camera: l3::camera::Camera,
-    t: l3::l3::IlluminantEntry,
-    c: l3::l3::IlluminantEntry,
+    t: l3::l3::correct::IlluminantEntry,
+    c: l3::l3::correct::IlluminantEntry,
 }
 
 impl D65TableUnderTheLamp {
     fn train(sensor: &str) -> Self {
         use l3::camera::Camera;
-        use l3::l3::{IlluminantRegistry, TableKind};
+        use l3::l3::correct::{IlluminantRegistry, camera_corrected, noise_model};
+        use l3::l3::learn::{TrainingSpec, train_table};
+        use l3::l3::table::TableKind;
         use l3::spectral::WavelengthGrid;
-        use l3::training::{TrainingSpec, camera_corrected, noise_model, train_table};
 
         let path = format!(
             "{}/config/sensors/{sensor}.toml",
@@ -212,7 +213,7 @@ impl D65TableUnderTheLamp {
     }
 
     /// Mean patch-mean ΔE2000 of the chart under the lamp with `corr`.
-    fn mean(&self, corr: &l3::l3::IlluminantEntry, chart: &ChartSetup) -> f64 {
+    fn mean(&self, corr: &l3::l3::correct::IlluminantEntry, chart: &ChartSetup) -> f64 {
         use l3::eval::{Method, evaluate_method};
         evaluate_method(
             &self.camera,
@@ -257,7 +258,7 @@ fn camera_aware_correction_serves_a_d65_table_under_fluorescent() {
 fn per_level_camera_correction_serves_a_d65_table_in_dim_light() {
     let d = D65TableUnderTheLamp::train("rgbw-ar0132at");
     assert_eq!(d.c.level_corrections.len(), d.table.n_levels());
-    let brightest_only = l3::l3::IlluminantEntry {
+    let brightest_only = l3::l3::correct::IlluminantEntry {
         level_corrections: Vec::new(),
         ..d.c.clone()
     };
@@ -283,9 +284,10 @@ fn per_level_camera_correction_serves_a_d65_table_in_dim_light() {
 fn chroma_classes_take_the_papers_sensor_under_its_targets() {
     use l3::camera::Camera;
     use l3::eval::{Method, evaluate_method};
-    use l3::l3::{IlluminantRegistry, TableKind};
+    use l3::l3::correct::IlluminantRegistry;
+    use l3::l3::learn::{TrainingSpec, train_table};
+    use l3::l3::table::TableKind;
     use l3::spectral::WavelengthGrid;
-    use l3::training::{TrainingSpec, train_table};
 
     let sensor = concat!(env!("CARGO_MANIFEST_DIR"), "/config/sensors/rgbw-iset.toml");
     let design = SensorDesign::load(sensor, None).unwrap();
@@ -361,9 +363,9 @@ fn chroma_classes_take_the_papers_sensor_under_its_targets() {
 fn held_out_lights_choose_the_fit_a_table_takes_to_a_foreign_light() {
     use l3::camera::Camera;
     use l3::eval::{Method, evaluate_capture, linear_table, matching_linear_map, simulate_chart};
-    use l3::l3::IlluminantRegistry;
+    use l3::l3::correct::IlluminantRegistry;
+    use l3::l3::learn::{TrainingSpec, train_table};
     use l3::spectral::WavelengthGrid;
-    use l3::training::{TrainingSpec, train_table};
 
     let sensor = concat!(env!("CARGO_MANIFEST_DIR"), "/config/sensors/rgbw-iset.toml");
     let design = SensorDesign::load(sensor, None).unwrap();

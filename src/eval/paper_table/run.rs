@@ -8,17 +8,19 @@ use super::rows::{
     BaselineFamily, CaptureSpread, ExposurePoint, PAPER_TABLE1, PaperOptions, PaperRow, PaperTable,
     StorageComparison,
 };
+use crate::baseline::ColourMatrix;
 use crate::camera::{Camera, SensorDesign};
 use crate::eval::noise_split::check_captures;
 use crate::eval::{
     ChannelSet, ChartCapture, ChartSetup, ColourFit, DeltaEReport, EvalError, LightLevel, Method,
     evaluate_capture, fit_colour_matrix, linear_table, matching_linear_map, simulate_chart,
 };
-use crate::l3::{
-    ColourMatrix, IDENTITY, IlluminantEntry, IlluminantRegistry, L3Table, LevelMap, TableKind,
-};
+use crate::l3::L3Table;
+use crate::l3::correct::{IDENTITY, IlluminantEntry, IlluminantRegistry, LevelMap};
+use crate::l3::correct::{camera_corrected, noise_model};
+use crate::l3::learn::{TrainingSpec, train_table};
+use crate::l3::table::TableKind;
 use crate::spectral::{IsetData, WavelengthGrid};
-use crate::training::{TrainingSpec, camera_corrected, noise_model, train_table};
 
 /// The training spec's noise settings for a Table 1 run: a noise-free run
 /// (`ChartSetup::noise` off) trains noise-free too — noise-free patches and

@@ -11,7 +11,7 @@ use super::scratch::{SCRATCH, Scratch};
 use super::sink::Sink;
 use super::source::Source;
 use super::tile::{Tile, TileCtx};
-use super::{FastRenderer, L3Error, Region, RenderStats};
+use super::{FastRenderer, Region, RenderError, RenderStats};
 
 /// Rows per rayon task.
 const BAND_ROWS: usize = 32;
@@ -29,7 +29,7 @@ impl FastRenderer {
         out: &mut [T],
         sink: &S,
         cancel: &AtomicBool,
-    ) -> Result<RenderStats, L3Error> {
+    ) -> Result<RenderStats, RenderError> {
         let chans = 3;
         let row_len = reg.width * chans;
         let isa = if self.uses_avx512() {
@@ -65,7 +65,7 @@ impl FastRenderer {
                 a
             });
         if cancel.load(Ordering::Relaxed) {
-            return Err(L3Error::RenderCanceled);
+            return Err(RenderError::RenderCanceled);
         }
         Ok(stats)
     }

@@ -56,10 +56,11 @@ use source::{Source, check_region, gather_frame};
 use stages::LevelLut;
 
 // Everything the fast renderer takes from outside `fast`: its files import these through `super::`.
-use super::classify::sat_case_index;
-use super::output::{WhiteLevel, white_from_samples, white_sample_points};
-use super::render::{dot, fuse_matrix};
-use super::{L3Error, L3Table, PatchGeometry, RenderStats, mirror};
+use super::classify::{PatchGeometry, mirror, sat_case_index};
+use super::render::error::RenderError;
+use super::render::output::{WhiteLevel, white_from_samples, white_sample_points};
+use super::render::reference::{RenderStats, dot, fuse_matrix};
+use super::table::L3Table;
 use crate::buffers::zeroed;
 use crate::colour::{SrgbLut, XYZ_TO_LINEAR_SRGB};
 
@@ -174,7 +175,7 @@ impl FastRenderer {
     /// Prepare `table` with `kernels` (its own, or fused with a correction matrix
     /// by [`fuse_kernels`](super::fuse_kernels)), its chroma classes under their
     /// reference light.
-    pub fn new(table: &L3Table, kernels: &[f32]) -> Result<Self, L3Error> {
+    pub fn new(table: &L3Table, kernels: &[f32]) -> Result<Self, RenderError> {
         Self::under_light(table, kernels, None)
     }
 
@@ -184,15 +185,15 @@ impl FastRenderer {
         table: &L3Table,
         kernels: &[f32],
         light: Option<&[f64]>,
-    ) -> Result<Self, L3Error> {
+    ) -> Result<Self, RenderError> {
         if kernels.len() != table.kernels.len() {
-            return Err(L3Error::KernelMismatch {
+            return Err(RenderError::KernelMismatch {
                 got: kernels.len(),
                 expected: table.kernels.len(),
             });
         }
         if kernels.iter().any(|v| !v.is_finite()) {
-            return Err(L3Error::Table("a kernel weight is not finite".into()));
+            return Err(RenderError::Table("a kernel weight is not finite".into()));
         }
         let geo = table.geometry_under(light)?;
         let nf = table.n_features();
@@ -276,12 +277,12 @@ impl FastRenderer {
         width: usize,
         height: usize,
         region: Option<Region>,
-    ) -> Result<(Vec<f32>, RenderStats), L3Error> {
+    ) -> Result<(Vec<f32>, RenderStats), RenderError> {
         self.render_xyz_until(mosaic, width, height, region, &AtomicBool::new(false))
     }
 
     /// [`render_xyz`](Self::render_xyz) that stops between bands of rows once `cancel` is
-    /// set, with [`L3Error::RenderCanceled`].
+    /// set, with [`RenderError::RenderCanceled`].
     pub fn render_xyz_until(
         &self,
         mosaic: Mosaic<'_>,
@@ -289,7 +290,7 @@ impl FastRenderer {
         height: usize,
         region: Option<Region>,
         cancel: &AtomicBool,
-    ) -> Result<(Vec<f32>, RenderStats), L3Error> {
+    ) -> Result<(Vec<f32>, RenderStats), RenderError> {
         let (src, clamped) = self.source(mosaic, width, height)?;
         let reg = check_region(region, width, height)?;
         let mut out = zeroed::<f32>(reg.width * reg.height * 3);
@@ -309,7 +310,7 @@ impl FastRenderer {
         height: usize,
         region: Option<Region>,
         white: WhiteLevel,
-    ) -> Result<(Frame, f64, RenderStats), L3Error> {
+    ) -> Result<(Frame, f64, RenderStats), RenderError> {
         self.render_srgb8_until(
             mosaic,
             width,
@@ -321,7 +322,7 @@ impl FastRenderer {
     }
 
     /// [`render_srgb8`](Self::render_srgb8) that stops between bands of rows once `cancel`
-    /// is set, with [`L3Error::RenderCanceled`].
+    /// is set, with [`RenderError::RenderCanceled`].
     pub fn render_srgb8_until(
         &self,
         mosaic: Mosaic<'_>,
@@ -330,7 +331,7 @@ impl FastRenderer {
         region: Option<Region>,
         white: WhiteLevel,
         cancel: &AtomicBool,
-    ) -> Result<(Frame, f64, RenderStats), L3Error> {
+    ) -> Result<(Frame, f64, RenderStats), RenderError> {
         let reg = check_region(region, width, height)?;
         let mut out = Frame::take(reg.width * reg.height * 3);
         let (src, clamped) = self.source(mosaic, width, height)?;
@@ -349,11 +350,11 @@ impl FastRenderer {
         region: Option<Region>,
         white: WhiteLevel,
         out: &mut [u8],
-    ) -> Result<(f64, RenderStats), L3Error> {
+    ) -> Result<(f64, RenderStats), RenderError> {
         let reg = check_region(region, width, height)?;
         let need = reg.width * reg.height * 3;
         if out.len() != need {
-            return Err(L3Error::OutputBuffer {
+            return Err(RenderError::OutputBuffer {
                 got: out.len(),
                 need,
                 width: reg.width,
@@ -375,7 +376,7 @@ impl FastRenderer {
         white: WhiteLevel,
         out: &mut [u8],
         cancel: &AtomicBool,
-    ) -> Result<(f64, RenderStats), L3Error> {
+    ) -> Result<(f64, RenderStats), RenderError> {
         let wy = self.white_of(src, white);
         let k = 1.0 / wy;
         let m = XYZ_TO_LINEAR_SRGB.map(|r| r.map(|v| v * k));
@@ -397,7 +398,7 @@ impl FastRenderer {
         width: usize,
         height: usize,
         white: WhiteLevel,
-    ) -> Result<f64, L3Error> {
+    ) -> Result<f64, RenderError> {
         let (src, _) = self.source(mosaic, width, height)?;
         Ok(self.white_of(&src, white))
     }

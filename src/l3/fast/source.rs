@@ -2,7 +2,7 @@
 
 use rayon::prelude::*;
 
-use super::{FastRenderer, L3Error, Mosaic, PatchGeometry, Region, mirror};
+use super::{FastRenderer, Mosaic, PatchGeometry, Region, RenderError, mirror};
 
 /// The frame being rendered, with its conversion to clamped volts.
 pub(super) struct Source<'a> {
@@ -95,13 +95,15 @@ impl FastRenderer {
         mosaic: Mosaic<'a>,
         width: usize,
         height: usize,
-    ) -> Result<(Source<'a>, u64), L3Error> {
+    ) -> Result<(Source<'a>, u64), RenderError> {
         if width == 0 || height == 0 {
-            return Err(L3Error::InvalidInput(format!("frame is {width}×{height}")));
+            return Err(RenderError::InvalidInput(format!(
+                "frame is {width}×{height}"
+            )));
         }
-        let n = width
-            .checked_mul(height)
-            .ok_or_else(|| L3Error::InvalidInput(format!("frame {width}×{height} is too large")))?;
+        let n = width.checked_mul(height).ok_or_else(|| {
+            RenderError::InvalidInput(format!("frame {width}×{height} is too large"))
+        })?;
         let swing = self.swing;
         let (len, dn, clamped) = match mosaic {
             Mosaic::Volts(v) => {
@@ -120,7 +122,7 @@ impl FastRenderer {
                     .reduce(|| (0, 0), |a, b| (a.0 + b.0, a.1 + b.1));
                 if bad > 0 {
                     let i = v.par_iter().position_first(|x| !x.is_finite()).unwrap_or(0);
-                    return Err(L3Error::InvalidInput(format!(
+                    return Err(RenderError::InvalidInput(format!(
                         "input value at row {}, column {} is not finite",
                         i / width,
                         i % width
@@ -130,7 +132,7 @@ impl FastRenderer {
             }
             Mosaic::Dn { data, black, white } => {
                 if white <= black {
-                    return Err(L3Error::InvalidInput(format!(
+                    return Err(RenderError::InvalidInput(format!(
                         "white level {white} must exceed black level {black}"
                     )));
                 }
@@ -144,7 +146,7 @@ impl FastRenderer {
             }
         };
         if len != n {
-            return Err(L3Error::InvalidInput(format!(
+            return Err(RenderError::InvalidInput(format!(
                 "{len} values for a {width}×{height} frame ({n} expected)"
             )));
         }
@@ -191,7 +193,7 @@ pub(super) fn check_region(
     region: Option<Region>,
     width: usize,
     height: usize,
-) -> Result<Region, L3Error> {
+) -> Result<Region, RenderError> {
     let reg = region.unwrap_or(Region {
         x: 0,
         y: 0,
@@ -203,7 +205,7 @@ pub(super) fn check_region(
         && reg.x.checked_add(reg.width).is_some_and(|e| e <= width)
         && reg.y.checked_add(reg.height).is_some_and(|e| e <= height);
     if !inside {
-        return Err(L3Error::InvalidInput(format!(
+        return Err(RenderError::InvalidInput(format!(
             "region {},{} {}×{} is empty or not inside the {width}×{height} frame",
             reg.x, reg.y, reg.width, reg.height
         )));

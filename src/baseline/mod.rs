@@ -5,8 +5,21 @@ use nalgebra::DMatrix;
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 
-use super::{L3Error, Mat3, mirror};
 use crate::camera::Cfa;
+use crate::l3::classify::mirror;
+
+/// Errors of the conventional pipeline: a colour matrix that cannot be fitted, a frame it
+/// cannot render.
+#[derive(Debug, thiserror::Error)]
+pub enum BaselineError {
+    #[error("invalid parameters: {0}")]
+    InvalidParams(String),
+    #[error("invalid input: {0}")]
+    InvalidInput(String),
+    /// A colour matrix fit whose normal equations are singular.
+    #[error("table is not usable: {0}")]
+    Singular(String),
+}
 
 /// A least-squares colour matrix: XYZ = M · channels.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
@@ -18,11 +31,11 @@ pub struct ColourMatrix {
 
 impl ColourMatrix {
     /// Fit by least squares from (channel responses, XYZ) pairs.
-    pub fn fit(channels: &[Vec<f64>], xyz: &[[f64; 3]]) -> Result<Self, L3Error> {
+    pub fn fit(channels: &[Vec<f64>], xyz: &[[f64; 3]]) -> Result<Self, BaselineError> {
         let n = channels.len();
         let nc = channels.first().map(|c| c.len()).unwrap_or(0);
         if n < nc.max(3) || n != xyz.len() || nc == 0 || channels.iter().any(|c| c.len() != nc) {
-            return Err(L3Error::InvalidParams(format!(
+            return Err(BaselineError::InvalidParams(format!(
                 "colour matrix fit needs at least {} consistent samples, got {n}",
                 nc.max(3)
             )));
@@ -34,7 +47,7 @@ impl ColourMatrix {
         let sol = ata
             .cholesky()
             .map(|c| c.solve(&atb))
-            .ok_or_else(|| L3Error::Table("colour matrix fit is singular".into()))?;
+            .ok_or_else(|| BaselineError::Singular("colour matrix fit is singular".into()))?;
         let m = (0..nc)
             .map(|c| [sol[(c, 0)], sol[(c, 1)], sol[(c, 2)]])
             .collect();
@@ -42,7 +55,7 @@ impl ColourMatrix {
     }
 
     /// The matrix followed by `t` (T·M).
-    pub fn then(&self, t: &Mat3) -> Self {
+    pub fn then(&self, t: &[[f64; 3]; 3]) -> Self {
         let m = self
             .m
             .iter()
@@ -63,9 +76,9 @@ pub fn bilinear_demosaic(
     width: usize,
     height: usize,
     cfa: &Cfa,
-) -> Result<Vec<f32>, L3Error> {
+) -> Result<Vec<f32>, BaselineError> {
     if width == 0 || height == 0 || volts.len() != width * height {
-        return Err(L3Error::InvalidInput(format!(
+        return Err(BaselineError::InvalidInput(format!(
             "{} values for a {width}×{height} frame",
             volts.len()
         )));
@@ -120,10 +133,10 @@ pub fn render_baseline(
     height: usize,
     cfa: &Cfa,
     m: &ColourMatrix,
-) -> Result<Vec<f32>, L3Error> {
+) -> Result<Vec<f32>, BaselineError> {
     let nc = cfa.n_channels();
     if m.n_channels != nc {
-        return Err(L3Error::InvalidInput(format!(
+        return Err(BaselineError::InvalidInput(format!(
             "colour matrix has {} channels, the CFA {nc}",
             m.n_channels
         )));

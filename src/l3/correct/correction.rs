@@ -14,7 +14,7 @@ use crate::spectral::{
     cie_illuminant, munsell_reflectances,
 };
 
-use super::L3Error;
+use super::CorrectError;
 
 pub type Mat3 = [[f64; 3]; 3];
 
@@ -45,13 +45,14 @@ pub fn correction_matrix(
     acquisition: &Spectrum,
     target: &Spectrum,
     white_preserving: bool,
-) -> Result<Mat3, L3Error> {
+) -> Result<Mat3, CorrectError> {
     if reflectances.len() < 3 {
-        return Err(L3Error::InvalidParams(
+        return Err(CorrectError::InvalidParams(
             "T needs at least 3 reflectances".into(),
         ));
     }
-    let err = |e: crate::colour::ColourError| L3Error::InvalidInput(format!("illuminant: {e}"));
+    let err =
+        |e: crate::colour::ColourError| CorrectError::InvalidInput(format!("illuminant: {e}"));
     let wa = cmfs.reflectance_weights(acquisition).map_err(err)?;
     let wt = cmfs.reflectance_weights(target).map_err(err)?;
     let n = reflectances.len();
@@ -59,7 +60,7 @@ pub fn correction_matrix(
     let mut b = Matrix3xX::<f64>::zeros(n);
     for (j, r) in reflectances.iter().enumerate() {
         if r.grid() != &cmfs.grid {
-            return Err(L3Error::InvalidInput(
+            return Err(CorrectError::InvalidInput(
                 "reflectance grid differs from the CMF grid".into(),
             ));
         }
@@ -71,7 +72,7 @@ pub fn correction_matrix(
     let aat: Matrix3<f64> = &a * a.transpose();
     let bat: Matrix3<f64> = &b * a.transpose();
     let inv = aat.try_inverse().ok_or_else(|| {
-        L3Error::InvalidInput(
+        CorrectError::InvalidInput(
             "the illuminant makes the reflectance XYZs degenerate (T is singular)".into(),
         )
     })?;
@@ -96,11 +97,11 @@ pub fn correction_matrix(
     }
     let out: Mat3 = [0, 1, 2].map(|i| [0, 1, 2].map(|j| t[(i, j)]));
     if out.iter().flatten().any(|v| !v.is_finite()) {
-        return Err(L3Error::InvalidInput("T is not finite".into()));
+        return Err(CorrectError::InvalidInput("T is not finite".into()));
     }
     if let Some(v) = out.iter().flatten().find(|v| v.abs() > MAX_MATRIX_ENTRY) {
         // a (nearly) line spectrum: every surface's XYZ is nearly collinear
-        return Err(L3Error::InvalidInput(format!(
+        return Err(CorrectError::InvalidInput(format!(
             "the illuminant is too narrow-band for a colour correction (T has an entry {v:e}, beyond ±{MAX_MATRIX_ENTRY:e})"
         )));
     }
@@ -134,7 +135,7 @@ pub struct IlluminantEntry {
     pub source: CorrectionSource,
     /// The light's spectrum on the registry's grid, when it is known (not for
     /// a correction given as a matrix): what a camera-aware correction is
-    /// fitted on (`crate::training::camera_corrected`).
+    /// fitted on ([`camera_corrected`](super::camera_corrected)).
     #[serde(skip)]
     pub spd: Option<Spectrum>,
     /// Per table band (level, or level and chroma class), the correction a same-illuminant table's classes of that band
@@ -143,7 +144,7 @@ pub struct IlluminantEntry {
     pub level_corrections: Vec<Mat3>,
     /// A table's sensor's channel responses to white under this light, when
     /// they have been worked out for the table it renders with: what its
-    /// chroma classes balance by (`crate::l3::chroma`); `None`, their
+    /// chroma classes balance by (`l3::classify::chroma`); `None`, their
     /// reference light.
     #[serde(skip)]
     pub neutral: Option<Vec<f64>>,
@@ -180,10 +181,12 @@ pub struct IlluminantRegistry {
 
 impl IlluminantRegistry {
     /// An empty registry (D65 only) using `reflectances` for T.
-    pub fn new(grid: WavelengthGrid, reflectances: Vec<Spectrum>) -> Result<Self, L3Error> {
+    pub fn new(grid: WavelengthGrid, reflectances: Vec<Spectrum>) -> Result<Self, CorrectError> {
         let cmfs = Cmfs::cie1931(&grid);
         let d65 = cie_illuminant("D65")
-            .ok_or_else(|| L3Error::InvalidParams("D65 missing from the built-in data".into()))?
+            .ok_or_else(|| {
+                CorrectError::InvalidParams("D65 missing from the built-in data".into())
+            })?
             .resample(&grid, Extrapolation::Zero);
         let mut r = Self {
             grid,
@@ -212,16 +215,19 @@ impl IlluminantRegistry {
 
     /// The defaults: D65, D50, A, F2, F11, and ISET's measured Tungsten and
     /// Fluorescent (from `iset`; `None`: the built-in data).
-    pub fn with_defaults(grid: WavelengthGrid, iset: Option<&IsetData>) -> Result<Self, L3Error> {
+    pub fn with_defaults(
+        grid: WavelengthGrid,
+        iset: Option<&IsetData>,
+    ) -> Result<Self, CorrectError> {
         let refl = crate::scene::natural_reflectances(&grid, iset)
-            .map_err(|e| L3Error::InvalidInput(e.to_string()))?
+            .map_err(|e| CorrectError::InvalidInput(e.to_string()))?
             .into_iter()
             .map(|(_, s)| s)
             .collect();
         let mut r = Self::new(grid, refl)?;
         for name in ["D50", "A", "F2", "F11"] {
             let spd = cie_illuminant(name).ok_or_else(|| {
-                L3Error::InvalidParams(format!("{name} missing from built-in data"))
+                CorrectError::InvalidParams(format!("{name} missing from built-in data"))
             })?;
             r.insert_spd(name, &spd, CorrectionSource::Builtin)?;
         }
@@ -262,7 +268,7 @@ impl IlluminantRegistry {
         self.entries.is_empty()
     }
 
-    fn check_name(name: &str) -> Result<(), L3Error> {
+    fn check_name(name: &str) -> Result<(), CorrectError> {
         let ok = !name.is_empty()
             && name.len() <= 64
             && name
@@ -271,16 +277,16 @@ impl IlluminantRegistry {
         if ok {
             Ok(())
         } else {
-            Err(L3Error::InvalidInput(format!(
+            Err(CorrectError::InvalidInput(format!(
                 "illuminant name '{name}': 1–64 characters of A–Z, a–z, 0–9, '-', '_', '.', ':'"
             )))
         }
     }
 
-    fn put(&mut self, e: IlluminantEntry) -> Result<&IlluminantEntry, L3Error> {
+    fn put(&mut self, e: IlluminantEntry) -> Result<&IlluminantEntry, CorrectError> {
         Self::check_name(&e.name)?;
         if Self::key(&e.name) == "d65" {
-            return Err(L3Error::InvalidInput(
+            return Err(CorrectError::InvalidInput(
                 "D65 is the target and cannot be replaced".into(),
             ));
         }
@@ -298,7 +304,7 @@ impl IlluminantRegistry {
 
     /// The correction T to D65 of an SPD on the registry's grid, as an entry
     /// registered from it would carry.
-    pub fn correction_for(&self, spd: &Spectrum) -> Result<Mat3, L3Error> {
+    pub fn correction_for(&self, spd: &Spectrum) -> Result<Mat3, CorrectError> {
         correction_matrix(
             &self.cmfs,
             &self.reflectances,
@@ -315,9 +321,9 @@ impl IlluminantRegistry {
         spd: &Spectrum,
         cct: Option<f64>,
         source: CorrectionSource,
-    ) -> Result<IlluminantEntry, L3Error> {
+    ) -> Result<IlluminantEntry, CorrectError> {
         if spd.values().iter().any(|v| *v < 0.0) {
-            return Err(L3Error::InvalidInput(format!(
+            return Err(CorrectError::InvalidInput(format!(
                 "SPD of '{name}' has negative values"
             )));
         }
@@ -341,34 +347,34 @@ impl IlluminantRegistry {
         name: &str,
         spd: &Samples,
         source: CorrectionSource,
-    ) -> Result<&IlluminantEntry, L3Error> {
+    ) -> Result<&IlluminantEntry, CorrectError> {
         let s = spd.resample(&self.grid, Extrapolation::Zero);
         let e = self.entry_for(name, &s, None, source)?;
         self.put(e)
     }
 
     /// Register a given matrix.
-    pub fn insert_matrix(&mut self, name: &str, t: Mat3) -> Result<&IlluminantEntry, L3Error> {
+    pub fn insert_matrix(&mut self, name: &str, t: Mat3) -> Result<&IlluminantEntry, CorrectError> {
         if t.iter().flatten().any(|v| !v.is_finite()) {
-            return Err(L3Error::InvalidInput(
+            return Err(CorrectError::InvalidInput(
                 "matrix has non-finite entries".into(),
             ));
         }
         if let Some(v) = t.iter().flatten().find(|v| v.abs() > MAX_MATRIX_ENTRY) {
             // fused into f32 kernels, such a matrix overflows to Inf/NaN pixels
-            return Err(L3Error::InvalidInput(format!(
+            return Err(CorrectError::InvalidInput(format!(
                 "matrix entry {v:e} is beyond ±{MAX_MATRIX_ENTRY:e}: not an XYZ → XYZ correction"
             )));
         }
         let m = Matrix3::from_fn(|i, j| t[i][j]);
         if m.determinant().abs() < 1e-9 {
-            return Err(L3Error::InvalidInput("matrix is singular".into()));
+            return Err(CorrectError::InvalidInput("matrix is singular".into()));
         }
         self.put(IlluminantEntry::from_matrix(name, t))
     }
 
     /// Register a blackbody (below 4000 K) or CIE daylight (from 4000 K) by CCT.
-    pub fn insert_cct(&mut self, name: &str, cct: f64) -> Result<&IlluminantEntry, L3Error> {
+    pub fn insert_cct(&mut self, name: &str, cct: f64) -> Result<&IlluminantEntry, CorrectError> {
         let spd = IlluminantSpec::Cct(cct).resolve(None)?.spd;
         let s = spd.resample(&self.grid, Extrapolation::Zero);
         let e = self.entry_for(name, &s, Some(cct), CorrectionSource::Cct)?;
@@ -376,9 +382,9 @@ impl IlluminantRegistry {
     }
 
     /// Remove an entry (never D65). Returns whether it existed.
-    pub fn remove(&mut self, name: &str) -> Result<bool, L3Error> {
+    pub fn remove(&mut self, name: &str) -> Result<bool, CorrectError> {
         if Self::key(name) == "d65" {
-            return Err(L3Error::InvalidInput("D65 cannot be deleted".into()));
+            return Err(CorrectError::InvalidInput("D65 cannot be deleted".into()));
         }
         let k = self
             .entries
@@ -396,7 +402,7 @@ impl IlluminantRegistry {
         &mut self,
         spec: &str,
         iset: Option<&IsetData>,
-    ) -> Result<IlluminantEntry, L3Error> {
+    ) -> Result<IlluminantEntry, CorrectError> {
         if let Some(e) = self.get(spec) {
             return Ok(e.clone());
         }
@@ -435,7 +441,7 @@ impl IlluminantRegistry {
 /// The correlated colour temperature of an `xy:x,y` illuminant spec (`None` when `spec` is
 /// not one): a chromaticity inside the spectrum locus triangle whose CCT lies in
 /// 1000–25000 K.
-pub fn xy_spec_cct(spec: &str) -> Result<Option<f64>, L3Error> {
+pub fn xy_spec_cct(spec: &str) -> Result<Option<f64>, CorrectError> {
     let spec = spec.trim();
     let Some(rest) = spec
         .get(..3)
@@ -444,7 +450,7 @@ pub fn xy_spec_cct(spec: &str) -> Result<Option<f64>, L3Error> {
     else {
         return Ok(None);
     };
-    let bad = |why: String| L3Error::InvalidInput(format!("illuminant '{spec}': {why}"));
+    let bad = |why: String| CorrectError::InvalidInput(format!("illuminant '{spec}': {why}"));
     let parts: Vec<f64> = rest
         .split(',')
         .map(|p| p.trim().parse::<f64>())

@@ -33,7 +33,7 @@ use rand::{RngExt, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use serde::{Deserialize, Serialize};
 
-use super::L3Error;
+use super::ClassifyError;
 
 /// Lloyd iterations at most (the sets converge in far fewer).
 const MAX_ITERATIONS: usize = 200;
@@ -60,10 +60,10 @@ pub struct ChromaClasses {
 
 /// `neutral` scaled so its largest channel is 1, or an error naming what is
 /// wrong with it (a neutral must be positive and finite in every channel).
-pub fn normalised_neutral(neutral: &[f64]) -> Result<Vec<f64>, L3Error> {
+pub fn normalised_neutral(neutral: &[f64]) -> Result<Vec<f64>, ClassifyError> {
     let max = neutral.iter().copied().fold(0.0, f64::max);
     if neutral.is_empty() || !neutral.iter().all(|v| v.is_finite() && *v > 0.0) || max <= 0.0 {
-        return Err(L3Error::InvalidInput(format!(
+        return Err(ClassifyError::InvalidInput(format!(
             "a light's neutral must be positive and finite in every channel, got {neutral:?}"
         )));
     }
@@ -72,14 +72,14 @@ pub fn normalised_neutral(neutral: &[f64]) -> Result<Vec<f64>, L3Error> {
 
 /// The channel-wise geometric mean of `neutrals` (each normalised), itself
 /// normalised: the reference neutral of an ensemble of lights.
-pub fn mean_neutral(neutrals: &[Vec<f64>]) -> Result<Vec<f64>, L3Error> {
+pub fn mean_neutral(neutrals: &[Vec<f64>]) -> Result<Vec<f64>, ClassifyError> {
     let normed = neutrals
         .iter()
         .map(|n| normalised_neutral(n))
         .collect::<Result<Vec<_>, _>>()?;
     let nc = normed.first().map(Vec::len).unwrap_or(0);
     if nc == 0 || normed.iter().any(|n| n.len() != nc) {
-        return Err(L3Error::InvalidInput(
+        return Err(ClassifyError::InvalidInput(
             "neutrals of one length are needed for a mean".into(),
         ));
     }
@@ -156,7 +156,7 @@ impl ChromaClasses {
         k: usize,
         min_size: usize,
         seed: u64,
-    ) -> Result<Self, L3Error> {
+    ) -> Result<Self, ClassifyError> {
         let normed = neutrals
             .iter()
             .map(|n| normalised_neutral(n))
@@ -168,11 +168,13 @@ impl ChromaClasses {
                 let n = normed
                     .get(light.get(i).copied().unwrap_or(0))
                     .ok_or_else(|| {
-                        L3Error::InvalidInput(format!("response {i} is lit by an unknown light"))
+                        ClassifyError::InvalidInput(format!(
+                            "response {i} is lit by an unknown light"
+                        ))
                     })?;
                 Ok(balanced(r, Some(n)))
             })
-            .collect::<Result<Vec<_>, L3Error>>()?;
+            .collect::<Result<Vec<_>, ClassifyError>>()?;
         let mut classes = Self::fit(&balanced_responses, k, min_size, seed)?;
         classes.white = Some(mean_neutral(&normed)?);
         Ok(classes)
@@ -186,17 +188,17 @@ impl ChromaClasses {
         k: usize,
         min_size: usize,
         seed: u64,
-    ) -> Result<Self, L3Error> {
+    ) -> Result<Self, ClassifyError> {
         let points: Vec<Vec<f64>> = responses.iter().filter_map(|r| chromaticity(r)).collect();
         let nc = points.first().map(Vec::len).unwrap_or(0);
         if k == 0 || nc == 0 || points.iter().any(|p| p.len() != nc) {
-            return Err(L3Error::InvalidParams(format!(
+            return Err(ClassifyError::InvalidParams(format!(
                 "chroma classes need k ≥ 1 and responses of one length ({k} classes, {} points)",
                 points.len()
             )));
         }
         if points.len() < min_size.max(1) {
-            return Err(L3Error::InvalidParams(format!(
+            return Err(ClassifyError::InvalidParams(format!(
                 "{} responding surfaces cannot make a class of {min_size}",
                 points.len()
             )));
@@ -233,10 +235,10 @@ impl ChromaClasses {
 
     /// Check a stored set of classes for a sensor of `n_channels`: 1 to
     /// [`MAX_CHROMA_CLASSES`] centroids of that length, finite.
-    pub fn validate(&self, n_channels: usize) -> Result<(), L3Error> {
+    pub fn validate(&self, n_channels: usize) -> Result<(), ClassifyError> {
         let n = self.centroids.len();
         if n == 0 || n > MAX_CHROMA_CLASSES {
-            return Err(L3Error::InvalidParams(format!(
+            return Err(ClassifyError::InvalidParams(format!(
                 "{n} chroma classes (1 to {MAX_CHROMA_CLASSES})"
             )));
         }
@@ -245,18 +247,18 @@ impl ChromaClasses {
             .iter()
             .any(|c| c.len() != n_channels || c.iter().any(|v| !v.is_finite()))
         {
-            return Err(L3Error::InvalidParams(format!(
+            return Err(ClassifyError::InvalidParams(format!(
                 "chroma centroids must be {n_channels} finite values each"
             )));
         }
         if let Some(w) = &self.white {
             if w.len() != n_channels {
-                return Err(L3Error::InvalidParams(format!(
+                return Err(ClassifyError::InvalidParams(format!(
                     "the chroma classes' neutral has {} values for {n_channels} channels",
                     w.len()
                 )));
             }
-            normalised_neutral(w).map_err(|e| L3Error::InvalidParams(e.to_string()))?;
+            normalised_neutral(w).map_err(|e| ClassifyError::InvalidParams(e.to_string()))?;
         }
         Ok(())
     }

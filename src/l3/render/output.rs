@@ -4,7 +4,7 @@
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 
-use super::L3Error;
+use super::error::RenderError;
 use crate::colour::{SrgbLut, XYZ_TO_LINEAR_SRGB};
 
 /// The XYZ luminance that maps to sRGB white.
@@ -18,14 +18,14 @@ pub enum WhiteLevel {
 }
 
 impl std::str::FromStr for WhiteLevel {
-    type Err = L3Error;
+    type Err = RenderError;
     fn from_str(s: &str) -> Result<Self, Self::Err> {
         if s.eq_ignore_ascii_case("auto") {
             return Ok(Self::Auto);
         }
         match s.parse::<f64>() {
             Ok(v) if v.is_finite() && v > 0.0 => Ok(Self::Y(v)),
-            _ => Err(L3Error::InvalidInput(format!(
+            _ => Err(RenderError::InvalidInput(format!(
                 "white level '{s}': expected 'auto' or a positive number"
             ))),
         }

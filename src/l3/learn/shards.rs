@@ -4,8 +4,7 @@
 //!
 //! # Why the result does not depend on the sharding
 //!
-//! A training run has two data passes over its batches (see
-//! [`super::trainer`]):
+//! A training run has two data passes over its batches (see `trainer.rs`):
 //!
 //! 1. **Survey.** Contrast histograms and sample counts of every fourth
 //!    batch (batch `i` with `i % 4 == 0`). These are integers, so a sum of
@@ -36,12 +35,12 @@
 //!    Within a batch, samples are folded in blocks of 64
 //!    ([`Gram::push`]); that order depends on the batch alone.
 //!
-//! The single-process path ([`super::learn`]) is this same code with one
+//! The single-process path ([`learn`](super::learn)) is this same code with one
 //! shard covering every batch: survey it, derive the classes, accumulate
 //! it, merge the one partial, solve.
 //!
 //! Partial sums serialise to bytes and back exactly (see
-//! [`super::partial_format`]), so the shards of a run can be computed on
+//! `partial_format.rs`), so the shards of a run can be computed on
 //! different machines and merged by any of them. A partial carries the
 //! caller's run key, its batch range and the shape of its sums; a merge
 //! checks that its parts are of one run and tile `0..n` exactly once.
@@ -53,7 +52,8 @@ use std::sync::Mutex;
 use serde::{Deserialize, Serialize};
 use sha2::{Digest, Sha256};
 
-use super::{Gram, L3Error};
+use super::LearnError;
+use super::normal_eq::Gram;
 
 /// One shard of a training run: batches `start..end` of `n_batches`.
 #[derive(Clone, Debug, PartialEq, Eq, Serialize, Deserialize)]
@@ -74,9 +74,9 @@ impl ShardSpec {
 
 /// Split `n_batches` batches into `n_shards` contiguous shards of nearly
 /// equal size (1 ≤ `n_shards` ≤ `n_batches`).
-pub fn plan_shards(n_batches: usize, n_shards: usize) -> Result<Vec<ShardSpec>, L3Error> {
+pub fn plan_shards(n_batches: usize, n_shards: usize) -> Result<Vec<ShardSpec>, LearnError> {
     if n_shards == 0 || n_shards > n_batches {
-        return Err(L3Error::InvalidParams(format!(
+        return Err(LearnError::InvalidParams(format!(
             "{n_shards} shards for {n_batches} batches (1 to {n_batches})"
         )));
     }
@@ -161,14 +161,14 @@ pub fn cover(range: Range<usize>, n: usize) -> Vec<Node> {
 pub(crate) fn tree_sum<T: Send>(
     node: Node,
     n: usize,
-    get: &(dyn Fn(Node) -> Result<Option<T>, L3Error> + Sync),
+    get: &(dyn Fn(Node) -> Result<Option<T>, LearnError> + Sync),
     add: &(dyn Fn(T, T) -> T + Sync),
-) -> Result<T, L3Error> {
+) -> Result<T, LearnError> {
     if let Some(v) = get(node)? {
         return Ok(v);
     }
     if node.log2 == 0 {
-        return Err(L3Error::PartialSums(format!(
+        return Err(LearnError::PartialSums(format!(
             "no shard has the sums of batch {}",
             node.lo
         )));
@@ -261,14 +261,14 @@ impl SurveyPartial {
 
 /// Check that `ranges` (with their origins) tile `0..n` exactly once, and
 /// return the order that sorts them by start.
-fn check_tiling(ranges: &[Range<usize>], n: usize) -> Result<Vec<usize>, L3Error> {
+fn check_tiling(ranges: &[Range<usize>], n: usize) -> Result<Vec<usize>, LearnError> {
     let mut order: Vec<usize> = (0..ranges.len()).collect();
     order.sort_by_key(|&i| (ranges[i].start, ranges[i].end));
     let mut next = 0;
     for &i in &order {
         let r = &ranges[i];
         if r.start != next || r.end <= r.start {
-            return Err(L3Error::PartialSums(format!(
+            return Err(LearnError::PartialSums(format!(
                 "shards do not tile batches 0..{n}: batches {next}.. expected, {}..{} given",
                 r.start, r.end
             )));
@@ -276,7 +276,7 @@ fn check_tiling(ranges: &[Range<usize>], n: usize) -> Result<Vec<usize>, L3Error
         next = r.end;
     }
     if next != n {
-        return Err(L3Error::PartialSums(format!(
+        return Err(LearnError::PartialSums(format!(
             "shards cover batches 0..{next} of 0..{n}"
         )));
     }
@@ -284,17 +284,17 @@ fn check_tiling(ranges: &[Range<usize>], n: usize) -> Result<Vec<usize>, L3Error
 }
 
 /// Merge the survey shards of one run into the survey of all its batches.
-pub fn merge_surveys(parts: &[SurveyPartial]) -> Result<SurveyPartial, L3Error> {
+pub fn merge_surveys(parts: &[SurveyPartial]) -> Result<SurveyPartial, LearnError> {
     let first = parts
         .first()
-        .ok_or_else(|| L3Error::PartialSums("no survey shards".into()))?;
+        .ok_or_else(|| LearnError::PartialSums("no survey shards".into()))?;
     for p in parts {
         if p.run_key != first.run_key
             || p.n_batches != first.n_batches
             || p.shape != first.shape
             || !p.sizes_agree()
         {
-            return Err(L3Error::PartialSums(format!(
+            return Err(LearnError::PartialSums(format!(
                 "survey of batches {}..{} is of another run or shape",
                 p.batches.start, p.batches.end
             )));
@@ -378,10 +378,10 @@ pub struct GramPartial {
 /// Merge the accumulation shards of one run, accumulated for `classes`:
 /// the class sums of every batch, added exactly as one process adds them.
 /// Each class without samples gets an empty accumulator.
-pub fn merge_partials(classes: &Classes, parts: Vec<GramPartial>) -> Result<Vec<Gram>, L3Error> {
+pub fn merge_partials(classes: &Classes, parts: Vec<GramPartial>) -> Result<Vec<Gram>, LearnError> {
     let first = parts
         .first()
-        .ok_or_else(|| L3Error::PartialSums("no accumulation shards".into()))?;
+        .ok_or_else(|| LearnError::PartialSums("no accumulation shards".into()))?;
     let (key, n, nf, nc) = (
         first.run_key.clone(),
         first.n_batches,
@@ -396,7 +396,7 @@ pub fn merge_partials(classes: &Classes, parts: Vec<GramPartial>) -> Result<Vec<
             || p.n_classes != nc
             || p.classes_digest != digest
         {
-            return Err(L3Error::PartialSums(format!(
+            return Err(LearnError::PartialSums(format!(
                 "sums of batches {}..{} are of another run or other classes",
                 p.batches.start, p.batches.end
             )));
@@ -409,32 +409,32 @@ pub fn merge_partials(classes: &Classes, parts: Vec<GramPartial>) -> Result<Vec<
         for (node, sums) in p.nodes {
             let b = node.batches(n);
             if !node.is_valid(n) || b.start < p.batches.start || b.end > p.batches.end {
-                return Err(L3Error::PartialSums(format!(
+                return Err(LearnError::PartialSums(format!(
                     "node {node:?} is not in shard {}..{}",
                     p.batches.start, p.batches.end
                 )));
             }
             let bad_size = sums.iter().flatten().any(|g| g.n_features() != nf);
             if bad_size || sums.len() != nc || stored.insert(node, sums).is_some() {
-                return Err(L3Error::PartialSums(format!(
+                return Err(LearnError::PartialSums(format!(
                     "node {node:?}: wrong class count or size, or given twice"
                 )));
             }
         }
     }
     let stored = Mutex::new(stored);
-    let get = |node: Node| -> Result<Option<ClassSums>, L3Error> {
+    let get = |node: Node| -> Result<Option<ClassSums>, LearnError> {
         Ok(stored
             .lock()
-            .map_err(|_| L3Error::PartialSums("merge state poisoned".into()))?
+            .map_err(|_| LearnError::PartialSums("merge state poisoned".into()))?
             .remove(&node))
     };
     let sums = tree_sum(Node::root(n), n, &get, &add_class_sums)?;
     let left = stored
         .into_inner()
-        .map_err(|_| L3Error::PartialSums("merge state poisoned".into()))?;
+        .map_err(|_| LearnError::PartialSums("merge state poisoned".into()))?;
     if !left.is_empty() {
-        return Err(L3Error::PartialSums(format!(
+        return Err(LearnError::PartialSums(format!(
             "{} nodes overlap others",
             left.len()
         )));

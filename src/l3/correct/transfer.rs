@@ -2,7 +2,7 @@
 //!
 //! A same-illuminant table's colour maps are fitted for the lights it was
 //! trained under, aimed through each light's T at the true D65 colour
-//! (`training::ColourTarget::ThroughCorrection`): they absorb what those
+//! ([`ColourTarget::ThroughCorrection`](super::ColourTarget::ThroughCorrection)): they absorb what those
 //! T's get wrong, which another light's T does not share. The maps of a
 //! chroma class are also a local fit, to the spectra its surfaces sent under
 //! the training light(s), and extrapolate worse under another light than one
@@ -18,9 +18,9 @@
 //!   through the camera-aware C, gained (`docs/table1/summary-chroma8.md`).
 //!
 //! So a same-illuminant table keeps, per level, the map fitted over every
-//! class and aimed at XYZ under the light ([`super::L3Params::transfer_maps`];
+//! class and aimed at XYZ under the light ([`L3Params::transfer_maps`](crate::l3::params::L3Params::transfer_maps);
 //! the trainer fits it for ΔE00 or by plain least squares, whichever renders
-//! standard lights held out from training better: `training::transfer_fit`),
+//! standard lights held out from training better: `src/l3/learn/transfer_fit.rs`),
 //! and under a foreign light with T every unsaturated kernel's channel sums
 //! are moved onto it: each channel's difference is spread evenly over that
 //! channel's pixels in the patch. On a uniform patch the kernel then applies
@@ -30,7 +30,7 @@
 //! they are. Through the camera-aware C (per-level corrections fitted on the
 //! table's own maps) the table's kernels are used as they are.
 
-use super::{L3Error, L3Table};
+use crate::l3::table::{L3Table, TableError};
 
 impl L3Table {
     /// Whether the table was trained under the light named `name` (one of
@@ -52,7 +52,7 @@ impl L3Table {
     /// The table's kernels with every unsaturated kernel's channel sums moved
     /// to its level's transfer map (see the module doc); `None` for a table
     /// without transfer maps.
-    pub fn transfer_kernels(&self) -> Result<Option<Vec<f32>>, L3Error> {
+    pub fn transfer_kernels(&self) -> Result<Option<Vec<f32>>, TableError> {
         let Some(maps) = &self.meta.params.transfer_maps else {
             return Ok(None);
         };
@@ -60,7 +60,7 @@ impl L3Table {
         let nch = geo.n_channels();
         let nf = self.n_features();
         if maps.len() != self.n_levels() || maps.iter().any(|m| m.n_channels != nch) {
-            return Err(L3Error::Table(format!(
+            return Err(TableError::Unusable(format!(
                 "{} transfer maps of {:?} channels for {} levels of {nch} channels",
                 maps.len(),
                 maps.first().map(|m| m.n_channels),

@@ -4,7 +4,7 @@ use std::borrow::Cow;
 
 use crate::camera::Cfa;
 
-use super::L3Error;
+use super::ClassifyError;
 
 /// The most CFA channels a table can classify (saturation cases are bit masks).
 pub const MAX_CHANNELS: usize = 8;
@@ -99,28 +99,28 @@ impl PatchGeometry {
         cfa: &Cfa,
         levels: &[f64],
         sat_threshold: f64,
-    ) -> Result<Self, L3Error> {
+    ) -> Result<Self, ClassifyError> {
         if size.is_multiple_of(2) || !(3..=9).contains(&size) {
-            return Err(L3Error::InvalidParams(format!(
+            return Err(ClassifyError::InvalidParams(format!(
                 "patch size {size} (3, 5, 7 or 9)"
             )));
         }
         let n_channels = cfa.n_channels();
         if n_channels == 0 || n_channels > MAX_CHANNELS {
-            return Err(L3Error::InvalidParams(format!(
+            return Err(ClassifyError::InvalidParams(format!(
                 "{n_channels} CFA channels (1 to {MAX_CHANNELS} supported)"
             )));
         }
         if cfa.rows == 0 || cfa.cols == 0 || cfa.pattern.len() != cfa.rows * cfa.cols {
-            return Err(L3Error::InvalidParams("malformed CFA".into()));
+            return Err(ClassifyError::InvalidParams("malformed CFA".into()));
         }
         if cfa.pattern.iter().any(|&c| c >= n_channels) {
-            return Err(L3Error::InvalidParams(
+            return Err(ClassifyError::InvalidParams(
                 "CFA names an undefined channel".into(),
             ));
         }
         if levels.is_empty() || levels.iter().any(|v| !v.is_finite()) {
-            return Err(L3Error::InvalidParams(
+            return Err(ClassifyError::InvalidParams(
                 "levels must be finite and non-empty".into(),
             ));
         }
@@ -173,7 +173,7 @@ impl PatchGeometry {
     /// becomes one band per chroma class (band = level × classes + class),
     /// classified under the classes' reference light ([`Self::under_light`]
     /// for another).
-    pub fn with_chroma(mut self, classes: &super::ChromaClasses) -> Result<Self, L3Error> {
+    pub fn with_chroma(mut self, classes: &super::ChromaClasses) -> Result<Self, ClassifyError> {
         classes.validate(self.n_channels)?;
         self.chroma = if classes.len() > 1 {
             classes
@@ -199,12 +199,12 @@ impl PatchGeometry {
     /// channel responses to white) is `light`: the classes' balance divides
     /// each channel by it. Borrowed when nothing changes (no split, classes
     /// of raw ratios, or no light named).
-    pub fn under_light(&self, light: Option<&[f64]>) -> Result<Cow<'_, Self>, L3Error> {
+    pub fn under_light(&self, light: Option<&[f64]>) -> Result<Cow<'_, Self>, ClassifyError> {
         let Some(light) = light.filter(|_| self.chroma_balanced && !self.chroma.is_empty()) else {
             return Ok(Cow::Borrowed(self));
         };
         if light.len() != self.n_channels {
-            return Err(L3Error::InvalidInput(format!(
+            return Err(ClassifyError::InvalidInput(format!(
                 "a neutral of {} channels for a sensor of {}",
                 light.len(),
                 self.n_channels
@@ -558,7 +558,7 @@ mod tests {
 
     #[test]
     fn bands_split_each_level_by_chroma_class() {
-        let classes = crate::l3::ChromaClasses {
+        let classes = crate::l3::classify::ChromaClasses {
             centroids: vec![vec![0.7, 0.1, 0.1, 0.1], vec![0.1, 0.1, 0.1, 0.7]],
             white: None,
         };
@@ -584,9 +584,9 @@ mod tests {
             g.chroma_of(&means([0.0, 0.1, 0.1, 0.1]))
         );
         // a single class is no split; centroids of the wrong length are refused
-        let one = crate::l3::ChromaClasses::single(4);
+        let one = crate::l3::classify::ChromaClasses::single(4);
         assert_eq!(rgbw_geometry().with_chroma(&one).unwrap().n_bands(), 3);
-        let three = crate::l3::ChromaClasses {
+        let three = crate::l3::classify::ChromaClasses {
             centroids: vec![vec![0.5, 0.5, 0.0]; 2],
             white: None,
         };
@@ -602,7 +602,7 @@ mod tests {
     #[test]
     fn balanced_classes_follow_the_light() {
         // a reddish and a bluish class, balanced by a neutral light
-        let classes = crate::l3::ChromaClasses {
+        let classes = crate::l3::classify::ChromaClasses {
             centroids: vec![vec![0.4, 0.2, 0.2, 0.2], vec![0.2, 0.2, 0.4, 0.2]],
             white: Some(vec![1.0; 4]),
         };

@@ -4,7 +4,7 @@
 use rand::{RngExt, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 
-use super::{TrainError, mix};
+use super::LearnError;
 use crate::scene::{
     DeadLeavesParams, Scene, SceneOptions, dead_leaves, grey_ramp, reflectance_chart,
     training_reflectances,
@@ -27,7 +27,7 @@ impl TrainingScenes {
         seed: u64,
         size: usize,
         mean_luminance: f64,
-    ) -> Result<Self, TrainError> {
+    ) -> Result<Self, LearnError> {
         let reflectances = training_reflectances(&grid, iset)?
             .into_iter()
             .map(|(_, s)| s)
@@ -58,7 +58,7 @@ impl TrainingScenes {
         index: usize,
         illuminant: &Spectrum,
         name: &str,
-    ) -> Result<Scene, TrainError> {
+    ) -> Result<Scene, LearnError> {
         let opts = SceneOptions::new(self.grid, illuminant.clone(), name)?
             .with_mean_luminance(self.mean_luminance);
         let seed = mix(self.seed, index as u64, 0x5CE7E);
@@ -89,6 +89,18 @@ impl TrainingScenes {
         };
         Ok(scene)
     }
+}
+
+/// A well-mixed 64-bit seed from three inputs (SplitMix64 finaliser).
+pub fn mix(a: u64, b: u64, c: u64) -> u64 {
+    let mut z = a
+        .wrapping_mul(0x9E37_79B9_7F4A_7C15)
+        .wrapping_add(b.wrapping_mul(0xBF58_476D_1CE4_E5B9))
+        .wrapping_add(c.wrapping_mul(0x94D0_49BB_1331_11EB))
+        .wrapping_add(0x2545_F491_4F6C_DD1D);
+    z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
+    z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
+    z ^ (z >> 31)
 }
 
 /// Crop a scene to `n × n` from its top-left corner (charts round up).

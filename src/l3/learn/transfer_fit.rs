@@ -1,6 +1,6 @@
 //! Which fit a same-illuminant table's transfer maps take: the maps it
 //! renders a light it was not trained on with
-//! ([`crate::l3::L3Params::transfer_maps`]), chosen on standard lights held
+//! ([`L3Params::transfer_maps`]), chosen on standard lights held
 //! out from training.
 //!
 //! Under a light outside its training set, the table's map (aimed at XYZ
@@ -10,7 +10,7 @@
 //! lights. Two fits are candidates:
 //! - [`TransferFit::Perceptual`]: the colour maps' own fit, each error
 //!   weighed as the first-order ΔE00 after the training light's T
-//!   ([`crate::l3::ColourMapFit`]);
+//!   ([`ColourMapFit`]);
 //! - [`TransferFit::LeastSquares`]: the plain least-squares map in XYZ (each
 //!   light's white at Y = 1), the matching linear map of the evaluation.
 //!
@@ -46,12 +46,18 @@
 
 use serde::{Deserialize, Serialize};
 
-use crate::camera::Camera;
+use super::LearnError;
+use super::colour_map::level_maps;
+use super::spec::TrainingSpec;
+use crate::baseline::ColourMatrix;
+use crate::camera::{Camera, SensorDesign};
 use crate::colour::{ciede2000, xyz_to_lab};
-use crate::l3::{ColourMatrix, ColourSamples, Mat3};
+use crate::l3::correct::{
+    ColourSamples, ColourTarget, Mat3, colour_samples, noise_model, same_illuminant_corrections,
+};
+use crate::l3::params::{ColourLoss, ColourMapFit, L3Params};
+use crate::l3::table::TableKind;
 use crate::spectral::{Extrapolation, Spectrum, cie_illuminant};
-
-use super::{ColourTarget, TrainError, colour_samples};
 
 /// The standard lights a transfer fit is scored on (CIE D50, A, F2 and F11,
 /// the illuminant registry's built-in lights), less those the table was
@@ -110,9 +116,9 @@ pub fn held_out_lights(
     camera: &Camera,
     trained: &[String],
     reflectances: &[Spectrum],
-) -> Result<Vec<HeldOutLight>, TrainError> {
+) -> Result<Vec<HeldOutLight>, LearnError> {
     let grid = *camera.grid();
-    let missing = |name: &str| TrainError::Invalid(format!("{name} missing from built-in data"));
+    let missing = |name: &str| LearnError::Invalid(format!("{name} missing from built-in data"));
     let d65 = cie_illuminant("D65")
         .ok_or_else(|| missing("D65"))?
         .resample(&grid, Extrapolation::Zero);
@@ -124,15 +130,10 @@ pub fn held_out_lights(
             let spd = cie_illuminant(name).ok_or_else(|| missing(name))?;
             Ok((name, spd.resample(&grid, Extrapolation::Zero)))
         })
-        .collect::<Result<Vec<_>, TrainError>>()?;
+        .collect::<Result<Vec<_>, LearnError>>()?;
     let spds: Vec<Spectrum> = named.iter().map(|(_, spd)| spd.clone()).collect();
     // every light's T from one registry, as the service fits it
-    let ts = super::same_illuminant_corrections(
-        crate::l3::TableKind::SameIlluminant,
-        grid,
-        reflectances,
-        &spds,
-    )?;
+    let ts = same_illuminant_corrections(TableKind::SameIlluminant, grid, reflectances, &spds)?;
     named
         .into_iter()
         .zip(ts)
@@ -144,7 +145,7 @@ pub fn held_out_lights(
                 .channels
                 .into_iter()
                 .next()
-                .ok_or_else(|| TrainError::Invalid("no white sample".into()))?;
+                .ok_or_else(|| LearnError::Invalid("no white sample".into()))?;
             Ok(HeldOutLight {
                 name: name.to_string(),
                 samples,
@@ -244,6 +245,78 @@ pub fn choose_transfer_fit(
     )
 }
 
+/// A same-illuminant table's maps for lights it was not trained under, one
+/// per level, aimed at XYZ under the light (which any light's T can take),
+/// with the fit, on all its training lights or (an ensemble) on one of them,
+/// that [`choose_transfer_fit`] picks on the held-out lights (see
+/// the module doc).
+pub(super) fn transfer_maps(
+    camera: &Camera,
+    design: &SensorDesign,
+    spec: &TrainingSpec,
+    lights: &[Spectrum],
+    corrections: &[Mat3],
+    refl: &[Spectrum],
+    params: &L3Params,
+) -> Result<(Vec<ColourMatrix>, TransferChoice), LearnError> {
+    let fit = params
+        .colour_map
+        .ok_or_else(|| LearnError::Invalid("transfer maps need a colour map fit".into()))?;
+    let d65 = cie_illuminant("D65")
+        .ok_or_else(|| LearnError::Invalid("D65 missing".into()))?
+        .resample(camera.grid(), Extrapolation::Zero);
+    let (nm, swing) = (noise_model(design), design.voltage_swing_v);
+    let averaging_px = Some(spec.transfer_averaging()).filter(|&px| px > 0.0);
+    // the colour maps' fit, each error weighed after the training light's T
+    let perceptual = ColourMapFit {
+        averaging_px,
+        ..fit
+    };
+    // plain least squares in XYZ: no T, no perceptual weights
+    let least_squares = ColourMapFit {
+        averaging_px,
+        perceptual: false,
+        loss: ColourLoss::SquaredDeltaE,
+    };
+    // each fit on every training light, then (an ensemble) on each alone
+    let singles = if lights.len() > 1 { lights.len() } else { 0 };
+    let subsets = std::iter::once(0..lights.len()).chain((0..singles).map(|i| i..i + 1));
+    let mut candidates = Vec::new();
+    for range in subsets {
+        let mismatch = || LearnError::Invalid("lights, corrections and names differ".into());
+        let spds = lights.get(range.clone()).ok_or_else(mismatch)?;
+        let ts = corrections.get(range.clone()).ok_or_else(mismatch)?;
+        let names = spec.illuminants.get(range).ok_or_else(mismatch)?.to_vec();
+        let weighed = colour_samples(camera, spds, ColourTarget::UnderLight(ts), &d65, refl)?;
+        let as_is = colour_samples(camera, spds, ColourTarget::UnderLight(&[]), &d65, refl)?;
+        candidates.push((TransferFit::Perceptual, names.clone(), weighed, perceptual));
+        candidates.push((TransferFit::LeastSquares, names, as_is, least_squares));
+    }
+    let level = params.levels.first().copied().unwrap_or(swing);
+    let noise_free = candidates
+        .iter()
+        .map(|(fit, names, samples, how)| {
+            let how = ColourMapFit {
+                averaging_px: None,
+                ..*how
+            };
+            let map = level_maps(samples, &[level], &nm, swing, &how)?
+                .pop()
+                .ok_or_else(|| LearnError::Invalid("no transfer map".into()))?;
+            Ok((*fit, names.clone(), map))
+        })
+        .collect::<Result<Vec<_>, LearnError>>()?;
+    let held_out = held_out_lights(camera, &spec.illuminants, refl)?;
+    let (best, choice) = choose_transfer_fit(&noise_free, &held_out);
+    let (_, _, samples, how) = candidates
+        .get(best)
+        .ok_or_else(|| LearnError::Invalid("no transfer map candidate".into()))?;
+    Ok((
+        level_maps(samples, &params.levels, &nm, swing, how)?,
+        choice,
+    ))
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -265,13 +338,8 @@ mod tests {
             .unwrap()
             .resample(&grid, Extrapolation::Zero);
         let lights = std::slice::from_ref(&spd);
-        let ts = super::super::same_illuminant_corrections(
-            crate::l3::TableKind::SameIlluminant,
-            grid,
-            refl,
-            lights,
-        )
-        .unwrap();
+        let ts =
+            same_illuminant_corrections(TableKind::SameIlluminant, grid, refl, lights).unwrap();
         let d65 = cie_illuminant("D65")
             .unwrap()
             .resample(&grid, Extrapolation::Zero);

@@ -1,18 +1,18 @@
-//! The spectral data a table's colour maps are fitted on: noise-free channel
-//! responses and target XYZ of the natural reflectances (`scene::natural_reflectances`) under the training
-//! illuminants (DESIGN.md §5, `super::super::l3::colour_map`). The same
-//! samples give the evaluation's matching linear map and the conventional
-//! baseline's colour matrix, so every comparison is fitted on one set.
+//! The spectral data a table's colour maps and its camera-aware corrections are fitted on
+//! ([`ColourSamples`]): noise-free channel responses and target XYZ of the natural
+//! reflectances (`scene::natural_reflectances`) under the training illuminants (DESIGN.md
+//! §5, `src/l3/learn/colour_map.rs`), and the per-light corrections T a same-illuminant table
+//! is judged through. The same samples give the evaluation's matching linear map and the
+//! conventional baseline's colour matrix, so every comparison is fitted on one set.
 
-use crate::camera::{Camera, SensorDesign};
+use super::CorrectError;
+use super::correction::{IDENTITY, IlluminantRegistry, Mat3};
+use super::fit::delta_e_weights;
+use crate::camera::Camera;
 use crate::colour::mat3_mul_vec;
-use crate::l3::{
-    ColourLoss, ColourSamples, IlluminantEntry, IlluminantRegistry, LevelMap,
-    MIN_SURFACES_PER_CHANNEL, Mat3, NoiseModel, TableKind, camera_correction,
-};
-use crate::spectral::{Extrapolation, IsetData, Spectrum, WavelengthGrid, cie_illuminant};
-
-use super::TrainError;
+use crate::l3::classify::ChromaClasses;
+use crate::l3::table::TableKind;
+use crate::spectral::{Spectrum, WavelengthGrid};
 
 /// What a table's colour samples aim at.
 #[derive(Clone, Copy, Debug)]
@@ -23,7 +23,7 @@ pub enum ColourTarget<'a> {
     /// renders it, with each sample's error weighed after its light's
     /// correction T (one per illuminant, in order; empty: as it is). The
     /// maps a same-illuminant table renders a light it was not trained under
-    /// with ([`crate::l3::L3Params::transfer_maps`]).
+    /// with ([`L3Params::transfer_maps`](crate::l3::params::L3Params::transfer_maps)).
     UnderLight(&'a [Mat3]),
     /// A same-illuminant table judged after its light's correction T (one
     /// per illuminant, in order): the target is `T⁻¹ · xyz_D65`, the XYZ
@@ -44,25 +44,170 @@ pub fn same_illuminant_corrections(
     grid: WavelengthGrid,
     reflectances: &[Spectrum],
     illuminants: &[Spectrum],
-) -> Result<Vec<Mat3>, TrainError> {
+) -> Result<Vec<Mat3>, CorrectError> {
     if kind == TableKind::CrossIlluminant {
         return Ok(Vec::new());
     }
     let registry = IlluminantRegistry::new(grid, reflectances.to_vec())?;
     illuminants
         .iter()
-        .map(|spd| Ok(registry.correction_for(spd)?))
+        .map(|spd| registry.correction_for(spd))
         .collect()
 }
 
 /// `T⁻¹`, refused when T is singular or not finite.
-pub fn inverse_correction(t: &Mat3) -> Result<Mat3, TrainError> {
+pub fn inverse_correction(t: &Mat3) -> Result<Mat3, CorrectError> {
     let m = nalgebra::Matrix3::from_fn(|r, c| t[r][c]);
     let inv = m
         .try_inverse()
         .filter(|i| i.iter().all(|v| v.is_finite()))
-        .ok_or_else(|| TrainError::Invalid("a light's correction T is singular".into()))?;
+        .ok_or_else(|| CorrectError::Samples("a light's correction T is singular".into()))?;
     Ok([0, 1, 2].map(|r| [0, 1, 2].map(|c| inv[(r, c)])))
+}
+
+/// Noise-free channel responses and XYZ of a set of surfaces, the data every
+/// colour map is fitted on. All three lists have one entry per sample; each
+/// sample carries the XYZ of the white of its illuminant (same units) for the
+/// perceptual weights. Units are arbitrary but common to channels and XYZ.
+#[derive(Clone, Debug, Default)]
+pub struct ColourSamples {
+    pub channels: Vec<Vec<f64>>,
+    pub xyz: Vec<[f64; 3]>,
+    pub white: Vec<[f64; 3]>,
+    /// Per sample, the 3×3 matrix the table's output goes through before it
+    /// is judged: a same-illuminant table's correction T to D65. Empty when
+    /// the output is judged as it is (a cross table's D65 XYZ).
+    pub judged_through: Vec<Mat3>,
+    /// Per sample, the index of the illuminant it is lit by (empty: one
+    /// light), so that a loss can weigh every light of an ensemble alike.
+    pub light: Vec<usize>,
+    /// Per illuminant (by [`Self::light`]'s index), the sensor's channel
+    /// responses to white under it: what chroma classes balance by
+    /// ([`chroma`](crate::l3::classify::chroma)). Empty: the classes' reference light.
+    pub neutral: Vec<Vec<f64>>,
+}
+
+impl ColourSamples {
+    pub fn len(&self) -> usize {
+        self.channels.len()
+    }
+
+    pub fn is_empty(&self) -> bool {
+        self.channels.is_empty()
+    }
+
+    /// The samples at `indices`, in that order (every per-sample column kept).
+    pub fn subset(&self, indices: &[usize]) -> Self {
+        let pick = |v: &[Mat3]| -> Vec<Mat3> {
+            if v.is_empty() {
+                Vec::new()
+            } else {
+                indices.iter().map(|&i| v[i]).collect()
+            }
+        };
+        Self {
+            channels: indices.iter().map(|&i| self.channels[i].clone()).collect(),
+            xyz: indices.iter().map(|&i| self.xyz[i]).collect(),
+            white: indices.iter().map(|&i| self.white[i]).collect(),
+            judged_through: pick(&self.judged_through),
+            light: if self.light.is_empty() {
+                Vec::new()
+            } else {
+                indices.iter().map(|&i| self.light[i]).collect()
+            },
+            neutral: self.neutral.clone(),
+        }
+    }
+
+    /// The neutral of sample `i`'s light, when known.
+    pub fn neutral_of(&self, i: usize) -> Option<&[f64]> {
+        let light = self.light.get(i).copied().unwrap_or(0);
+        self.neutral.get(light).map(Vec::as_slice)
+    }
+
+    /// The indices of the samples `classes` puts in chroma class `k`, each
+    /// balanced by its light's neutral.
+    pub fn in_chroma_class(&self, classes: &ChromaClasses, k: usize) -> Vec<usize> {
+        (0..self.len())
+            .filter(|&i| classes.classify_under(&self.channels[i], self.neutral_of(i)) == k)
+            .collect()
+    }
+
+    /// Channels per sample (0 when empty).
+    pub fn n_channels(&self) -> usize {
+        self.channels.first().map(Vec::len).unwrap_or(0)
+    }
+
+    /// The weights `W` that make an XYZ error `e` of sample `i` cost
+    /// `eᵀ W e` where it is judged: with `perceptual`, its first-order ΔE00²
+    /// after [`Self::judged_through`] (`Tᵀ (JᵀQJ at T·xyz, white T·white) T`),
+    /// otherwise its squared error relative to the judged white's luminance.
+    pub fn error_weights(&self, i: usize, perceptual: bool) -> [[f64; 3]; 3] {
+        let t = self.judged_through.get(i).copied().unwrap_or(IDENTITY);
+        let apply = |v: [f64; 3]| mat3_mul_vec(&t, v);
+        let white = apply(self.white[i]);
+        let w = if perceptual {
+            delta_e_weights(apply(self.xyz[i]), white)
+        } else {
+            let y = white[1].max(f64::MIN_POSITIVE);
+            [0, 1, 2].map(|k| [0, 1, 2].map(|l| if k == l { 1.0 / (y * y) } else { 0.0 }))
+        };
+        // Tᵀ W T
+        [0, 1, 2].map(|a| {
+            [0, 1, 2].map(|b| {
+                (0..3)
+                    .map(|p| (0..3).map(|q| t[p][a] * w[p][q] * t[q][b]).sum::<f64>())
+                    .sum()
+            })
+        })
+    }
+
+    /// The channel count, once the samples are consistent and finite: what every fit on
+    /// them checks first.
+    pub fn check(&self) -> Result<usize, CorrectError> {
+        let nc = self.n_channels();
+        let n = self.len();
+        if n < nc.max(3) || nc == 0 {
+            return Err(CorrectError::InvalidParams(format!(
+                "a colour map needs at least {} samples, got {n}",
+                nc.max(3)
+            )));
+        }
+        if self.xyz.len() != n
+            || self.white.len() != n
+            || !(self.judged_through.is_empty() || self.judged_through.len() == n)
+            || !(self.light.is_empty() || self.light.len() == n)
+        {
+            return Err(CorrectError::InvalidParams(
+                "colour samples: channel, XYZ, white, correction and light lists differ in length"
+                    .into(),
+            ));
+        }
+        if self.channels.iter().any(|c| c.len() != nc) {
+            return Err(CorrectError::InvalidParams(
+                "colour samples differ in channel count".into(),
+            ));
+        }
+        let finite = self.channels.iter().flatten().all(|v| v.is_finite())
+            && self.xyz.iter().flatten().all(|v| v.is_finite())
+            && self
+                .judged_through
+                .iter()
+                .flatten()
+                .flatten()
+                .all(|v| v.is_finite())
+            && self
+                .white
+                .iter()
+                .flatten()
+                .all(|v| v.is_finite() && *v > 0.0);
+        if !finite {
+            return Err(CorrectError::InvalidParams(
+                "colour samples must be finite, with a positive white".into(),
+            ));
+        }
+        Ok(nc)
+    }
 }
 
 /// Colour samples of `reflectances` under each of `illuminants` (on the
@@ -84,7 +229,7 @@ pub fn colour_samples(
     target: ColourTarget,
     d65: &Spectrum,
     reflectances: &[Spectrum],
-) -> Result<ColourSamples, TrainError> {
+) -> Result<ColourSamples, CorrectError> {
     let grid = *camera.grid();
     let white = Spectrum::constant(grid, 1.0);
     let (corrections, aimed) = match target {
@@ -93,7 +238,7 @@ pub fn colour_samples(
         ColourTarget::ThroughCorrection(ts) => (ts, true),
     };
     if (aimed || !corrections.is_empty()) && corrections.len() != illuminants.len() {
-        return Err(TrainError::Invalid(format!(
+        return Err(CorrectError::Samples(format!(
             "{} corrections for {} illuminants",
             corrections.len(),
             illuminants.len()
@@ -113,7 +258,7 @@ pub fn colour_samples(
         let (_, wd) = camera.reflectance_response(&white, d65)?;
         let norm = wx[1];
         if !(wc.iter().any(|&v| v > 0.0) && norm.is_finite() && norm > 0.0 && wd[1] > 0.0) {
-            return Err(TrainError::Invalid(
+            return Err(CorrectError::Samples(
                 "the sensor does not respond to a white surface under a training illuminant".into(),
             ));
         }
@@ -148,109 +293,11 @@ pub fn colour_samples(
     Ok(out)
 }
 
-/// `entry` with its T replaced by the camera-aware correction C of a
-/// same-illuminant table whose colour maps are `maps` (one per band, the
-/// brightest level last, each with the noise it was fitted for:
-/// [`crate::l3::L3Table::level_colour_maps`]; or one map every level shares),
-/// fitted on the natural reflectances under the entry's light (see
-/// `crate::l3::camera_correction`). `t` is the brightest level's C; with
-/// several maps every level also gets its own
-/// ([`IlluminantEntry::level_corrections`]). An entry with no spectrum (a
-/// correction given as a matrix) is refused.
-pub fn camera_corrected(
-    camera: &Camera,
-    maps: &[LevelMap],
-    entry: &IlluminantEntry,
-    iset: Option<&IsetData>,
-) -> Result<IlluminantEntry, TrainError> {
-    let spd = entry.spd.as_ref().ok_or_else(|| {
-        TrainError::Invalid(format!(
-            "illuminant '{}' has no spectrum to fit a camera-aware correction on",
-            entry.name
-        ))
-    })?;
-    let grid = *camera.grid();
-    let refl: Vec<Spectrum> = crate::scene::natural_reflectances(&grid, iset)
-        .map_err(|e| TrainError::Invalid(e.to_string()))?
-        .into_iter()
-        .map(|(_, s)| s)
-        .collect();
-    let d65 = cie_illuminant("D65")
-        .ok_or_else(|| TrainError::Invalid("D65 missing from the built-in data".into()))?
-        .resample(&grid, Extrapolation::Zero);
-    let samples = colour_samples(
-        camera,
-        std::slice::from_ref(spd),
-        ColourTarget::D65,
-        &d65,
-        &refl,
-    )?;
-    let corrections = maps
-        .iter()
-        .map(|m| {
-            // a chroma class's map is corrected on the surfaces the class
-            // holds under this light (all of them if too few stay in it)
-            let class_samples = m.chroma.as_ref().and_then(|(classes, k)| {
-                let idx = samples.in_chroma_class(classes, *k);
-                (idx.len() >= MIN_SURFACES_PER_CHANNEL * samples.n_channels())
-                    .then(|| samples.subset(&idx))
-            });
-            let fit_on = class_samples.as_ref().unwrap_or(&samples);
-            camera_correction(&m.map, fit_on, m.noise.as_ref(), ColourLoss::MeanDeltaE)
-        })
-        .collect::<Result<Vec<_>, _>>()?;
-    let t = *corrections.last().ok_or_else(|| {
-        TrainError::Invalid("a camera-aware correction needs a colour map".into())
-    })?;
-    with_neutral(
-        camera,
-        &IlluminantEntry {
-            t,
-            level_corrections: if corrections.len() > 1 {
-                corrections
-            } else {
-                Vec::new()
-            },
-            ..entry.clone()
-        },
-    )
-}
-
-/// `entry` with `camera`'s neutral under its light (the channel responses to
-/// a white surface, [`IlluminantEntry::neutral`]), which a table's chroma
-/// classes balance by; unchanged for an entry with no spectrum.
-pub fn with_neutral(
-    camera: &Camera,
-    entry: &IlluminantEntry,
-) -> Result<IlluminantEntry, TrainError> {
-    let neutral = match &entry.spd {
-        Some(spd) => {
-            let white = Spectrum::constant(*camera.grid(), 1.0);
-            Some(camera.reflectance_response(&white, spd)?.0.to_vec())
-        }
-        None => entry.neutral.clone(),
-    };
-    Ok(IlluminantEntry {
-        neutral,
-        ..entry.clone()
-    })
-}
-
-/// The noise model of `design`'s sensor: what the colour maps and the
-/// camera-aware corrections trade colour against.
-pub fn noise_model(design: &SensorDesign) -> NoiseModel {
-    NoiseModel {
-        conversion_gain_v: design.conversion_gain_v(),
-        read_noise_v: design.read_noise_v(),
-        dsnu_v: design.dsnu_v(),
-        prnu_fraction: design.prnu_fraction(),
-    }
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::l3::ColourMatrix;
+    use crate::baseline::ColourMatrix;
+    use crate::spectral::{Extrapolation, cie_illuminant};
     use crate::test_support::paper_camera;
 
     fn setup() -> (Camera, Vec<Spectrum>, Spectrum, Spectrum) {
@@ -338,7 +385,7 @@ mod tests {
     fn aiming_through_t_refuses_a_singular_or_missing_correction() {
         let (camera, refl, d65, a) = setup();
         let lights = [a, d65.clone()];
-        let one = [crate::l3::IDENTITY];
+        let one = [IDENTITY];
         assert!(
             colour_samples(
                 &camera,

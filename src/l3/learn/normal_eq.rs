@@ -4,31 +4,8 @@ use nalgebra::{DMatrix, DVector, SymmetricEigen};
 use ndarray::{Array2, ArrayView2, linalg::general_mat_mul, s};
 use serde::{Deserialize, Serialize};
 
-use super::L3Error;
-
-/// How the ridge parameter λ of a class is chosen.
-#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
-#[serde(tag = "method", rename_all = "snake_case")]
-pub enum RidgeChoice {
-    /// Generalised cross-validation over a log grid of λ.
-    Gcv,
-    /// λ = `relative` × the mean eigenvalue of the centred covariance.
-    Fixed { relative: f64 },
-    /// λ = the sensor's noise variance at the class level (volts²): the
-    /// analytic noise-aware ridge for tables trained on noise-free patches.
-    NoiseVariance,
-}
-
-impl RidgeChoice {
-    pub fn validate(&self) -> Result<(), L3Error> {
-        match self {
-            Self::Fixed { relative } if !(relative.is_finite() && *relative >= 0.0) => Err(
-                L3Error::InvalidParams(format!("ridge relative λ {relative}")),
-            ),
-            _ => Ok(()),
-        }
-    }
-}
+use super::LearnError;
+use crate::l3::params::RidgeChoice;
 
 const BATCH: usize = 64;
 
@@ -127,16 +104,16 @@ impl Gram {
     /// The accumulator holding exactly the sums `matrix` (row-major,
     /// `(n_features + 3)²` values) over `n` samples, as
     /// [`Gram::flushed_sums`] gives them.
-    pub fn from_sums(n_features: usize, matrix: Vec<f64>, n: u64) -> Result<Gram, L3Error> {
+    pub fn from_sums(n_features: usize, matrix: Vec<f64>, n: u64) -> Result<Gram, LearnError> {
         let dim = n_features + 3;
         if n_features == 0 || matrix.len() != dim * dim {
-            return Err(L3Error::InvalidInput(format!(
+            return Err(LearnError::InvalidInput(format!(
                 "{} sums for {n_features} features",
                 matrix.len()
             )));
         }
         let gram = Array2::from_shape_vec((dim, dim), matrix)
-            .map_err(|e| L3Error::InvalidInput(format!("sums: {e}")))?;
+            .map_err(|e| LearnError::InvalidInput(format!("sums: {e}")))?;
         Ok(Self {
             n_features,
             dim,
@@ -222,7 +199,7 @@ pub fn solve(
     gram: &mut Gram,
     ridge: RidgeChoice,
     noise_var: f64,
-) -> Result<ClassSolution, L3Error> {
+) -> Result<ClassSolution, LearnError> {
     solve_with(gram, ridge, noise_var, None)
 }
 
@@ -232,7 +209,7 @@ pub fn solve(
 /// regressors are all but constant); the SVD, which for a symmetric
 /// positive semi-definite matrix gives the same decomposition, is the
 /// fallback.
-fn symmetric_eigen(m: &DMatrix<f64>) -> Result<(DVector<f64>, DMatrix<f64>), L3Error> {
+fn symmetric_eigen(m: &DMatrix<f64>) -> Result<(DVector<f64>, DMatrix<f64>), LearnError> {
     let finite = |v: &DVector<f64>, u: &DMatrix<f64>| {
         v.iter().all(|x| x.is_finite()) && u.iter().all(|x| x.is_finite())
     };
@@ -241,7 +218,7 @@ fn symmetric_eigen(m: &DMatrix<f64>) -> Result<(DVector<f64>, DMatrix<f64>), L3E
         return Ok((eig.eigenvalues, eig.eigenvectors));
     }
     svd_eigen(m).filter(|(v, u)| finite(v, u)).ok_or_else(|| {
-        L3Error::Table("the class's covariance has no finite eigendecomposition".into())
+        LearnError::Solve("the class's covariance has no finite eigendecomposition".into())
     })
 }
 
@@ -259,11 +236,11 @@ pub fn solve_with(
     ridge: RidgeChoice,
     noise_var: f64,
     constraint: Option<&ChannelSumConstraint>,
-) -> Result<ClassSolution, L3Error> {
+) -> Result<ClassSolution, LearnError> {
     let nf = gram.n_features();
     let n = gram.count();
     if n == 0 {
-        return Err(L3Error::Table("class has no samples".into()));
+        return Err(LearnError::Solve("class has no samples".into()));
     }
     let g = gram.matrix();
     let p = nf - 1; // non-constant regressors
@@ -276,7 +253,7 @@ pub fn solve_with(
         .map(|k| g[[nf + k, nf + k]] / nn - my[k] * my[k])
         .sum();
     if !(cxx.iter().all(|v| v.is_finite()) && cxy.iter().all(|v| v.is_finite())) {
-        return Err(L3Error::Table("non-finite normal equations".into()));
+        return Err(LearnError::Solve("non-finite normal equations".into()));
     }
     let (raw_evals, vecs) = symmetric_eigen(&cxx)?;
     let evals: Vec<f64> = raw_evals.iter().map(|&e| e.max(0.0)).collect();
@@ -310,9 +287,58 @@ pub fn solve_with(
         }
         r.max(0.0)
     };
+    let lambda = choose_lambda(ridge, noise_var, &evals, mean_e, nn, &rss);
+    // w = V diag(1/(e+λ)) q
+    let mut scaled = q.clone();
+    for i in 0..p {
+        let d = 1.0 / (evals[i] + lambda);
+        for k in 0..3 {
+            scaled[(i, k)] *= d;
+        }
+    }
+    let mut w = &vecs * scaled; // p × 3
+    let intercept = match constraint {
+        Some(con) if con.channel_of.len() == p => constrain(con, &vecs, &evals, lambda, &mut w),
+        _ => None,
+    };
+    let mut kernel = vec![0.0; 3 * nf];
+    for k in 0..3 {
+        let mut b = my[k];
+        for i in 0..p {
+            kernel[k * nf + i] = w[(i, k)];
+            b -= w[(i, k)] * mx[i];
+        }
+        kernel[k * nf + p] = intercept.map(|c| c[k]).unwrap_or(b);
+    }
+    if kernel.iter().any(|v| !v.is_finite()) {
+        return Err(LearnError::Solve(format!(
+            "non-finite kernel ({n} samples, λ {lambda:.3e}, eigenvalues {emin:.3e}–{emax:.3e})"
+        )));
+    }
+    Ok(ClassSolution {
+        kernel,
+        lambda,
+        condition,
+        active,
+        rank,
+        samples: n,
+        rss_per_sample: rss(lambda) / 3.0,
+    })
+}
+
+/// The ridge λ of a class whose centred covariance has eigenvalues `evals` (their mean
+/// `mean_e`), over `nn` samples, as `ridge` says (GCV scores the residual `rss(λ)`).
+fn choose_lambda(
+    ridge: RidgeChoice,
+    noise_var: f64,
+    evals: &[f64],
+    mean_e: f64,
+    nn: f64,
+    rss: &dyn Fn(f64) -> f64,
+) -> f64 {
     // a floor keeps rank-deficient classes (e.g. zeroed saturated channels) solvable
     let floor = (mean_e * 1e-9).max(1e-24);
-    let lambda = match ridge {
+    match ridge {
         RidgeChoice::Fixed { relative } => (relative * mean_e).max(floor),
         RidgeChoice::NoiseVariance => noise_var.max(floor),
         RidgeChoice::Gcv => {
@@ -329,77 +355,53 @@ pub fn solve_with(
             best.1
         }
     }
-    .max(floor);
-    // w = V diag(1/(e+λ)) q
-    let mut scaled = q.clone();
-    for i in 0..p {
-        let d = 1.0 / (evals[i] + lambda);
-        for k in 0..3 {
-            scaled[(i, k)] *= d;
-        }
-    }
-    let mut w = &vecs * scaled; // p × 3
-    let mut intercept: Option<[f64; 3]> = None;
-    if let Some(con) = constraint
-        && con.channel_of.len() == p
-    {
-        // KKT: w = H⁻¹(cxy − Aᵀν), ν = (A H⁻¹ Aᵀ)⁻¹ (A H⁻¹ cxy − m),
-        // with H = V diag(e+λ) Vᵀ and A the channel-membership matrix.
-        let nc = con.n_channels;
-        let present: Vec<usize> = (0..nc)
-            .filter(|&c| con.channel_of.iter().any(|&x| x as usize == c))
-            .collect();
-        let a = DMatrix::from_fn(present.len(), p, |r, j| {
-            (con.channel_of[j] as usize == present[r]) as u8 as f64
-        });
-        let hinv = {
-            let mut d = vecs.clone();
-            for j in 0..p {
-                let f = 1.0 / (evals[j] + lambda);
-                for i in 0..p {
-                    d[(i, j)] *= f;
-                }
+    .max(floor)
+}
+
+/// The ridge solution `w` (p × 3, `w = H⁻¹ cxy`) moved onto the constraint `con`, and the
+/// intercept the constraint fixes; `None` (and `w` unchanged) when the constraint's
+/// system is singular. `H = V diag(e+λ) Vᵀ` from the eigenvectors `vecs` and eigenvalues
+/// `evals` of the centred covariance.
+fn constrain(
+    con: &ChannelSumConstraint,
+    vecs: &DMatrix<f64>,
+    evals: &[f64],
+    lambda: f64,
+    w: &mut DMatrix<f64>,
+) -> Option<[f64; 3]> {
+    let p = evals.len();
+    // KKT: w = H⁻¹(cxy − Aᵀν), ν = (A H⁻¹ Aᵀ)⁻¹ (A H⁻¹ cxy − m),
+    // with H = V diag(e+λ) Vᵀ and A the channel-membership matrix.
+    let nc = con.n_channels;
+    let present: Vec<usize> = (0..nc)
+        .filter(|&c| con.channel_of.iter().any(|&x| x as usize == c))
+        .collect();
+    let a = DMatrix::from_fn(present.len(), p, |r, j| {
+        (con.channel_of[j] as usize == present[r]) as u8 as f64
+    });
+    let hinv = {
+        let mut d = vecs.clone();
+        for j in 0..p {
+            let f = 1.0 / (evals[j] + lambda);
+            for i in 0..p {
+                d[(i, j)] *= f;
             }
-            d * vecs.transpose()
-        };
-        let ahinv = &a * &hinv; // nc × p
-        let s_mat = &ahinv * a.transpose(); // nc × nc
-        if let Some(s_inv) = s_mat.try_inverse() {
-            for k in 0..3 {
-                let m = nalgebra::DVector::from_fn(present.len(), |r, _| {
-                    con.sums[k].get(present[r]).copied().unwrap_or(0.0)
-                });
-                let wk = w.column(k).into_owned(); // = H⁻¹ cxy
-                let nu = &s_inv * (&a * &wk - m);
-                let corr = &hinv * (a.transpose() * nu);
-                w.set_column(k, &(wk - corr));
-            }
-            intercept = Some(con.intercept);
         }
-    }
-    let mut kernel = vec![0.0; 3 * nf];
+        d * vecs.transpose()
+    };
+    let ahinv = &a * &hinv; // nc × p
+    let s_mat = &ahinv * a.transpose(); // nc × nc
+    let s_inv = s_mat.try_inverse()?;
     for k in 0..3 {
-        let mut b = my[k];
-        for i in 0..p {
-            kernel[k * nf + i] = w[(i, k)];
-            b -= w[(i, k)] * mx[i];
-        }
-        kernel[k * nf + p] = intercept.map(|c| c[k]).unwrap_or(b);
+        let m = nalgebra::DVector::from_fn(present.len(), |r, _| {
+            con.sums[k].get(present[r]).copied().unwrap_or(0.0)
+        });
+        let wk = w.column(k).into_owned(); // = H⁻¹ cxy
+        let nu = &s_inv * (&a * &wk - m);
+        let corr = &hinv * (a.transpose() * nu);
+        w.set_column(k, &(wk - corr));
     }
-    if kernel.iter().any(|v| !v.is_finite()) {
-        return Err(L3Error::Table(format!(
-            "non-finite kernel ({n} samples, λ {lambda:.3e}, eigenvalues {emin:.3e}–{emax:.3e})"
-        )));
-    }
-    Ok(ClassSolution {
-        kernel,
-        lambda,
-        condition,
-        active,
-        rank,
-        samples: n,
-        rss_per_sample: rss(lambda) / 3.0,
-    })
+    Some(con.intercept)
 }
 
 #[cfg(test)]

@@ -2,7 +2,7 @@
 //! same-illuminant table's output under an acquisition light to XYZ under
 //! D65, fitted on what this table and its sensor actually produce.
 //!
-//! The paper's correction T ([`super::correction_matrix`]) maps the *true*
+//! The paper's correction T ([`correction_matrix`](super::correction_matrix)) maps the *true*
 //! XYZ under the acquisition light to XYZ under D65. It assumes the table
 //! renders the light's XYZ exactly. A table trained under D65 does not: under
 //! another light the sensor's channels move in ways its colour map was never
@@ -17,7 +17,7 @@
 //! and the light's spectrum; T needs neither.
 //!
 //! **One C per level.** A table's darker levels have colour maps shrunk for
-//! its own light's noise (`super::colour_map`). Under another light that
+//! its own light's noise (the trainer's colour maps). Under another light that
 //! shrinkage is a colour cast which differs from level to level, and one C
 //! fitted on the brightest level's map cannot undo it: rgbw-ar0132at's D65
 //! table under the fluorescent lamp gave 2.48 ΔE2000 (8 captures), 9.26 at a
@@ -30,9 +30,9 @@
 //! numbers per light) is derived from the table and fused into each class's
 //! kernel, so rendering costs the same.
 //!
-//! **The mean ΔE.** `training::camera_corrected` fits C for the light's
+//! **The mean ΔE.** [`camera_corrected`] fits C for the light's
 //! mean first-order ΔE00 ([`ColourLoss::MeanDeltaE`], the colour maps'
-//! reweighted least squares, `super::colour_map`) rather than its squared
+//! reweighted least squares, [`mean_loss_fit`]) rather than its squared
 //! sum, whatever loss the table's maps used: C is fitted under one light, so
 //! the ensemble concern that keeps their maps squared does not arise. In the
 //! six-sensor Table 1 every `+C` row moved by −0.01 to −0.13 (Canon
@@ -41,18 +41,23 @@
 
 use nalgebra::{SMatrix, SVector};
 
-use super::colour_map::{delta_e_weights, mean_loss_fit};
-use super::{
-    ChromaClasses, ColourLoss, ColourMatrix, ColourSamples, L3Error, L3Table, LevelNoise,
-    MAX_MATRIX_ENTRY, Mat3, NoiseModel,
-};
+use super::CorrectError;
+use super::correction::{IlluminantEntry, MAX_MATRIX_ENTRY, Mat3};
+use super::fit::{LevelNoise, NoiseModel, delta_e_weights, mean_loss_fit};
+use super::samples::{ColourSamples, ColourTarget, colour_samples};
+use crate::baseline::ColourMatrix;
+use crate::camera::Camera;
+use crate::l3::classify::{ChromaClasses, MIN_SURFACES_PER_CHANNEL};
+use crate::l3::params::ColourLoss;
+use crate::l3::table::{L3Table, TableError};
+use crate::spectral::{Extrapolation, IsetData, Spectrum, cie_illuminant};
 
 impl L3Table {
     /// Every band's colour map (every level's, darkest first, split by
     /// chroma class where the table has them: see [`Self::colour_map_at`]),
     /// with the noise it was fitted for on a sensor with `noise` (none for a
     /// table whose maps were fitted noise-free) and its chroma class.
-    pub fn level_colour_maps(&self, noise: &NoiseModel) -> Result<Vec<LevelMap>, L3Error> {
+    pub fn level_colour_maps(&self, noise: &NoiseModel) -> Result<Vec<LevelMap>, TableError> {
         let averaging = self.meta.params.colour_map.and_then(|fit| fit.averaging_px);
         let kc = self.n_chroma();
         let chroma = self.meta.params.chroma.as_ref().filter(|c| c.len() > 1);
@@ -78,12 +83,14 @@ impl L3Table {
     /// [`Self::n_bands`]): the channel sums of the band's flat, unsaturated
     /// kernels, averaged over CFA positions. The trainer fixes these sums to
     /// the band's colour map.
-    pub fn colour_map_at(&self, level: usize) -> Result<ColourMatrix, L3Error> {
+    pub fn colour_map_at(&self, level: usize) -> Result<ColourMatrix, TableError> {
         let geo = self.geometry()?;
         let nf = self.n_features();
         let nch = geo.n_channels();
         if level >= self.n_bands() {
-            return Err(L3Error::Table(format!("the table has no band {level}")));
+            return Err(TableError::Unusable(format!(
+                "the table has no band {level}"
+            )));
         }
         let np = self.n_positions();
         let mut m = vec![[0.0f64; 3]; nch];
@@ -132,9 +139,9 @@ pub fn camera_correction(
     samples: &ColourSamples,
     noise: Option<&LevelNoise>,
     loss: ColourLoss,
-) -> Result<Mat3, L3Error> {
+) -> Result<Mat3, CorrectError> {
     if samples.n_channels() != map.n_channels || map.m.len() != map.n_channels {
-        return Err(L3Error::InvalidParams(format!(
+        return Err(CorrectError::InvalidParams(format!(
             "a {}-channel colour map for {}-channel samples",
             map.n_channels,
             samples.n_channels()
@@ -144,7 +151,7 @@ pub fn camera_correction(
         || samples.xyz.len() != samples.len()
         || samples.white.len() != samples.len()
     {
-        return Err(L3Error::InvalidParams(
+        return Err(CorrectError::InvalidParams(
             "a camera-aware correction needs at least 3 consistent samples".into(),
         ));
     }
@@ -169,7 +176,7 @@ pub fn camera_correction(
         .flatten()
         .any(|v| !v.is_finite() || v.abs() > MAX_MATRIX_ENTRY)
     {
-        return Err(L3Error::Table(format!(
+        return Err(CorrectError::Fit(format!(
             "the camera-aware correction is not finite or out of bounds: {c:?}"
         )));
     }
@@ -237,7 +244,10 @@ impl CorrectionSample {
 
 /// The weighted normal equations of C (unknowns `C[i][j]` at `3i + j`),
 /// solved.
-fn solve_correction(prepared: &[CorrectionSample], sample_weight: &[f64]) -> Result<Mat3, L3Error> {
+fn solve_correction(
+    prepared: &[CorrectionSample],
+    sample_weight: &[f64],
+) -> Result<Mat3, CorrectError> {
     let mut a = SMatrix::<f64, 9, 9>::zeros();
     let mut b = SVector::<f64, 9>::zeros();
     for (s, &sw) in prepared.iter().zip(sample_weight) {
@@ -260,8 +270,96 @@ fn solve_correction(prepared: &[CorrectionSample], sample_weight: &[f64]) -> Res
     let sol = a
         .cholesky()
         .map(|ch| ch.solve(&b))
-        .ok_or_else(|| L3Error::Table("the camera-aware correction is singular".into()))?;
+        .ok_or_else(|| CorrectError::Fit("the camera-aware correction is singular".into()))?;
     Ok([0, 1, 2].map(|i| [0, 1, 2].map(|p| sol[3 * i + p])))
+}
+
+/// `entry` with its T replaced by the camera-aware correction C of a
+/// same-illuminant table whose colour maps are `maps` (one per band, the
+/// brightest level last, each with the noise it was fitted for:
+/// [`L3Table::level_colour_maps`]; or one map every level shares),
+/// fitted on the natural reflectances under the entry's light (see
+/// [`camera_correction`]). `t` is the brightest level's C; with
+/// several maps every level also gets its own
+/// ([`IlluminantEntry::level_corrections`]). An entry with no spectrum (a
+/// correction given as a matrix) is refused.
+pub fn camera_corrected(
+    camera: &Camera,
+    maps: &[LevelMap],
+    entry: &IlluminantEntry,
+    iset: Option<&IsetData>,
+) -> Result<IlluminantEntry, CorrectError> {
+    let spd = entry.spd.as_ref().ok_or_else(|| {
+        CorrectError::Samples(format!(
+            "illuminant '{}' has no spectrum to fit a camera-aware correction on",
+            entry.name
+        ))
+    })?;
+    let grid = *camera.grid();
+    let refl: Vec<Spectrum> = crate::scene::natural_reflectances(&grid, iset)
+        .map_err(|e| CorrectError::Samples(e.to_string()))?
+        .into_iter()
+        .map(|(_, s)| s)
+        .collect();
+    let d65 = cie_illuminant("D65")
+        .ok_or_else(|| CorrectError::Samples("D65 missing from the built-in data".into()))?
+        .resample(&grid, Extrapolation::Zero);
+    let samples = colour_samples(
+        camera,
+        std::slice::from_ref(spd),
+        ColourTarget::D65,
+        &d65,
+        &refl,
+    )?;
+    let corrections = maps
+        .iter()
+        .map(|m| {
+            // a chroma class's map is corrected on the surfaces the class
+            // holds under this light (all of them if too few stay in it)
+            let class_samples = m.chroma.as_ref().and_then(|(classes, k)| {
+                let idx = samples.in_chroma_class(classes, *k);
+                (idx.len() >= MIN_SURFACES_PER_CHANNEL * samples.n_channels())
+                    .then(|| samples.subset(&idx))
+            });
+            let fit_on = class_samples.as_ref().unwrap_or(&samples);
+            camera_correction(&m.map, fit_on, m.noise.as_ref(), ColourLoss::MeanDeltaE)
+        })
+        .collect::<Result<Vec<_>, _>>()?;
+    let t = *corrections.last().ok_or_else(|| {
+        CorrectError::Samples("a camera-aware correction needs a colour map".into())
+    })?;
+    with_neutral(
+        camera,
+        &IlluminantEntry {
+            t,
+            level_corrections: if corrections.len() > 1 {
+                corrections
+            } else {
+                Vec::new()
+            },
+            ..entry.clone()
+        },
+    )
+}
+
+/// `entry` with `camera`'s neutral under its light (the channel responses to
+/// a white surface, [`IlluminantEntry::neutral`]), which a table's chroma
+/// classes balance by; unchanged for an entry with no spectrum.
+pub fn with_neutral(
+    camera: &Camera,
+    entry: &IlluminantEntry,
+) -> Result<IlluminantEntry, CorrectError> {
+    let neutral = match &entry.spd {
+        Some(spd) => {
+            let white = Spectrum::constant(*camera.grid(), 1.0);
+            Some(camera.reflectance_response(&white, spd)?.0.to_vec())
+        }
+        None => entry.neutral.clone(),
+    };
+    Ok(IlluminantEntry {
+        neutral,
+        ..entry.clone()
+    })
 }
 
 #[cfg(test)]
@@ -335,7 +433,7 @@ mod tests {
         let mean = camera_correction(&map, &s, None, ColourLoss::MeanDeltaE).unwrap();
         let squared = camera_correction(&map, &s, None, ColourLoss::SquaredDeltaE).unwrap();
         let (em, es) = (errors(&mean), errors(&squared));
-        crate::l3::colour_map::assert_mean_loss_trade(&em, &es);
+        crate::l3::correct::assert_mean_loss_trade(&em, &es);
         // the outliers pull the mean-loss C less far from T
         let dist = |c: &Mat3| {
             (0..3)
@@ -444,7 +542,7 @@ mod tests {
     #[test]
     fn a_map_for_other_channels_is_refused() {
         let truth = [[0.6, 0.3, 0.0], [0.3, 0.6, 0.1], [0.05, 0.1, 0.9]];
-        let s = samples_from(&truth, &crate::l3::IDENTITY);
+        let s = samples_from(&truth, &crate::l3::correct::IDENTITY);
         let map = ColourMatrix {
             m: vec![[1.0, 0.0, 0.0]; 4],
             n_channels: 4,

@@ -33,9 +33,10 @@ use safetensors::{Dtype, SafeTensors};
 use serde::{Deserialize, Serialize};
 use sha2::{Digest, Sha256};
 
+use super::LearnError;
+use super::normal_eq::Gram;
 use super::shards::{ClassSums, GramPartial, Node, SurveyPartial, SurveyShape, cover};
-use super::table::serialize_sorted;
-use super::{Gram, L3Error};
+use crate::l3::table::serialize_sorted;
 
 pub const PARTIAL_FORMAT_VERSION: u32 = 1;
 const FORMAT_NAME: &str = "l3-partial-sums";
@@ -84,8 +85,8 @@ struct AccumulateShape {
     nodes: Vec<(usize, u32)>,
 }
 
-fn bad(msg: impl Into<String>) -> L3Error {
-    L3Error::PartialSums(msg.into())
+fn bad(msg: impl Into<String>) -> LearnError {
+    LearnError::PartialSums(msg.into())
 }
 
 fn checksum(header: &str, tensors: &[(String, Vec<u8>)]) -> String {
@@ -104,7 +105,7 @@ fn checksum(header: &str, tensors: &[(String, Vec<u8>)]) -> String {
 fn write(
     header: &Header,
     tensors: Vec<(String, Dtype, Vec<usize>, Vec<u8>)>,
-) -> Result<Vec<u8>, L3Error> {
+) -> Result<Vec<u8>, LearnError> {
     let json = serde_json::to_string(header).map_err(|e| bad(format!("header: {e}")))?;
     let plain: Vec<(String, Vec<u8>)> = tensors
         .iter()
@@ -125,7 +126,7 @@ fn write(
 }
 
 /// Parse, checksum and version-check a partial's bytes.
-fn read(bytes: &[u8], stage: Stage) -> Result<(Header, SafeTensors<'_>), L3Error> {
+fn read(bytes: &[u8], stage: Stage) -> Result<(Header, SafeTensors<'_>), LearnError> {
     let st = SafeTensors::deserialize(bytes)
         .map_err(|e| bad(format!("not a valid safetensors file ({e})")))?;
     let (_, md) =
@@ -184,7 +185,7 @@ fn tensor<'a>(
     name: &str,
     dtype: Dtype,
     shape: &[usize],
-) -> Result<&'a [u8], L3Error> {
+) -> Result<&'a [u8], LearnError> {
     let t = st
         .tensor(name)
         .map_err(|_| bad(format!("tensor {name} missing")))?;
@@ -231,7 +232,7 @@ fn range_of(h: &Header) -> Range<usize> {
 
 impl SurveyPartial {
     /// The partial's bytes (format in [`self`](super::partial_format)).
-    pub fn to_bytes(&self) -> Result<Vec<u8>, L3Error> {
+    pub fn to_bytes(&self) -> Result<Vec<u8>, LearnError> {
         let cells: Vec<u32> = (0..self.hist.len())
             .filter(|&k| !self.hist[k].is_empty())
             .map(|k| k as u32)
@@ -284,7 +285,7 @@ impl SurveyPartial {
     }
 
     /// Read a survey partial from its bytes, checking everything.
-    pub fn from_bytes(bytes: &[u8]) -> Result<Self, L3Error> {
+    pub fn from_bytes(bytes: &[u8]) -> Result<Self, LearnError> {
         let (h, st) = read(bytes, Stage::Survey)?;
         let shape = h.survey.ok_or_else(|| bad("survey sizes missing"))?;
         let cells = shape
@@ -326,7 +327,7 @@ impl SurveyPartial {
 
 impl GramPartial {
     /// The partial's bytes (format in [`self`](super::partial_format)).
-    pub fn to_bytes(&self) -> Result<Vec<u8>, L3Error> {
+    pub fn to_bytes(&self) -> Result<Vec<u8>, LearnError> {
         let dim = self.n_features + 3;
         let mut tensors = Vec::new();
         for (i, (_, sums)) in self.nodes.iter().enumerate() {
@@ -386,7 +387,7 @@ impl GramPartial {
     }
 
     /// Read an accumulation partial from its bytes, checking everything.
-    pub fn from_bytes(bytes: &[u8]) -> Result<Self, L3Error> {
+    pub fn from_bytes(bytes: &[u8]) -> Result<Self, LearnError> {
         let (h, st) = read(bytes, Stage::Accumulate)?;
         let a = h
             .accumulate

@@ -4,8 +4,10 @@
 use rayon::prelude::*;
 use serde::Serialize;
 
-use super::classify::sat_case_index;
-use super::{L3Error, L3Table, PatchGeometry};
+use super::error::RenderError;
+use crate::l3::classify::{PatchGeometry, sat_case_index};
+use crate::l3::correct::{IDENTITY, IlluminantEntry};
+use crate::l3::table::L3Table;
 
 /// Counts of what the renderer did, for response headers and tests.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize)]
@@ -38,7 +40,7 @@ impl std::ops::AddAssign for RenderStats {
 /// Kernels with a 3×3 matrix applied after them: K' = M·K for every class.
 /// Rendering with fused kernels equals rendering and then applying M.
 pub fn fuse_kernels(table: &L3Table, m: &[[f64; 3]; 3]) -> Vec<f32> {
-    if *m == super::IDENTITY {
+    if *m == IDENTITY {
         // D65: the table as is
         return table.kernels.clone();
     }
@@ -50,7 +52,7 @@ pub fn fuse_kernels(table: &L3Table, m: &[[f64; 3]; 3]) -> Vec<f32> {
 /// class where the table has them), else times `entry.t`: the table's own kernels, or,
 /// for a same-illuminant table under a light it was not trained on, its
 /// [transfer kernels](L3Table::transfer_kernels).
-pub fn fuse_entry(table: &L3Table, entry: &super::IlluminantEntry) -> Result<Vec<f32>, L3Error> {
+pub fn fuse_entry(table: &L3Table, entry: &IlluminantEntry) -> Result<Vec<f32>, RenderError> {
     let nl = table.n_bands();
     if entry.level_corrections.len() != nl || nl == 0 {
         if table.transfers_to(&entry.name)
@@ -73,7 +75,7 @@ pub fn fuse_entry(table: &L3Table, entry: &super::IlluminantEntry) -> Result<Vec
 }
 
 /// `M·K` for every class's 3 output rows of `n_features` weights (f64 sums).
-pub(super) fn fuse_matrix(kernels: &[f32], m: &[[f64; 3]; 3], nf: usize) -> Vec<f32> {
+pub(crate) fn fuse_matrix(kernels: &[f32], m: &[[f64; 3]; 3], nf: usize) -> Vec<f32> {
     let mut out = vec![0f32; kernels.len()];
     for (src, dst) in kernels
         .chunks_exact(3 * nf)
@@ -104,7 +106,7 @@ pub fn render_reference(
     volts: &[f32],
     width: usize,
     height: usize,
-) -> Result<(Vec<f32>, RenderStats), L3Error> {
+) -> Result<(Vec<f32>, RenderStats), RenderError> {
     render_reference_under(table, kernels, None, volts, width, height)
 }
 
@@ -118,25 +120,27 @@ pub fn render_reference_under(
     volts: &[f32],
     width: usize,
     height: usize,
-) -> Result<(Vec<f32>, RenderStats), L3Error> {
+) -> Result<(Vec<f32>, RenderStats), RenderError> {
     if width == 0 || height == 0 {
-        return Err(L3Error::InvalidInput(format!("frame is {width}×{height}")));
+        return Err(RenderError::InvalidInput(format!(
+            "frame is {width}×{height}"
+        )));
     }
     if volts.len() != width * height {
-        return Err(L3Error::InvalidInput(format!(
+        return Err(RenderError::InvalidInput(format!(
             "{} values for a {width}×{height} frame ({} expected)",
             volts.len(),
             width * height
         )));
     }
     if kernels.len() != table.kernels.len() {
-        return Err(L3Error::KernelMismatch {
+        return Err(RenderError::KernelMismatch {
             got: kernels.len(),
             expected: table.kernels.len(),
         });
     }
     if let Some(i) = volts.iter().position(|v| !v.is_finite()) {
-        return Err(L3Error::InvalidInput(format!(
+        return Err(RenderError::InvalidInput(format!(
             "input value at row {}, column {} is not finite",
             i / width,
             i % width
@@ -156,11 +160,19 @@ pub fn render_reference_under(
         })
         .collect();
     let geo = table.geometry_under(light)?;
+    let frame = RowSource {
+        table,
+        geo: &geo,
+        kernels,
+        img: &input,
+        width,
+        height,
+    };
     let mut out = vec![0f32; width * height * 3];
     let stats = out
         .par_chunks_mut(width * 3)
         .enumerate()
-        .map(|(r, row)| render_row(table, &geo, kernels, &input, width, height, r, row))
+        .map(|(r, row)| render_row(&frame, r, row))
         .reduce(RenderStats::default, |mut a, b| {
             a += b;
             a
@@ -173,7 +185,7 @@ pub fn render_reference_under(
 /// Dot product with 8 independent partial sums (vectorises; a plain
 /// `iter().sum()` of f32 must keep its sequential order and cannot).
 #[inline]
-pub(super) fn dot(a: &[f32], b: &[f32]) -> f32 {
+pub(crate) fn dot(a: &[f32], b: &[f32]) -> f32 {
     let n = a.len().min(b.len());
     let mut acc = [0f32; 8];
     let full = n / 8 * 8;
@@ -189,17 +201,27 @@ pub(super) fn dot(a: &[f32], b: &[f32]) -> f32 {
     s
 }
 
-#[allow(clippy::too_many_arguments)]
-fn render_row(
-    table: &L3Table,
-    geo: &PatchGeometry,
-    kernels: &[f32],
-    img: &[f32],
+/// What every row of a reference render reads: the table, its geometry under the light,
+/// the kernels and the clamped input frame (`width × height` volts).
+struct RowSource<'a> {
+    table: &'a L3Table,
+    geo: &'a PatchGeometry,
+    kernels: &'a [f32],
+    img: &'a [f32],
     width: usize,
     height: usize,
-    r: usize,
-    row: &mut [f32],
-) -> RenderStats {
+}
+
+/// Render row `r` of `src` into `row` (interleaved XYZ).
+fn render_row(src: &RowSource, r: usize, row: &mut [f32]) -> RenderStats {
+    let RowSource {
+        table,
+        geo,
+        kernels,
+        img,
+        width,
+        height,
+    } = *src;
     let nf = geo.n_features();
     let np = nf - 1;
     let mut patch = vec![0f32; np];

@@ -16,8 +16,10 @@
 //! `illuminant_estimation` benchmark (`cargo bench --bench illuminant_estimation`) and reported
 //! in the README.
 
-use super::{L3Error, L3Table, Mosaic};
+use super::CorrectError;
 use crate::camera::Cfa;
+use crate::l3::render::Mosaic;
+use crate::l3::table::{L3Table, TableError};
 
 /// Tiles with a value at or above this fraction of the swing are left out.
 pub const CLIP_FRACTION: f32 = 0.98;
@@ -68,7 +70,7 @@ pub fn frame_neutral(
     cfa: &Cfa,
     swing: f64,
     statistic: NeutralStatistic,
-) -> Result<(Vec<(String, f64)>, usize), L3Error> {
+) -> Result<(Vec<(String, f64)>, usize), CorrectError> {
     let nc = cfa.n_channels();
     let tiles = tile_channel_means(mosaic, width, height, cfa, swing)?;
     let n_tiles = tiles.len() / nc;
@@ -98,7 +100,7 @@ pub fn frame_neutral(
     }
     let max = sums.iter().copied().fold(0.0, f64::max);
     if !(max.is_finite() && max > 0.0) || sums.iter().any(|s| *s <= 0.0) {
-        return Err(L3Error::InvalidInput(
+        return Err(CorrectError::InvalidInput(
             "the frame has no signal in some channel; name the illuminant".into(),
         ));
     }
@@ -119,16 +121,16 @@ fn tile_channel_means(
     height: usize,
     cfa: &Cfa,
     swing: f64,
-) -> Result<Vec<f64>, L3Error> {
+) -> Result<Vec<f64>, CorrectError> {
     let n = width
         .checked_mul(height)
-        .ok_or_else(|| L3Error::InvalidInput("the frame size overflows".into()))?;
+        .ok_or_else(|| CorrectError::InvalidInput("the frame size overflows".into()))?;
     let len = match mosaic {
         Mosaic::Volts(v) => v.len(),
         Mosaic::Dn { data, .. } => data.len(),
     };
     if len != n {
-        return Err(L3Error::InvalidInput(format!(
+        return Err(CorrectError::InvalidInput(format!(
             "the mosaic has {len} values for a {width}×{height} frame"
         )));
     }
@@ -165,7 +167,7 @@ fn tile_channel_means(
         }
     }
     if out.len() < MIN_TILES * nc {
-        return Err(L3Error::InvalidInput(format!(
+        return Err(CorrectError::InvalidInput(format!(
             "the frame has {} unclipped CFA tiles; at least {MIN_TILES} are needed to estimate the light (name the illuminant)",
             out.len() / nc
         )));
@@ -174,6 +176,23 @@ fn tile_channel_means(
 }
 
 impl L3Table {
+    /// The colour temperature whose white response, through the table's sensor, best matches
+    /// a raw file's neutral (e.g. a DNG's AsShotNeutral, per channel name): see
+    /// [`Camera::cct_from_neutral`](crate::camera::Camera::cct_from_neutral). The sensor's
+    /// curves are read through `iset` (the built-in data when `None`).
+    pub fn illuminant_from_neutral(
+        &self,
+        neutral: &[(String, f64)],
+        iset: Option<&crate::spectral::IsetData>,
+    ) -> Result<crate::camera::NeutralMatch, CorrectError> {
+        let design = self.sensor_design()?;
+        let camera = crate::camera::Camera::new(&design, self.meta.grid, iset)
+            .map_err(|e| TableError::Unusable(format!("the table's sensor: {e}")))?;
+        camera
+            .cct_from_neutral(neutral)
+            .map_err(|e| CorrectError::Neutral(e.to_string()))
+    }
+
     /// The light of a frame with no metadata, estimated from the mosaic by `statistic` and
     /// matched to a colour temperature through this table's sensor (its curves read through
     /// `iset`, the built-in data when `None`).
@@ -184,7 +203,7 @@ impl L3Table {
         height: usize,
         statistic: NeutralStatistic,
         iset: Option<&crate::spectral::IsetData>,
-    ) -> Result<IlluminantEstimate, L3Error> {
+    ) -> Result<IlluminantEstimate, CorrectError> {
         let (neutral, tiles) = frame_neutral(
             mosaic,
             width,
@@ -198,10 +217,10 @@ impl L3Table {
             NeutralStatistic::GreyWorld => {
                 let grid = self.meta.grid;
                 let camera = crate::camera::Camera::new(&self.sensor_design()?, grid, iset)
-                    .map_err(|e| L3Error::Table(format!("the table's sensor: {e}")))?;
+                    .map_err(|e| TableError::Unusable(format!("the table's sensor: {e}")))?;
                 camera
                     .cct_from_surface(&neutral, &mean_natural_surface(&grid, iset)?)
-                    .map_err(|e| L3Error::Neutral(e.to_string()))?
+                    .map_err(|e| CorrectError::Neutral(e.to_string()))?
             }
         };
         Ok(IlluminantEstimate {
@@ -267,7 +286,7 @@ impl L3Table {
         width: usize,
         height: usize,
         iset: Option<&crate::spectral::IsetData>,
-    ) -> Result<(String, IlluminantSource), L3Error> {
+    ) -> Result<(String, IlluminantSource), CorrectError> {
         if let Some(spec) = metadata.illuminant {
             return Ok((spec.to_string(), IlluminantSource::Metadata));
         }
@@ -290,16 +309,16 @@ impl L3Table {
 fn mean_natural_surface(
     grid: &crate::spectral::WavelengthGrid,
     iset: Option<&crate::spectral::IsetData>,
-) -> Result<crate::spectral::Spectrum, L3Error> {
+) -> Result<crate::spectral::Spectrum, CorrectError> {
     let set = crate::scene::training_reflectances(grid, iset)
-        .map_err(|e| L3Error::InvalidInput(e.to_string()))?;
+        .map_err(|e| CorrectError::InvalidInput(e.to_string()))?;
     let mut mean = vec![0.0; grid.len()];
     for (_, r) in &set {
         for (m, v) in mean.iter_mut().zip(r.values()) {
             *m += v / set.len() as f64;
         }
     }
-    crate::spectral::Spectrum::new(*grid, mean).map_err(L3Error::from)
+    crate::spectral::Spectrum::new(*grid, mean).map_err(CorrectError::from)
 }
 
 #[cfg(test)]

@@ -23,7 +23,7 @@
 //! - the error is weighted perceptually: each sample's XYZ error goes
 //!   through the Jacobian of CIELAB at its true colour (relative to the
 //!   white of its illuminant) and CIEDE2000's local metric there
-//!   ([`delta_e_weights`]), so the fit minimises a first-order ΔE00², the
+//!   ([`delta_e_weights`](crate::l3::correct::delta_e_weights)), so the fit minimises a first-order ΔE00², the
 //!   measure the evaluation reports, rather than an XYZ error that bright
 //!   colours dominate. A same-illuminant table's output is judged after its
 //!   light's correction T, so its samples carry T
@@ -32,7 +32,7 @@
 //!   (noise-free on ISET's RGBW under tungsten, SI_Tun+T 2.58 → 2.47 against
 //!   its matching linear map's 2.52). Its target is what T must receive to
 //!   give the true D65 colour, `T⁻¹·xyz_D65`, not XYZ under the light
-//!   (`training::ColourTarget`): the map then also absorbs T's own error
+//!   (`l3::correct::ColourTarget`): the map then also absorbs T's own error
 //!   where the channels tell apart what T confuses (rgbw-paper SI_Tun+T
 //!   1.48 → 0.87). The samples are the natural reflectances
 //!   (`scene::natural_reflectances`, no Munsell chips): on ISET's RGBW under
@@ -67,276 +67,18 @@
 //! table, and the evaluation prints it beside every L3 row.
 
 use nalgebra::{DMatrix, DVector};
-use serde::{Deserialize, Serialize};
 
-use super::{ChromaClasses, ColourMatrix, IDENTITY, L3Error, Mat3, NoiseModel};
-use crate::colour::{ciede2000_metric, mat3_mul_vec, xyz_to_lab};
-
-/// Noise-free channel responses and XYZ of a set of surfaces, the data every
-/// colour map is fitted on. All three lists have one entry per sample; each
-/// sample carries the XYZ of the white of its illuminant (same units) for the
-/// perceptual weights. Units are arbitrary but common to channels and XYZ.
-#[derive(Clone, Debug, Default)]
-pub struct ColourSamples {
-    pub channels: Vec<Vec<f64>>,
-    pub xyz: Vec<[f64; 3]>,
-    pub white: Vec<[f64; 3]>,
-    /// Per sample, the 3×3 matrix the table's output goes through before it
-    /// is judged: a same-illuminant table's correction T to D65. Empty when
-    /// the output is judged as it is (a cross table's D65 XYZ).
-    pub judged_through: Vec<Mat3>,
-    /// Per sample, the index of the illuminant it is lit by (empty: one
-    /// light), so that a loss can weigh every light of an ensemble alike.
-    pub light: Vec<usize>,
-    /// Per illuminant (by [`Self::light`]'s index), the sensor's channel
-    /// responses to white under it: what chroma classes balance by
-    /// ([`super::chroma`]). Empty: the classes' reference light.
-    pub neutral: Vec<Vec<f64>>,
-}
-
-impl ColourSamples {
-    pub fn len(&self) -> usize {
-        self.channels.len()
-    }
-
-    pub fn is_empty(&self) -> bool {
-        self.channels.is_empty()
-    }
-
-    /// The samples at `indices`, in that order (every per-sample column kept).
-    pub fn subset(&self, indices: &[usize]) -> Self {
-        let pick = |v: &[Mat3]| -> Vec<Mat3> {
-            if v.is_empty() {
-                Vec::new()
-            } else {
-                indices.iter().map(|&i| v[i]).collect()
-            }
-        };
-        Self {
-            channels: indices.iter().map(|&i| self.channels[i].clone()).collect(),
-            xyz: indices.iter().map(|&i| self.xyz[i]).collect(),
-            white: indices.iter().map(|&i| self.white[i]).collect(),
-            judged_through: pick(&self.judged_through),
-            light: if self.light.is_empty() {
-                Vec::new()
-            } else {
-                indices.iter().map(|&i| self.light[i]).collect()
-            },
-            neutral: self.neutral.clone(),
-        }
-    }
-
-    /// The neutral of sample `i`'s light, when known.
-    pub fn neutral_of(&self, i: usize) -> Option<&[f64]> {
-        let light = self.light.get(i).copied().unwrap_or(0);
-        self.neutral.get(light).map(Vec::as_slice)
-    }
-
-    /// The indices of the samples `classes` puts in chroma class `k`, each
-    /// balanced by its light's neutral.
-    pub fn in_chroma_class(&self, classes: &ChromaClasses, k: usize) -> Vec<usize> {
-        (0..self.len())
-            .filter(|&i| classes.classify_under(&self.channels[i], self.neutral_of(i)) == k)
-            .collect()
-    }
-
-    /// Channels per sample (0 when empty).
-    pub fn n_channels(&self) -> usize {
-        self.channels.first().map(Vec::len).unwrap_or(0)
-    }
-
-    /// The weights `W` that make an XYZ error `e` of sample `i` cost
-    /// `eᵀ W e` where it is judged: with `perceptual`, its first-order ΔE00²
-    /// after [`Self::judged_through`] (`Tᵀ (JᵀQJ at T·xyz, white T·white) T`),
-    /// otherwise its squared error relative to the judged white's luminance.
-    pub fn error_weights(&self, i: usize, perceptual: bool) -> [[f64; 3]; 3] {
-        let t = self.judged_through.get(i).copied().unwrap_or(IDENTITY);
-        let apply = |v: [f64; 3]| mat3_mul_vec(&t, v);
-        let white = apply(self.white[i]);
-        let w = if perceptual {
-            delta_e_weights(apply(self.xyz[i]), white)
-        } else {
-            let y = white[1].max(f64::MIN_POSITIVE);
-            [0, 1, 2].map(|k| [0, 1, 2].map(|l| if k == l { 1.0 / (y * y) } else { 0.0 }))
-        };
-        // Tᵀ W T
-        [0, 1, 2].map(|a| {
-            [0, 1, 2].map(|b| {
-                (0..3)
-                    .map(|p| (0..3).map(|q| t[p][a] * w[p][q] * t[q][b]).sum::<f64>())
-                    .sum()
-            })
-        })
-    }
-
-    fn check(&self) -> Result<usize, L3Error> {
-        let nc = self.n_channels();
-        let n = self.len();
-        if n < nc.max(3) || nc == 0 {
-            return Err(L3Error::InvalidParams(format!(
-                "a colour map needs at least {} samples, got {n}",
-                nc.max(3)
-            )));
-        }
-        if self.xyz.len() != n
-            || self.white.len() != n
-            || !(self.judged_through.is_empty() || self.judged_through.len() == n)
-            || !(self.light.is_empty() || self.light.len() == n)
-        {
-            return Err(L3Error::InvalidParams(
-                "colour samples: channel, XYZ, white, correction and light lists differ in length"
-                    .into(),
-            ));
-        }
-        if self.channels.iter().any(|c| c.len() != nc) {
-            return Err(L3Error::InvalidParams(
-                "colour samples differ in channel count".into(),
-            ));
-        }
-        let finite = self.channels.iter().flatten().all(|v| v.is_finite())
-            && self.xyz.iter().flatten().all(|v| v.is_finite())
-            && self
-                .judged_through
-                .iter()
-                .flatten()
-                .flatten()
-                .all(|v| v.is_finite())
-            && self
-                .white
-                .iter()
-                .flatten()
-                .all(|v| v.is_finite() && *v > 0.0);
-        if !finite {
-            return Err(L3Error::InvalidParams(
-                "colour samples must be finite, with a positive white".into(),
-            ));
-        }
-        Ok(nc)
-    }
-}
-
-/// How each level's colour map is fitted.
-#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
-pub struct ColourMapFit {
-    /// Pixels per channel whose mean the map is made best for under the
-    /// sensor's noise; `None` fits the noise-free map at every level.
-    pub averaging_px: Option<f64>,
-    /// Weight errors by the CIELAB Jacobian (otherwise plain XYZ error).
-    pub perceptual: bool,
-    /// What the fit minimises over the samples (absent in tables trained
-    /// before the choice existed, which minimised the squared error).
-    #[serde(default = "ColourLoss::squared")]
-    pub loss: ColourLoss,
-}
-
-/// The loss a colour map minimises over its samples, each sample's error
-/// measured as its expected first-order ΔE00 (bias and noise).
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
-#[serde(rename_all = "kebab-case")]
-pub enum ColourLoss {
-    /// The sum of squared errors: one weighted least-squares solve.
-    SquaredDeltaE,
-    /// The mean error of every light, the mean ΔE an evaluation reports:
-    /// `Σ_light (Σ_sample ΔE)²`, by iteratively reweighted least squares.
-    #[default]
-    MeanDeltaE,
-}
-
-impl ColourLoss {
-    fn squared() -> Self {
-        Self::SquaredDeltaE
-    }
-}
-
-impl Default for ColourMapFit {
-    fn default() -> Self {
-        Self {
-            averaging_px: Some(UNDER_LIGHT_AVERAGING_PX),
-            perceptual: true,
-            loss: ColourLoss::default(),
-        }
-    }
-}
-
-/// The averaging of the maps a same-illuminant table keeps for lights it
-/// was not trained under ([`super::L3Params::transfer_maps`]), aimed at XYZ
-/// under the light, and the default [`ColourMapFit`]. Such a
-/// map has no white-balance gain, so it takes a lighter noise term than a
-/// cross map. Measured on ISET's RGBW under tungsten when every
-/// same-illuminant map was aimed so (SI_Tun+T, 16 captures; one capture's
-/// mean / noise-free / per-pixel): 64 gave 3.17 / 2.98 / 4.91, 128 gave 3.25
-/// / 2.89 / 6.05, 256 gave 3.42 / 2.84 / 7.28; on rgbw-ar0132at 2.52, 2.55
-/// and 2.58. 128 was chosen with the earlier ΔE76 maps, where 64 cost two
-/// fluorescent `+C` rows on rgbw-ar0132at.
-pub const UNDER_LIGHT_AVERAGING_PX: f64 = 128.0;
-
-/// The averaging of the maps a table renders with under its own lights: a
-/// cross-illuminant table's, and a same-illuminant table's aimed through T
-/// (`training::ColourTarget::ThroughCorrection`), which carry the same
-/// white-balance gain. The lighter noise term of 128 left such maps noisy.
-/// The value is measured, not derived: a 16×16-pixel patch interior holds
-/// 64 pixels per channel (2×2 CFA), and over 16 noisy captures of the chart
-/// the mean patch-mean ΔE2000 of one capture is lowest near 48 with the
-/// mean-ΔE loss. I_Tun (one capture's mean / noise-free / per-pixel),
-/// mean-ΔE loss: on ISET's RGBW 32 gave 2.81 / 2.72 / 3.72, 48 gave 2.77 /
-/// 2.62 / 4.21, 64 gave 2.77 / 2.54 / 4.71, 96 gave 2.81 / 2.40 / 5.61; on
-/// rgbw-ar0132at 2.21, 2.20, 2.20 and 2.21. (With the squared loss 32 was
-/// best: 2.80 / 2.62 / 4.46 on ISET's RGBW, 2.29 on rgbw-ar0132at.) The
-/// aimed same-illuminant maps took 128 until they were measured with it:
-/// on the six sensors' Table 1, 48 moved 29 rows by 0.01 or more for the
-/// better and 6 for the worse (mean −0.014), ISET's RGBW SI_Tun+T 2.73 →
-/// 2.67 (per pixel 6.37 → 4.21, the cross table's figures: with the same
-/// averaging an SI_Tun table followed by T is the cross table), and its
-/// `+C` rows by 0.10–0.30.
-pub const CROSS_AVERAGING_PX: f64 = 48.0;
-
-impl ColourMapFit {
-    pub fn validate(&self) -> Result<(), L3Error> {
-        match self.averaging_px {
-            Some(n) if !(n.is_finite() && n >= 1.0) => Err(L3Error::InvalidParams(format!(
-                "colour map averaging {n} px (at least 1)"
-            ))),
-            _ => Ok(()),
-        }
-    }
-}
+use super::LearnError;
+use crate::baseline::ColourMatrix;
+use crate::l3::classify::ChromaClasses;
+use crate::l3::correct::{ColourSamples, LevelNoise, NoiseModel, mean_loss_fit};
+use crate::l3::params::{ColourLoss, ColourMapFit};
 
 /// The plain least-squares linear map `XYZ = M · channels` over `samples`:
 /// the noise-free reference an L3 table is compared with.
-pub fn least_squares_map(samples: &ColourSamples) -> Result<ColourMatrix, L3Error> {
+pub fn least_squares_map(samples: &ColourSamples) -> Result<ColourMatrix, LearnError> {
     samples.check()?;
-    ColourMatrix::fit(&samples.channels, &samples.xyz)
-}
-
-/// The noise a level's colour map is fitted for: the sensor's noise on a
-/// channel mean over `averaging_px` pixels per channel, at the level's
-/// luminance statistic `level_v` volts (of a `swing_v` swing).
-#[derive(Clone, Copy, Debug)]
-pub struct LevelNoise {
-    pub model: NoiseModel,
-    pub level_v: f64,
-    pub swing_v: f64,
-    pub averaging_px: f64,
-}
-
-impl LevelNoise {
-    /// Per channel, the noise variance of a patch of this level whose
-    /// noise-free channel responses are proportional to `channels`, in
-    /// `channels`' units (the sample is scaled so that its mean channel
-    /// response is the level; zero noise for a sample with no signal).
-    pub fn channel_variance(&self, channels: &[f64]) -> Vec<f64> {
-        let lum = channels.iter().sum::<f64>() / channels.len().max(1) as f64;
-        if !(lum > 0.0 && self.level_v > 0.0) {
-            return vec![0.0; channels.len()];
-        }
-        let s = self.level_v / lum;
-        channels
-            .iter()
-            .map(|v| {
-                self.model.variance((v * s).clamp(0.0, self.swing_v)) / self.averaging_px / (s * s)
-            })
-            .collect()
-    }
+    Ok(ColourMatrix::fit(&samples.channels, &samples.xyz)?)
 }
 
 /// One colour map per level (`levels` in volts, the patch luminance
@@ -347,7 +89,7 @@ pub fn level_maps(
     noise: &NoiseModel,
     swing: f64,
     fit: &ColourMapFit,
-) -> Result<Vec<ColourMatrix>, L3Error> {
+) -> Result<Vec<ColourMatrix>, LearnError> {
     fit.validate()?;
     let nc = samples.check()?;
     levels
@@ -357,7 +99,7 @@ pub fn level_maps(
 }
 
 /// One colour map per band (level × chroma classes + class, see
-/// [`super::chroma`]): each level's map fitted on each chroma class's
+/// [`chroma`](crate::l3::classify::chroma)): each level's map fitted on each chroma class's
 /// samples, with a ridge ([`PRIOR_WEIGHT`]) toward `pooled`, the level's map over every
 /// sample ([`level_maps`] on the same samples). A class's surfaces span a narrow cone of channel space, so on its
 /// own a class map is free in the directions across the cone and takes large,
@@ -376,11 +118,11 @@ pub fn band_maps(
     noise: &NoiseModel,
     swing: f64,
     fit: &ColourMapFit,
-) -> Result<Vec<ColourMatrix>, L3Error> {
+) -> Result<Vec<ColourMatrix>, LearnError> {
     fit.validate()?;
     samples.check()?;
     if pooled.len() != levels.len() {
-        return Err(L3Error::InvalidParams(format!(
+        return Err(LearnError::InvalidParams(format!(
             "{} pooled maps for {} levels",
             pooled.len(),
             levels.len()
@@ -394,9 +136,9 @@ pub fn band_maps(
                 .iter()
                 .zip(pooled)
                 .map(|(&level, prior)| level_map(&sub, nc, level, noise, swing, fit, Some(prior)))
-                .collect::<Result<Vec<_>, L3Error>>()
+                .collect::<Result<Vec<_>, LearnError>>()
         })
-        .collect::<Result<Vec<_>, L3Error>>()?;
+        .collect::<Result<Vec<_>, LearnError>>()?;
     let kc = per_class.len();
     Ok((0..levels.len() * kc)
         .map(|b| per_class[b % kc][b / kc].clone())
@@ -406,39 +148,6 @@ pub fn band_maps(
 /// The weight of a chroma class map's ridge toward its level's pooled map,
 /// relative to the mean diagonal of the class's normal equations.
 pub const PRIOR_WEIGHT: f64 = 1e-5;
-
-/// `∂(L*, a*, b*)/∂(X, Y, Z)` at `xyz` for reference white `white`.
-fn lab_jacobian(xyz: [f64; 3], white: [f64; 3]) -> [[f64; 3]; 3] {
-    // d f(t)/dt of the CIELAB function, kept finite at t → 0
-    let df = |t: f64| {
-        if t > 216.0 / 24389.0 {
-            t.powf(-2.0 / 3.0) / 3.0
-        } else {
-            24389.0 / 27.0 / 116.0
-        }
-    };
-    let d = [0, 1, 2].map(|k| df(xyz[k] / white[k]) / white[k]);
-    [
-        [0.0, 116.0 * d[1], 0.0],
-        [500.0 * d[0], -500.0 * d[1], 0.0],
-        [0.0, 200.0 * d[1], -200.0 * d[2]],
-    ]
-}
-
-/// The weights `W = Jᵀ Q J` that make an XYZ error `e` at `xyz` (relative to
-/// `white`) cost `eᵀ W e`, its first-order ΔE00²: `J` is the CIELAB Jacobian,
-/// `Q` CIEDE2000's local metric in CIELAB ([`ciede2000_metric`]).
-pub(super) fn delta_e_weights(xyz: [f64; 3], white: [f64; 3]) -> [[f64; 3]; 3] {
-    let j = lab_jacobian(xyz, white);
-    let q = ciede2000_metric(xyz_to_lab(xyz, white));
-    [0, 1, 2].map(|k| {
-        [0, 1, 2].map(|l| {
-            (0..3)
-                .map(|p| (0..3).map(|r| j[p][k] * q[p][r] * j[r][l]).sum::<f64>())
-                .sum()
-        })
-    })
-}
 
 /// One sample of a level's fit: its index, error weights and the noise
 /// variance of its channel mean at the level.
@@ -456,7 +165,7 @@ fn level_map(
     swing: f64,
     fit: &ColourMapFit,
     prior: Option<&ColourMatrix>,
-) -> Result<ColourMatrix, L3Error> {
+) -> Result<ColourMatrix, LearnError> {
     let level_noise = fit.averaging_px.map(|n| LevelNoise {
         model: *noise,
         level_v: level,
@@ -484,7 +193,7 @@ fn level_map(
         })
         .collect();
     if prepared.len() < nc.max(3) {
-        return Err(L3Error::InvalidParams(format!(
+        return Err(LearnError::InvalidParams(format!(
             "a colour map needs at least {} samples with signal, got {}",
             nc.max(3),
             prepared.len()
@@ -505,47 +214,6 @@ fn level_map(
         n_channels: nc,
     })
 }
-
-/// Minimises `Σ_light (Σ_i e_i)²` over `n` samples, `e_i` sample i's
-/// smoothed error (`sqrt(square_error + s²)`, `s` [`MEAN_LOSS_SMOOTHING`]),
-/// by iteratively reweighted least squares: `solve(weights)` solves the
-/// problem whose loss is `Σ_i weights[i] · square_error_i`, and
-/// `square_error(x, i)` is sample i's squared error under solution `x`. The
-/// gradient of the loss weighs a sample by its light's total error over its
-/// own, so each round solves with those weights; the first round is the
-/// plain squared loss.
-pub(super) fn mean_loss_fit<T>(
-    n: usize,
-    light: impl Fn(usize) -> usize,
-    solve: impl Fn(&[f64]) -> Result<T, L3Error>,
-    square_error: impl Fn(&T, usize) -> f64,
-) -> Result<T, L3Error> {
-    let n_lights = (0..n).map(|i| light(i) + 1).max().unwrap_or(1);
-    let mut weights = vec![1.0; n];
-    let mut x = solve(&weights)?;
-    for _ in 0..MEAN_LOSS_ITERATIONS {
-        let errors: Vec<f64> = (0..n)
-            .map(|i| {
-                (square_error(&x, i).max(0.0) + MEAN_LOSS_SMOOTHING * MEAN_LOSS_SMOOTHING).sqrt()
-            })
-            .collect();
-        let mut light_total = vec![0.0; n_lights];
-        for (i, e) in errors.iter().enumerate() {
-            light_total[light(i)] += e;
-        }
-        for (i, (w, e)) in weights.iter_mut().zip(&errors).enumerate() {
-            *w = light_total[light(i)] / e;
-        }
-        x = solve(&weights)?;
-    }
-    Ok(x)
-}
-
-/// Reweighting rounds of the mean-ΔE loss ([`ColourLoss::MeanDeltaE`]).
-const MEAN_LOSS_ITERATIONS: usize = 12;
-/// The error (ΔE00) below which the mean-ΔE loss turns quadratic, so that a
-/// sample fitted exactly does not take all the weight.
-const MEAN_LOSS_SMOOTHING: f64 = 0.25;
 
 /// Sample `s`'s expected weighted squared error under map `m` (unknowns
 /// `m[k * nc + c]`): its bias `eᵀWe` plus its noise `tr(W M Σ Mᵀ)`.
@@ -579,7 +247,7 @@ fn solve_level(
     sample_weight: &[f64],
     level: f64,
     prior: Option<&ColourMatrix>,
-) -> Result<DVector<f64>, L3Error> {
+) -> Result<DVector<f64>, LearnError> {
     let nn = 3 * nc;
     let mut a = DMatrix::<f64>::zeros(nn, nn);
     let mut b = DVector::<f64>::zeros(nn);
@@ -619,42 +287,22 @@ fn solve_level(
     for i in 0..nn {
         a[(i, i)] += floor.max(f64::MIN_POSITIVE);
     }
-    let m = a
-        .cholesky()
-        .map(|ch| ch.solve(&b))
-        .ok_or_else(|| L3Error::Table(format!("the colour map at level {level} V is singular")))?;
+    let m = a.cholesky().map(|ch| ch.solve(&b)).ok_or_else(|| {
+        LearnError::Solve(format!("the colour map at level {level} V is singular"))
+    })?;
     if m.iter().any(|v| !v.is_finite()) {
-        return Err(L3Error::Table(format!(
+        return Err(LearnError::Solve(format!(
             "the colour map at level {level} V is not finite"
         )));
     }
     Ok(m)
 }
 
-/// For tests of a mean-ΔE fit: the per-sample errors of the mean-loss fit
-/// have the lower mean (by 0.05 or more), those of the squared-loss fit the
-/// lower sum of squares.
-#[cfg(test)]
-pub(super) fn assert_mean_loss_trade(mean_fit: &[f64], squared_fit: &[f64]) {
-    let mean = |e: &[f64]| e.iter().sum::<f64>() / e.len() as f64;
-    let sq = |e: &[f64]| e.iter().map(|v| v * v).sum::<f64>();
-    assert!(
-        mean(mean_fit) < mean(squared_fit) - 0.05,
-        "mean {} against {}",
-        mean(mean_fit),
-        mean(squared_fit)
-    );
-    assert!(
-        sq(squared_fit) < sq(mean_fit),
-        "squares {} against {}",
-        sq(squared_fit),
-        sq(mean_fit)
-    );
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::colour::{mat3_mul_vec, xyz_to_lab};
+    use crate::l3::correct::{MEAN_LOSS_SMOOTHING, assert_mean_loss_trade, delta_e_weights};
 
     fn noise() -> NoiseModel {
         NoiseModel {

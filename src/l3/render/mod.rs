@@ -1,0 +1,18 @@
+//! Rendering a mosaic with a table: the reference renderer (`reference.rs`: simple,
+//! parallel over rows), the fast renderer ([`FastRenderer`], DESIGN.md §9: the same classes
+//! and kernels, organised for speed) and the output encodings (`output.rs`).
+
+pub(super) mod error;
+pub(super) mod output;
+pub(super) mod reference;
+
+pub use super::fast::{FastOptions, FastRenderer, Frame, Mosaic, Region};
+pub use error::RenderError;
+pub use output::{
+    WHITE_GRID, WhiteLevel, white_from_samples, white_sample_points, white_y, xyz_to_srgb8,
+    xyz_to_srgb16,
+};
+pub use reference::{
+    RenderStats, fuse_entry, fuse_kernels, render_reference, render_reference_under,
+    resolve_sat_case,
+};
