@@ -22,7 +22,6 @@
 
 pub mod classify;
 pub mod correct;
-mod fast;
 pub mod learn;
 pub mod params;
 pub mod render;

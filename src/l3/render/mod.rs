@@ -3,11 +3,12 @@
 //! and kernels, organised for speed) and the output encodings (`output.rs`).
 
 pub(super) mod error;
+mod fast;
 pub(super) mod output;
 pub(super) mod reference;
 
-pub use super::fast::{FastOptions, FastRenderer, Frame, Mosaic, Region};
 pub use error::RenderError;
+pub use fast::{FastOptions, FastRenderer, Frame, Mosaic, Region};
 pub use output::{
     WHITE_GRID, WhiteLevel, white_from_samples, white_sample_points, white_y, xyz_to_srgb8,
     xyz_to_srgb16,

@@ -56,13 +56,13 @@ use source::{Source, check_region, gather_frame};
 use stages::LevelLut;
 
 // Everything the fast renderer takes from outside `fast`: its files import these through `super::`.
-use super::classify::{PatchGeometry, mirror, sat_case_index};
-use super::render::error::RenderError;
-use super::render::output::{WhiteLevel, white_from_samples, white_sample_points};
-use super::render::reference::{RenderStats, dot, fuse_matrix};
-use super::table::L3Table;
+use super::error::RenderError;
+use super::output::{WhiteLevel, white_from_samples, white_sample_points};
+use super::reference::{RenderStats, dot, fuse_matrix};
 use crate::buffers::zeroed;
 use crate::colour::{SrgbLut, XYZ_TO_LINEAR_SRGB};
+use crate::l3::classify::{PatchGeometry, mirror, sat_case_index};
+use crate::l3::table::L3Table;
 
 /// Lanes per kernel row in the SIMD layout.
 const LANES: usize = 8;
