@@ -9,7 +9,7 @@
 //!   [`l3`] (classification, training, tables, rendering, illuminant correction),
 //!   [`eval`] (ΔE2000 reports, the paper's Table 1);
 //! - file formats in [`io`];
-//! - [`render_pipeline`]: a decoded mosaic to encoded output, the one path `l3 render`, the
+//! - [`pipeline`]: a decoded mosaic to encoded output, the one path `l3 render`, the
 //!   service and the evaluation render through;
 //! - the command line in [`cli`], which only calls the core;
 //! - the HTTP render service in [`service`], which depends on the core (never the reverse).
@@ -30,7 +30,7 @@ pub mod eval;
 pub mod fuzzing;
 pub mod io;
 pub mod l3;
-pub mod render_pipeline;
+pub mod pipeline;
 pub mod scene;
 pub mod service;
 pub mod spectral;

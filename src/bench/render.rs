@@ -7,7 +7,7 @@ use crate::l3::{
     ColourMatrix, FastRenderer, Frame, IlluminantEntry, L3Error, L3Table, Mosaic, WhiteLevel,
     render_baseline, xyz_to_srgb8,
 };
-use crate::render_pipeline::RenderPipeline;
+use crate::pipeline::RenderPipeline;
 
 /// Name of the L3 renderer the wrappers call (recorded in the JSON).
 pub const RENDERER: &str = "fast";

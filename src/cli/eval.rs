@@ -9,7 +9,7 @@ use crate::eval::{
     noise_split, paper_summary, run_paper_table,
 };
 use crate::l3::{IlluminantRegistry, L3Table};
-use crate::render_pipeline::{CorrectionMode, correction_for, uses_own_kernels};
+use crate::pipeline::{CorrectionMode, correction_for, uses_own_kernels};
 use crate::spectral::WavelengthGrid;
 
 #[derive(Args, Debug)]

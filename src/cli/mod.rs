@@ -76,9 +76,9 @@ pub enum CliError {
     },
 }
 
-impl From<crate::render_pipeline::PipelineError> for CliError {
-    fn from(e: crate::render_pipeline::PipelineError) -> Self {
-        use crate::render_pipeline::PipelineError;
+impl From<crate::pipeline::PipelineError> for CliError {
+    fn from(e: crate::pipeline::PipelineError) -> Self {
+        use crate::pipeline::PipelineError;
         match e {
             PipelineError::Options(m) => CliError::Usage(m),
             PipelineError::Render(e) => e.into(),

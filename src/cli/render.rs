@@ -12,7 +12,7 @@ use crate::l3::{
     IlluminantRegistry, L3Table, Mosaic, RenderStats, TableKind, WhiteLevel,
     render_reference_under, white_y, xyz_to_srgb8, xyz_to_srgb16,
 };
-use crate::render_pipeline::{
+use crate::pipeline::{
     CorrectionMode, OutputFormat, PipelineError, RenderOptions, RenderPipeline, check_preview,
     correction_for, kernels_for, parse_region,
 };

@@ -211,9 +211,9 @@ impl From<crate::io::IoError> for ServiceError {
     }
 }
 
-impl From<crate::render_pipeline::PipelineError> for ServiceError {
-    fn from(e: crate::render_pipeline::PipelineError) -> Self {
-        use crate::render_pipeline::PipelineError;
+impl From<crate::pipeline::PipelineError> for ServiceError {
+    fn from(e: crate::pipeline::PipelineError) -> Self {
+        use crate::pipeline::PipelineError;
         match e {
             PipelineError::Options(m) => ServiceError::BadRequest(m),
             PipelineError::Correction(e) => ServiceError::Internal(e.to_string()),
@@ -354,7 +354,7 @@ mod tests {
     #[test]
     fn render_errors_map_by_kind() {
         use crate::l3::L3Error;
-        use crate::render_pipeline::PipelineError;
+        use crate::pipeline::PipelineError;
         let code = |e: L3Error| ServiceError::from(PipelineError::Render(e));
         let e = code(L3Error::InvalidInput(
             "input value at row 0 is not finite".into(),

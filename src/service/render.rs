@@ -28,7 +28,7 @@ use crate::io::{
     DecodedMosaic, Limits, UnknownPngCompression, decode_mosaic_with_meta, decode_raw_u16_le,
 };
 use crate::l3::{FrameMetadata, Mosaic, WhiteLevel};
-use crate::render_pipeline::{
+use crate::pipeline::{
     CorrectionMode, Encoded, OutputFormat as PipelineFormat, PipelineError, RenderOptions,
     check_preview, parse_region,
 };
@@ -161,7 +161,7 @@ enum Input {
 struct Rendered {
     illuminant: String,
     illuminant_source: &'static str,
-    out: crate::render_pipeline::Rendered,
+    out: crate::pipeline::Rendered,
     in_width: usize,
     in_height: usize,
     decode_ms: f64,

@@ -16,7 +16,7 @@ use super::config::ServiceConfig;
 use super::metrics::Metrics;
 use super::store::{IlluminantRow, Store};
 use crate::l3::{IlluminantEntry, IlluminantRegistry, L3Table};
-use crate::render_pipeline::{CorrectionMode, RenderPipeline, correction_for, uses_own_kernels};
+use crate::pipeline::{CorrectionMode, RenderPipeline, correction_for, uses_own_kernels};
 use crate::spectral::IsetData;
 
 /// The table renders use, with its id. Renders hold an `Arc` of it, so an activation never
@@ -119,7 +119,7 @@ impl Inner {
     }
 
     /// The render pipeline for `active` under `entry` (kernel selection:
-    /// [`crate::render_pipeline::kernels_for`]), cached per (table, illuminant).
+    /// [`crate::pipeline::kernels_for`]), cached per (table, illuminant).
     pub fn renderer_for(
         &self,
         active: &ActiveTable,
