@@ -9,8 +9,8 @@
 //!   [`l3`] (classification, training, tables, rendering, illuminant correction),
 //!   [`eval`] (ΔE2000 reports, the paper's Table 1);
 //! - file formats in [`io`];
-//! - [`pipeline`]: a decoded mosaic to encoded output, the one path `l3 render`, the
-//!   service and the evaluation render through;
+//! - [`pipeline`]: one render request end to end (bytes or a decoded mosaic → levels, CFA
+//!   check, light, kernels → render → encoded output), what `l3 render` and the service run;
 //! - the command line in [`cli`], which only calls the core;
 //! - the HTTP render service in [`service`], which depends on the core (never the reverse).
 //!
