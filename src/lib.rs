@@ -10,8 +10,8 @@
 //!   [`baseline`] (the conventional pipeline L3 is compared with),
 //!   [`eval`] (ΔE2000 reports, the paper's Table 1);
 //! - file formats in [`io`];
-//! - [`render_pipeline`]: a decoded mosaic to encoded output, the one path `l3 render`, the
-//!   service and the evaluation render through;
+//! - [`pipeline`]: one render request end to end (bytes or a decoded mosaic → levels, CFA
+//!   check, light, kernels → render → encoded output), what `l3 render` and the service run;
 //! - the command line in [`cli`], which only calls the core;
 //! - the HTTP render service in [`service`], which depends on the core (never the reverse).
 //!
@@ -32,7 +32,7 @@ pub mod eval;
 pub mod fuzzing;
 pub mod io;
 pub mod l3;
-pub mod render_pipeline;
+pub mod pipeline;
 pub mod scene;
 pub mod service;
 pub mod spectral;

@@ -7,7 +7,7 @@ use crate::camera::Cfa;
 use crate::l3::L3Table;
 use crate::l3::correct::IlluminantEntry;
 use crate::l3::render::{FastRenderer, Frame, Mosaic, RenderError, WhiteLevel, xyz_to_srgb8};
-use crate::render_pipeline::RenderPipeline;
+use crate::pipeline::RenderPipeline;
 
 /// Name of the L3 renderer the wrappers call (recorded in the JSON).
 pub const RENDERER: &str = "fast";

@@ -10,7 +10,7 @@ use crate::eval::{
 };
 use crate::l3::L3Table;
 use crate::l3::correct::IlluminantRegistry;
-use crate::render_pipeline::{CorrectionMode, correction_for, uses_own_kernels};
+use crate::pipeline::{CorrectionMode, correction_for, uses_own_kernels};
 use crate::spectral::{IsetData, WavelengthGrid};
 
 #[derive(Args, Debug)]
@@ -236,9 +236,9 @@ fn evaluate_frame(
         .as_ref()
         .ok_or_else(|| CliError::Usage("--frame needs --table".into()))?;
     let table = L3Table::load(path)?;
-    let input = super::render::load_mosaic(frame, table.meta.voltage_swing)?;
-    input.check_dng_cfa(&table, frame)?;
-    let (spec, source) = input.light(&table, a.illuminant.first().map(String::as_str), iset)?;
+    let named = a.illuminant.first().map(String::as_str);
+    let (input, spec, source) = super::render::frame_and_light(frame, &table, named, iset)?;
+    let (width, height) = (input.width, input.height);
     let grid = table.meta.grid;
     let design = match a.sensor.first() {
         Some(p) => load_sensor(&Some(p.clone()), iset)?,
@@ -250,9 +250,9 @@ fn evaluate_frame(
     println!("illuminant {} (from {source})", corr.name);
     let cap = crate::eval::frame_chart_capture(
         &camera,
-        input.volts,
-        input.width,
-        input.height,
+        input.into_volts(table.meta.voltage_swing)?,
+        width,
+        height,
         &corr.name,
         iset,
         chart,

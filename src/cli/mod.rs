@@ -86,14 +86,23 @@ pub enum CliError {
     },
 }
 
-impl From<crate::render_pipeline::PipelineError> for CliError {
-    fn from(e: crate::render_pipeline::PipelineError) -> Self {
-        use crate::render_pipeline::PipelineError;
+impl From<crate::pipeline::PipelineError> for CliError {
+    /// Options (and a region or preview asked of the reference renderer) are usage errors;
+    /// the rest are the layers' errors, shown as they are.
+    fn from(e: crate::pipeline::PipelineError) -> Self {
+        use crate::pipeline::PipelineError::*;
         match e {
-            PipelineError::Options(m) => CliError::Usage(m),
-            PipelineError::Render(e) => e.into(),
-            PipelineError::Encode(e) => e.into(),
-            PipelineError::Correction(e) => e.into(),
+            Options(m) => CliError::Usage(m),
+            WholeFrameOnly => {
+                CliError::Usage("--region and --preview need the fast renderer".into())
+            }
+            CfaMismatch { .. } | Levels { .. } | SizeMismatch { .. } => {
+                CliError::Usage(e.to_string())
+            }
+            Decode(e) | Encode(e) => e.into(),
+            Kernels(e) | Render(e) => e.into(),
+            FrameLight(e) => e.into(),
+            Correction(e) => e.into(),
         }
     }
 }

@@ -1,24 +1,25 @@
+//! `l3 render`: a mosaic file through the core's render request ([`crate::pipeline`]) to an
+//! image file.
+
+use std::cell::RefCell;
 use std::path::{Path, PathBuf};
 use std::sync::atomic::AtomicBool;
 
 use clap::Args;
 
 use super::{Cli, CliError, iset, write_file};
-use crate::io::{
-    DecodedMosaic, Limits, PngCompression, encode_png_rgb8, encode_ppm_rgb8, encode_tiff_f32_rgb,
-    encode_tiff_rgb16, read_mosaic,
-};
+use crate::io::{Limits, LoadedMosaic, PngCompression, read_mosaic};
 use crate::l3::L3Table;
-use crate::l3::correct::IlluminantRegistry;
-use crate::l3::render::{
-    Mosaic, RenderStats, WhiteLevel, render_reference_under, white_y, xyz_to_srgb8, xyz_to_srgb16,
-};
+use crate::l3::correct::{IlluminantEntry, IlluminantRegistry};
+use crate::l3::render::WhiteLevel;
 use crate::l3::table::TableKind;
-use crate::render_pipeline::{
-    CorrectionMode, OutputFormat, PipelineError, RenderOptions, RenderPipeline, check_preview,
-    correction_for, kernels_for, parse_region,
+use crate::pipeline::{
+    CorrectionMode, DecodedFrame, Input, Levels, LightChoice, LightOrigin, OutputFormat,
+    PipelineError, RenderContext, RenderOptions, RenderOutcome, RenderRequest, Renderer, Scaling,
+    check_preview, decode, parse_region,
 };
 use crate::service::{ServiceConfig, ServiceError};
+use crate::spectral::IsetData;
 
 #[derive(Args, Debug)]
 pub struct RenderArgs {
@@ -70,142 +71,111 @@ pub struct RenderArgs {
     pub correction: CorrectionMode,
 }
 
-/// A mosaic in volts with what its file says about the capture.
-pub struct MosaicInput {
-    pub volts: Vec<f32>,
-    pub width: usize,
-    pub height: usize,
-    /// The CFA a DNG declares (sidecars are not checked).
-    pub dng_cfa: Option<String>,
-    /// The sidecar's `illuminant`.
-    pub illuminant: Option<String>,
-    /// A DNG's AsShotNeutral per channel.
-    pub neutral: Option<Vec<(String, f64)>>,
+/// A failure of `l3 render`: the pipeline's (shown with the input's path where it is about
+/// the input) or the command's own.
+enum Failure {
+    Pipeline(PipelineError),
+    Cli(CliError),
 }
 
-impl MosaicInput {
-    /// A DNG whose CFA is not `table`'s is refused, naming both.
-    pub fn check_dng_cfa(&self, table: &L3Table, path: &std::path::Path) -> Result<(), CliError> {
-        let table_cfa = table.meta.cfa.to_string();
-        match &self.dng_cfa {
-            Some(cfa) if !cfa.eq_ignore_ascii_case(&table_cfa) => Err(CliError::Usage(format!(
-                "{}: the DNG's CFA '{cfa}' does not match the table's CFA '{table_cfa}'",
-                path.display()
-            ))),
-            _ => Ok(()),
-        }
-    }
-
-    /// The light to render this frame under, and where it came from: `named` (the
-    /// `--illuminant` flag), else the file's metadata, else an estimate from the pixels
-    /// ([`L3Table::frame_illuminant`]).
-    pub fn light(
-        &self,
-        table: &L3Table,
-        named: Option<&str>,
-        iset: Option<&crate::spectral::IsetData>,
-    ) -> Result<(String, &'static str), CliError> {
-        if let Some(s) = named {
-            return Ok((s.to_string(), "--illuminant"));
-        }
-        let metadata = crate::l3::correct::FrameMetadata {
-            illuminant: self.illuminant.as_deref(),
-            neutral: self.neutral.as_deref(),
-        };
-        let (spec, source) = table.frame_illuminant(
-            metadata,
-            &crate::l3::render::Mosaic::Volts(&self.volts),
-            self.width,
-            self.height,
-            iset,
-        )?;
-        Ok((spec, source.describe()))
+impl From<PipelineError> for Failure {
+    fn from(e: PipelineError) -> Self {
+        Failure::Pipeline(e)
     }
 }
 
-/// The input mosaic in volts: integer frames are scaled by their sidecar's (or DNG's)
-/// black/white levels (default 0/65535) to the table's swing; float frames are taken as
-/// volts. With what the file says about the capture.
-pub fn load_mosaic(path: &Path, swing: f64) -> Result<MosaicInput, CliError> {
-    let loaded = read_mosaic(path, &Limits::default())?;
-    let neutral = loaded.dng.as_ref().and_then(|d| d.neutral());
-    let dng_cfa = match (&loaded.dng, &loaded.meta) {
-        (Some(_), Some(m)) => Some(m.cfa.clone()),
-        _ => None,
-    };
-    let illuminant = match &loaded.dng {
-        None => loaded.meta.as_ref().and_then(|m| m.illuminant.clone()),
-        Some(_) => None,
-    };
-    let (volts, width, height) = match loaded.mosaic {
-        DecodedMosaic::U16(frame) => {
-            let meta = match loaded.meta {
-                Some(m) => m,
-                None => crate::io::RawMeta::new(frame.width, frame.height, "", 0, 65535, swing),
-            };
-            let mut m = meta;
-            m.voltage_swing = swing;
-            (frame.to_volts(&m)?, frame.width, frame.height)
-        }
-        DecodedMosaic::F32 {
-            width,
-            height,
-            data,
-        } => (data, width, height),
-    };
-    Ok(MosaicInput {
-        volts,
-        width,
-        height,
-        dng_cfa,
-        illuminant,
-        neutral,
-    })
+/// The CLI's error for a pipeline error about the input file `path`.
+pub(crate) fn input_error(e: PipelineError, path: &Path) -> CliError {
+    match e {
+        PipelineError::CfaMismatch { .. } => CliError::Usage(format!("{}: {e}", path.display())),
+        e => e.into(),
+    }
 }
 
-pub fn run(cli: &Cli, a: &RenderArgs) -> Result<(), CliError> {
-    let iset = iset(&cli.iset_dir)?;
-    let (table_path, table) = table_of(a)?;
-    let white: WhiteLevel = a.white_level.parse()?;
-    let input = load_mosaic(&a.input, table.meta.voltage_swing)?;
-    input.check_dng_cfa(&table, &a.input)?;
-    let (spec, source) = input.light(&table, a.illuminant.as_deref(), iset.as_ref())?;
-    let (volts, w, h) = (input.volts, input.width, input.height);
-    let mut registry = IlluminantRegistry::with_defaults(table.meta.grid, iset.as_ref())?;
-    let entry = correction_for(
-        &table,
-        &registry.resolve(&spec, iset.as_ref())?,
-        a.correction,
-        iset.as_ref(),
-    )?;
-    let illuminant = format!("{} (from {source})", entry.name);
-    if table.meta.kind == TableKind::CrossIlluminant && !table.trained_under(&entry.name) {
-        eprintln!(
-            "warning: cross-illuminant table trained for {} used for {}",
-            table.meta.train_illuminants.join("+"),
-            entry.name
-        );
+/// `l3 render`'s side of a render: its table, lights from a registry of the built-in
+/// illuminants (which takes files and ISET lights too), renderers prepared afresh.
+struct CliRender<'a> {
+    table: &'a L3Table,
+    iset: Option<&'a IsetData>,
+    registry: RefCell<IlluminantRegistry>,
+}
+
+impl RenderContext for CliRender<'_> {
+    type Error = Failure;
+
+    fn table(&self) -> &L3Table {
+        self.table
     }
-    let ext = a
-        .out
-        .extension()
-        .and_then(|e| e.to_str())
-        .unwrap_or("")
-        .to_ascii_lowercase();
-    let format = match ext.as_str() {
-        "png" => OutputFormat::Png,
-        "ppm" => OutputFormat::Ppm,
-        "tif" | "tiff" => match a.tiff.as_str() {
-            "xyz" => OutputFormat::TiffXyz,
-            "srgb16" => OutputFormat::TiffSrgb16,
-            other => {
-                return Err(CliError::Usage(format!(
-                    "--tiff '{other}': expected xyz or srgb16"
-                )));
-            }
-        },
-        "raw" | "bin" | "f32" => OutputFormat::F32,
-        _ => {
+
+    fn iset(&self) -> Option<&IsetData> {
+        self.iset
+    }
+
+    /// The light `spec` names; a cross-illuminant table not trained under it is warned of.
+    fn light(&self, spec: &str) -> Result<IlluminantEntry, Failure> {
+        let entry = self
+            .registry
+            .borrow_mut()
+            .resolve(spec, self.iset)
+            .map_err(|e| Failure::Cli(e.into()))?;
+        let table = self.table;
+        if table.meta.kind == TableKind::CrossIlluminant && !table.trained_under(&entry.name) {
+            eprintln!(
+                "warning: cross-illuminant table trained for {} used for {}",
+                table.meta.train_illuminants.join("+"),
+                entry.name
+            );
+        }
+        Ok(entry)
+    }
+}
+
+/// Where a light came from, as `l3 render` and `l3 eval --frame` say it.
+pub(crate) fn light_source(origin: LightOrigin) -> &'static str {
+    match origin {
+        LightOrigin::Named => "--illuminant",
+        LightOrigin::Frame(source) => source.describe(),
+    }
+}
+
+/// The mosaic file `path` decoded for `table` (in volts, a DNG's CFA checked), with the light
+/// to render it under: `named`, else the file's metadata, else an estimate from its pixels.
+pub(crate) fn frame_and_light(
+    path: &Path,
+    table: &L3Table,
+    named: Option<&str>,
+    iset: Option<&IsetData>,
+) -> Result<(DecodedFrame, String, &'static str), CliError> {
+    let limits = Limits::default();
+    let input = Input::Decoded(Box::new(read_mosaic(path, &limits)?));
+    let frame = decode(input, Levels::default(), table, Scaling::Upfront, &limits)
+        .map_err(|e| input_error(e, path))?;
+    let (spec, origin) = match named {
+        Some(s) => (s.to_string(), LightOrigin::Named),
+        None => {
+            let (spec, source) = frame.light(table, iset)?;
+            (spec, LightOrigin::Frame(source))
+        }
+    };
+    Ok((frame, spec, light_source(origin)))
+}
+
+/// The render `a` asks for of `loaded`: the output format by the file's extension (and
+/// `--tiff`), white, region, preview, PNG compression, renderer, light and correction.
+fn render_request(
+    a: &RenderArgs,
+    white: WhiteLevel,
+    loaded: LoadedMosaic,
+) -> Result<RenderRequest, CliError> {
+    let ext = a.out.extension().and_then(|e| e.to_str()).unwrap_or("");
+    let format = match OutputFormat::from_extension(ext) {
+        Some(OutputFormat::Tiff(_)) => OutputFormat::Tiff(
+            a.tiff
+                .parse()
+                .map_err(|e| CliError::Usage(format!("--tiff {e}")))?,
+        ),
+        Some(format) => format,
+        None => {
             return Err(CliError::Usage(format!(
                 "--out {}: use .png, .ppm, .tiff or .raw",
                 a.out.display()
@@ -213,7 +183,7 @@ pub fn run(cli: &Cli, a: &RenderArgs) -> Result<(), CliError> {
         }
     };
     let usage = |e: PipelineError| CliError::Usage(e.to_string());
-    let opts = RenderOptions {
+    let options = RenderOptions {
         white,
         region: a
             .region
@@ -224,47 +194,56 @@ pub fn run(cli: &Cli, a: &RenderArgs) -> Result<(), CliError> {
         preview: check_preview(a.preview).map_err(usage)?,
         png: a.png_compression,
     };
-    let started = std::time::Instant::now();
-    let frame = Mosaic::Volts(&volts);
-    let (bytes, ow, oh, stats) = match a.renderer.as_str() {
-        "fast" => {
-            let pipeline = RenderPipeline::new(&table, &entry)?;
-            let r = pipeline.render(frame, w, h, format, &opts, &AtomicBool::new(false))?;
-            (r.output.into_vec(), r.width, r.height, r.stats)
-        }
-        "reference" => {
-            if opts.region.is_some() || opts.preview != 1 {
-                return Err(CliError::Usage(
-                    "--region and --preview need the fast renderer".into(),
-                ));
-            }
-            let (xyz, stats) = render_reference_under(
-                &table,
-                &kernels_for(&table, &entry)?,
-                entry.neutral.as_deref(),
-                &volts,
-                w,
-                h,
-            )?;
-            let wy = || white_y(&xyz, w, h, white);
-            let bytes = match format {
-                OutputFormat::Png => encode_png_rgb8(w, h, &xyz_to_srgb8(&xyz, wy()), opts.png)?,
-                OutputFormat::Ppm => encode_ppm_rgb8(w, h, &xyz_to_srgb8(&xyz, wy()))?,
-                OutputFormat::TiffXyz => encode_tiff_f32_rgb(w, h, &xyz)?,
-                OutputFormat::TiffSrgb16 => encode_tiff_rgb16(w, h, &xyz_to_srgb16(&xyz, wy()))?,
-                OutputFormat::F32 => xyz.iter().flat_map(|v| v.to_le_bytes()).collect(),
-            };
-            (bytes, w, h, stats)
-        }
+    let renderer = match a.renderer.as_str() {
+        "fast" => Renderer::Fast,
+        "reference" => Renderer::Reference,
         other => {
             return Err(CliError::Usage(format!(
                 "--renderer '{other}': expected fast or reference"
             )));
         }
     };
-    let ms = started.elapsed().as_secs_f64() * 1e3;
-    write_file(&a.out, &bytes)?;
-    report(a, &table_path, &illuminant, ow, oh, ms, &stats);
+    Ok(RenderRequest {
+        input: Input::Decoded(Box::new(loaded)),
+        levels: Levels::default(),
+        cfa: None,
+        light: a
+            .illuminant
+            .clone()
+            .map_or(LightChoice::FromFrame, LightChoice::Named),
+        correction: a.correction,
+        options,
+        format,
+        renderer,
+        // the light estimate reads volts, as it always has here
+        scaling: Scaling::Upfront,
+        limits: Limits::default(),
+    })
+}
+
+pub fn run(cli: &Cli, a: &RenderArgs) -> Result<(), CliError> {
+    let iset = iset(&cli.iset_dir)?;
+    let (table_path, table) = table_of(a)?;
+    let white: WhiteLevel = a.white_level.parse()?;
+    let loaded = read_mosaic(&a.input, &Limits::default())?;
+    let request = render_request(a, white, loaded)?;
+    let ctx = CliRender {
+        table: &table,
+        iset: iset.as_ref(),
+        registry: RefCell::new(IlluminantRegistry::with_defaults(
+            table.meta.grid,
+            iset.as_ref(),
+        )?),
+    };
+    let out = request
+        .run(&ctx, &AtomicBool::new(false))
+        .map_err(|f| match f {
+            Failure::Pipeline(e) => input_error(e, &a.input),
+            Failure::Cli(e) => e,
+        })?;
+    let summary = summary(a, &table_path, &out);
+    write_file(&a.out, &out.rendered.output.into_vec())?;
+    println!("{summary}");
     Ok(())
 }
 
@@ -299,23 +278,22 @@ fn table_of(a: &RenderArgs) -> Result<(PathBuf, L3Table), CliError> {
     Ok((served.path, served.table))
 }
 
-fn report(
-    a: &RenderArgs,
-    table: &Path,
-    illuminant: &str,
-    w: usize,
-    h: usize,
-    ms: f64,
-    stats: &RenderStats,
-) {
-    println!(
-        "rendered {w}×{h} with {} under {illuminant} ({} renderer) in {ms:.1} ms ({:.1} Mpix/s): {} saturated, {} texture pixels, {} classified by the reference code; wrote {}",
+/// What `l3 render` says of a render: sizes, table, light, time (kernels, render and
+/// encoding), class counts, the file written.
+fn summary(a: &RenderArgs, table: &Path, out: &RenderOutcome) -> String {
+    let r = &out.rendered;
+    let (w, h) = (r.width, r.height);
+    let ms = out.kernels_ms + r.render_ms + r.encode_ms;
+    format!(
+        "rendered {w}×{h} with {} under {} (from {}) ({} renderer) in {ms:.1} ms ({:.1} Mpix/s): {} saturated, {} texture pixels, {} classified by the reference code; wrote {}",
         table.display(),
+        out.light,
+        light_source(out.light_origin),
         a.renderer,
         (w * h) as f64 / ms / 1e3,
-        stats.saturated,
-        stats.texture,
-        stats.exact_path,
+        r.stats.saturated,
+        r.stats.texture,
+        r.stats.exact_path,
         a.out.display()
-    );
+    )
 }

@@ -291,7 +291,7 @@ pub fn render_method(
 ) -> Result<Vec<f32>, EvalError> {
     Ok(match method {
         Method::Table(t) => {
-            crate::render_pipeline::RenderPipeline::new(t, correction)?
+            crate::pipeline::RenderPipeline::new(t, correction)?
                 .renderer()
                 .render_xyz(Mosaic::Volts(volts), width, height, None)?
                 .0

@@ -8,7 +8,7 @@ use serde::Deserialize;
 
 use super::ServiceError;
 use crate::io::PngCompression;
-use crate::render_pipeline::{CorrectionMode, RenderOptions};
+use crate::pipeline::{CorrectionMode, RenderOptions};
 
 /// The embedded defaults (the committed `config/default.toml`).
 pub const DEFAULT_CONFIG_TOML: &str = include_str!("../../config/default.toml");

@@ -211,14 +211,48 @@ impl From<crate::io::IoError> for ServiceError {
     }
 }
 
-impl From<crate::render_pipeline::PipelineError> for ServiceError {
-    fn from(e: crate::render_pipeline::PipelineError) -> Self {
-        use crate::render_pipeline::PipelineError;
+impl From<crate::pipeline::PipelineError> for ServiceError {
+    /// A render request's error, by kind: what the query or the body got wrong is a 4xx
+    /// (`bad_request`, `invalid_image`, `cfa_mismatch`, `unprocessable` for a light the frame
+    /// does not give), an abandoned render a timeout, the table's or the server's faults a
+    /// 500 `internal`.
+    fn from(e: crate::pipeline::PipelineError) -> Self {
+        use crate::pipeline::{CfaOrigin, PipelineError::*, error::show};
         match e {
-            PipelineError::Options(m) => ServiceError::BadRequest(m),
-            PipelineError::Correction(e) => ServiceError::Internal(e.to_string()),
-            PipelineError::Encode(e) => e.into(),
-            PipelineError::Render(e) => ServiceError::from_l3(e, ServiceError::InvalidImage),
+            Options(m) => ServiceError::BadRequest(m),
+            WholeFrameOnly => ServiceError::BadRequest(e.to_string()),
+            CfaMismatch {
+                origin,
+                input,
+                table,
+            } => ServiceError::CfaMismatch {
+                source_desc: match origin {
+                    CfaOrigin::Declared => "the query's",
+                    CfaOrigin::Dng => "the DNG's",
+                },
+                input,
+                table,
+            },
+            Levels { black, white } => ServiceError::InvalidImage(format!(
+                "white_level {white} must exceed black_level {black}"
+            )),
+            SizeMismatch {
+                image: (w, h),
+                declared: (dw, dh),
+            } => ServiceError::InvalidImage(format!(
+                "the image is {w}×{h} but the query says {}×{}",
+                show(dw),
+                show(dh)
+            )),
+            Decode(e) | Encode(e) => e.into(),
+            FrameLight(e) => ServiceError::from_l3(e, |m| {
+                ServiceError::Unprocessable(format!(
+                    "the illuminant cannot be taken from the DNG's AsShotNeutral ({m}); name one with illuminant="
+                ))
+            }),
+            Correction(e) => ServiceError::Internal(e.to_string()),
+            Kernels(e) => ServiceError::Internal(e.to_string()),
+            Render(e) => ServiceError::from_l3(e, ServiceError::InvalidImage),
         }
     }
 }
@@ -424,7 +458,7 @@ mod tests {
     fn render_errors_map_by_kind() {
         use crate::l3::render::RenderError;
         use crate::l3::table::TableError;
-        use crate::render_pipeline::PipelineError;
+        use crate::pipeline::PipelineError;
         let code = |e: RenderError| ServiceError::from(PipelineError::Render(e));
         let e = code(RenderError::InvalidInput(
             "input value at row 0 is not finite".into(),

@@ -33,13 +33,13 @@ pub use admission::Admission;
 pub use config::{DEFAULT_CONFIG_TOML, DataConfig, ServerConfig, ServiceConfig, TrainingConfig};
 pub use error::ServiceError;
 // what the fuzz bodies (`crate::fuzzing`, test support only) run as the service does
+pub use accept::negotiate;
 #[cfg(feature = "test-support")]
 pub(crate) use illuminants::{IlluminantDefinition, apply as apply_illuminant};
 #[cfg(feature = "test-support")]
 pub(crate) use jobs::parse_job_request;
 #[cfg(feature = "test-support")]
 pub(crate) use render::RenderQuery;
-pub use render::{OutputFormat, negotiate};
 pub use routes::{OPENAPI_YAML, ROUTES};
 pub use state::{ActiveTable, AppState, Inner, sha256_hex};
 pub use store::{JobStatus, Store};

@@ -1,6 +1,7 @@
 //! `POST /v1/render`: a raw mosaic in, an sRGB PNG, a TIFF or f32 XYZ out (by `Accept`).
-//! Decoding, rendering and encoding run on rayon; the answer carries timings and class
-//! statistics in headers. The result equals `l3 render` on the same input bit for bit.
+//! The handler parses the request into the core's render request ([`crate::pipeline`]), which
+//! decodes, renders and encodes on rayon; the answer carries timings and class statistics in
+//! headers. The result equals `l3 render` on the same input bit for bit.
 //!
 //! The illuminant comes from the query; without one, from a DNG's AsShotNeutral (matched to
 //! a colour temperature through the table's sensor), else estimated from the frame's
@@ -23,16 +24,19 @@ use serde::Deserialize;
 use tokio::sync::OwnedSemaphorePermit;
 
 use super::ServiceError;
-use super::state::AppState;
-use crate::io::{
-    DecodedMosaic, Limits, UnknownPngCompression, decode_mosaic_with_meta, decode_raw_u16_le,
+use super::accept::negotiate;
+use super::config::ServerConfig;
+use super::state::{ActiveTable, AppState};
+use crate::io::{Limits, UnknownPngCompression};
+use crate::l3::L3Table;
+use crate::l3::correct::IlluminantEntry;
+use crate::l3::render::WhiteLevel;
+use crate::pipeline::{
+    CorrectionMode, Encoded, Input, KernelChoice, Levels, LightChoice, LightOrigin, OutputFormat,
+    PipelineError, RenderContext, RenderOptions, RenderOutcome, RenderPipeline, RenderRequest,
+    Renderer, Scaling, check_preview, parse_region,
 };
-use crate::l3::correct::FrameMetadata;
-use crate::l3::render::{Mosaic, WhiteLevel};
-use crate::render_pipeline::{
-    CorrectionMode, Encoded, OutputFormat as PipelineFormat, PipelineError, RenderOptions,
-    check_preview, parse_region,
-};
+use crate::spectral::IsetData;
 
 /// Query parameters of a render.
 #[derive(Debug, Default, Deserialize)]
@@ -60,46 +64,6 @@ pub struct RenderQuery {
     pub png_compression: Option<String>,
     /// `camera` or `colorimetric` (default: the config's `correction`).
     pub correction: Option<String>,
-}
-
-/// Output formats a client can ask for.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub enum OutputFormat {
-    Png,
-    /// Binary PPM: 8-bit sRGB, uncompressed (encoding is a header and a copy).
-    Ppm,
-    Tiff,
-    F32,
-}
-
-impl OutputFormat {
-    fn content_type(self) -> &'static str {
-        match self {
-            OutputFormat::Png => "image/png",
-            OutputFormat::Ppm => "image/x-portable-pixmap",
-            OutputFormat::Tiff => "image/tiff",
-            OutputFormat::F32 => "application/octet-stream",
-        }
-    }
-}
-
-/// Chooses the output from an `Accept` header (q-values honoured; none or `*/*` → PNG).
-pub fn negotiate(accept: Option<&str>) -> Result<OutputFormat, ServiceError> {
-    let Some(accept) = accept.map(str::trim).filter(|a| !a.is_empty()) else {
-        return Ok(OutputFormat::Png);
-    };
-    super::accept::preferred(accept, |media| match media {
-        "image/png" | "image/*" | "*/*" => Some(OutputFormat::Png),
-        "image/x-portable-pixmap" => Some(OutputFormat::Ppm),
-        "image/tiff" => Some(OutputFormat::Tiff),
-        "application/octet-stream" => Some(OutputFormat::F32),
-        _ => None,
-    })
-    .ok_or_else(|| {
-        ServiceError::NotAcceptable(format!(
-            "Accept '{accept}' allows none of image/png, image/x-portable-pixmap, image/tiff, application/octet-stream"
-        ))
-    })
 }
 
 /// The request body, or a problem saying why it could not be read.
@@ -151,22 +115,6 @@ const IMAGE_TYPES: [&str; 8] = [
     "image/pgm",
     "image/x-pgm",
 ];
-
-/// A decoded mosaic as the renderer takes it.
-enum Input {
-    Dn(Vec<u16>),
-    Volts(Vec<f32>),
-}
-
-/// The answer of the CPU part of a render.
-struct Rendered {
-    illuminant: String,
-    illuminant_source: &'static str,
-    out: crate::render_pipeline::Rendered,
-    in_width: usize,
-    in_height: usize,
-    decode_ms: f64,
-}
 
 /// Sets its flag when dropped unless disarmed: a render whose request is dropped (timed
 /// out, or its client gone) tells its CPU work to stop.
@@ -244,6 +192,144 @@ pub async fn admit(State(state): State<AppState>, req: Request, next: Next) -> R
     resp
 }
 
+/// A render against the active table: lights from the service's registry (no files over
+/// HTTP), prepared renderers from its cache.
+struct ServiceRender {
+    state: AppState,
+    active: Arc<ActiveTable>,
+}
+
+impl RenderContext for ServiceRender {
+    type Error = ServiceError;
+
+    fn table(&self) -> &L3Table {
+        &self.active.table
+    }
+
+    fn iset(&self) -> Option<&IsetData> {
+        self.state.iset.as_ref()
+    }
+
+    fn light(&self, spec: &str) -> Result<IlluminantEntry, ServiceError> {
+        self.state.resolve_illuminant(spec)
+    }
+
+    fn renderer(&self, choice: &KernelChoice<'_>) -> Result<Arc<RenderPipeline>, ServiceError> {
+        self.state.renderer_for(&self.active, choice)
+    }
+}
+
+/// Whether a body of the request's Content-Type is a raw mosaic (else an image file).
+fn is_raw(headers: &HeaderMap) -> Result<bool, ServiceError> {
+    let ctype = content_type(headers).ok_or_else(|| {
+        ServiceError::UnsupportedMediaType(
+            "Content-Type is missing; send application/octet-stream (raw little-endian u16 with width and height) or image/png, image/tiff, image/x-adobe-dng, image/x-portable-graymap".into(),
+        )
+    })?;
+    match ctype.as_str() {
+        "application/octet-stream" => Ok(true),
+        t if IMAGE_TYPES.contains(&t) => Ok(false),
+        other => Err(ServiceError::UnsupportedMediaType(format!(
+            "Content-Type '{other}' is not a mosaic; send application/octet-stream (raw little-endian u16) or image/png, image/tiff, image/x-adobe-dng, image/x-portable-graymap"
+        ))),
+    }
+}
+
+/// The output the query asks for, checked in this order: `white`, `tiff` (over the
+/// negotiated `format`), `region`, `preview`, `png_compression`.
+fn output_of(
+    q: &RenderQuery,
+    format: OutputFormat,
+    server: &ServerConfig,
+) -> Result<(OutputFormat, RenderOptions), ServiceError> {
+    let white: WhiteLevel = match &q.white {
+        None => WhiteLevel::Auto,
+        Some(s) => s
+            .parse()
+            .map_err(|e: crate::l3::render::RenderError| ServiceError::BadRequest(e.to_string()))?,
+    };
+    let format = match q.tiff.as_deref() {
+        None => format,
+        Some(t) => format.with_tiff(
+            t.parse()
+                .map_err(|e| ServiceError::BadRequest(format!("tiff {e}")))?,
+        ),
+    };
+    let options = RenderOptions {
+        white,
+        region: q.region.as_deref().map(parse_region).transpose()?,
+        preview: check_preview(q.preview.unwrap_or(1))?,
+        png: match q.png_compression.as_deref() {
+            None => server.png_compression,
+            Some(s) => s
+                .parse()
+                .map_err(|e: UnknownPngCompression| ServiceError::BadRequest(e.to_string()))?,
+        },
+    };
+    Ok((format, options))
+}
+
+/// The render a request asks for, its parts checked in this order: the Content-Type, a
+/// body, the output ([`output_of`]), `correction`, the size of a raw body. `format` is the
+/// negotiated one.
+fn render_request(
+    q: RenderQuery,
+    headers: &HeaderMap,
+    body: Bytes,
+    format: OutputFormat,
+    server: &ServerConfig,
+) -> Result<RenderRequest, ServiceError> {
+    let raw = is_raw(headers)?;
+    if body.is_empty() {
+        return Err(ServiceError::InvalidImage(
+            "the request body is empty".into(),
+        ));
+    }
+    let (format, options) = output_of(&q, format, server)?;
+    let correction = match q.correction.as_deref() {
+        None => server.correction,
+        Some(s) => s.parse::<CorrectionMode>()?,
+    };
+    let input = match (raw, q.width, q.height) {
+        (true, Some(width), Some(height)) => Input::RawU16 {
+            bytes: body,
+            width,
+            height,
+        },
+        (true, ..) => {
+            return Err(ServiceError::BadRequest(
+                "a raw application/octet-stream body needs the width and height query parameters"
+                    .into(),
+            ));
+        }
+        (false, width, height) => Input::Image {
+            bytes: body,
+            width,
+            height,
+        },
+    };
+    Ok(RenderRequest {
+        input,
+        levels: Levels {
+            black: q.black_level,
+            white: q.white_level,
+        },
+        cfa: q.cfa,
+        light: q
+            .illuminant
+            .map_or(LightChoice::FromFrame, LightChoice::Named),
+        correction,
+        options,
+        format,
+        renderer: Renderer::Fast,
+        scaling: Scaling::InRenderer,
+        limits: Limits {
+            max_pixels: server.max_pixels,
+            ..Limits::default()
+        },
+    })
+}
+
 /// `POST /v1/render`
 pub async fn render(
     State(state): State<AppState>,
@@ -252,94 +338,21 @@ pub async fn render(
     query: Result<Query<RenderQuery>, QueryRejection>,
 ) -> Result<Response, ServiceError> {
     let Query(q) = query.map_err(|e| ServiceError::BadRequest(e.body_text()))?;
-    let body = admitted.body;
     let format = negotiate(headers.get(header::ACCEPT).and_then(|v| v.to_str().ok()))?;
-    let ctype = content_type(&headers).ok_or_else(|| {
-        ServiceError::UnsupportedMediaType(
-            "Content-Type is missing; send application/octet-stream (raw little-endian u16 with width and height) or image/png, image/tiff, image/x-adobe-dng, image/x-portable-graymap".into(),
-        )
-    })?;
-    let raw = match ctype.as_str() {
-        "application/octet-stream" => true,
-        t if IMAGE_TYPES.contains(&t) => false,
-        other => {
-            return Err(ServiceError::UnsupportedMediaType(format!(
-                "Content-Type '{other}' is not a mosaic; send application/octet-stream (raw little-endian u16) or image/png, image/tiff, image/x-adobe-dng, image/x-portable-graymap"
-            )));
-        }
-    };
-    if body.is_empty() {
-        return Err(ServiceError::InvalidImage(
-            "the request body is empty".into(),
-        ));
-    }
-    let white: WhiteLevel = match &q.white {
-        None => WhiteLevel::Auto,
-        Some(s) => s
-            .parse()
-            .map_err(|e: crate::l3::render::RenderError| ServiceError::BadRequest(e.to_string()))?,
-    };
-    let pipeline_format = match (format, q.tiff.as_deref()) {
-        (OutputFormat::Png, _) => PipelineFormat::Png,
-        (OutputFormat::Ppm, _) => PipelineFormat::Ppm,
-        (OutputFormat::F32, _) => PipelineFormat::F32,
-        (OutputFormat::Tiff, None | Some("xyz")) => PipelineFormat::TiffXyz,
-        (OutputFormat::Tiff, Some("srgb16")) => PipelineFormat::TiffSrgb16,
-        (OutputFormat::Tiff, Some(other)) => {
-            return Err(ServiceError::BadRequest(format!(
-                "tiff '{other}': expected xyz or srgb16"
-            )));
-        }
-    };
-    if let Some(t) = q.tiff.as_deref()
-        && !["xyz", "srgb16"].contains(&t)
-    {
-        return Err(ServiceError::BadRequest(format!(
-            "tiff '{t}': expected xyz or srgb16"
-        )));
-    }
-    let opts = RenderOptions {
-        white,
-        region: q.region.as_deref().map(parse_region).transpose()?,
-        preview: check_preview(q.preview.unwrap_or(1))?,
-        png: match q.png_compression.as_deref() {
-            None => state.config.server.png_compression,
-            Some(s) => s
-                .parse()
-                .map_err(|e: UnknownPngCompression| ServiceError::BadRequest(e.to_string()))?,
-        },
-    };
-    let correction = match q.correction.as_deref() {
-        None => state.config.server.correction,
-        Some(s) => s.parse::<CorrectionMode>()?,
-    };
-    if raw && (q.width.is_none() || q.height.is_none()) {
-        return Err(ServiceError::BadRequest(
-            "a raw application/octet-stream body needs the width and height query parameters"
-                .into(),
-        ));
-    }
+    let request = render_request(q, &headers, admitted.body, format, &state.config.server)?;
+    let (format, correction) = (request.format, request.correction);
     let active = state.active.load_full().ok_or_else(|| {
         ServiceError::NotReady(
             "no table is active yet (the default table may still be training; see /readyz)".into(),
         )
     })?;
-    let table_cfa = active.table.meta.cfa.to_string();
-    if let Some(cfa) = &q.cfa
-        && !cfa.trim().eq_ignore_ascii_case(&table_cfa)
-    {
-        return Err(ServiceError::CfaMismatch {
-            source_desc: "the query's",
-            input: cfa.clone(),
-            table: table_cfa,
-        });
-    }
-    // a named illuminant is checked before the body is decoded
-    let query_entry = q
-        .illuminant
-        .as_deref()
-        .map(|s| state.resolve_illuminant(s))
-        .transpose()?;
+    let table_id = active.id.clone();
+    let ctx = ServiceRender {
+        state: state.clone(),
+        active,
+    };
+    // the query's CFA and a named illuminant are checked before the body is decoded
+    let prepared = request.prepare(&ctx)?;
     let permit = admitted
         .slot
         .lock()
@@ -356,125 +369,24 @@ pub async fn render(
         .await
         .map_err(|_| ServiceError::Internal("the render gate is closed".into()))?;
     let queue_ms = admitted.queue_ms + queued.elapsed().as_secs_f64() * 1e3;
-    let limits = Limits {
-        max_pixels: state.config.server.max_pixels,
-        ..Limits::default()
-    };
-    let st = state.clone();
-    let table_id = active.id.clone();
     let cancel = Arc::new(AtomicBool::new(false));
     let mut cancel_on_drop = CancelOnDrop(cancel.clone(), false);
     #[cfg(feature = "fault-injection")]
     let inject_panic = super::fault_injection::render_panic_requested(&headers);
     let r = super::cpu::run(&state.pools.render, "the render", move || {
-        let run = || -> Result<Rendered, ServiceError> {
-            if cancel.load(Ordering::Relaxed) {
-                // abandoned while it waited for a thread
-                return Err(PipelineError::Render(crate::l3::render::RenderError::RenderCanceled).into());
-            }
+        let result = if cancel.load(Ordering::Relaxed) {
+            // abandoned while it waited for a thread
+            Err(PipelineError::Render(crate::l3::render::RenderError::RenderCanceled).into())
+        } else {
             #[cfg(feature = "fault-injection")]
             if inject_panic {
                 panic!("injected fault: {}", super::fault_injection::RENDER_PANIC);
             }
-            let t0 = Instant::now();
-            let mut black = q.black_level.unwrap_or(0);
-            let mut white_dn = q.white_level.unwrap_or(65535);
-            let bad_levels = |black: u16, white_dn: u16| {
-                ServiceError::InvalidImage(format!(
-                    "white_level {white_dn} must exceed black_level {black}"
-                ))
-            };
-            if white_dn <= black {
-                return Err(bad_levels(black, white_dn));
-            }
-            let mut neutral = None;
-            // integer input stays u16: the renderer converts it tile by tile
-            let (input, w, h) = if raw {
-                let (w, h) = (q.width.unwrap_or(0), q.height.unwrap_or(0));
-                let f = decode_raw_u16_le(&body, w, h, &limits)?;
-                (Input::Dn(f.data), f.width, f.height)
-            } else {
-                let loaded = decode_mosaic_with_meta(&body, &limits)?;
-                if let (Some(meta), Some(dng)) = (&loaded.meta, &loaded.dng) {
-                    if !meta.cfa.eq_ignore_ascii_case(&table_cfa) {
-                        return Err(ServiceError::CfaMismatch {
-                            source_desc: "the DNG's",
-                            input: meta.cfa.clone(),
-                            table: table_cfa.clone(),
-                        });
-                    }
-                    // the file's levels unless the query gives others
-                    black = q.black_level.unwrap_or(meta.black_level);
-                    white_dn = q.white_level.unwrap_or(meta.white_level);
-                    neutral = dng.neutral();
-                }
-                let m = loaded.mosaic;
-                let (mw, mh) = m.dims();
-                if q.width.is_some_and(|w| w != mw) || q.height.is_some_and(|h| h != mh) {
-                    return Err(ServiceError::InvalidImage(format!(
-                        "the image is {mw}×{mh} but the query says {}×{}",
-                        q.width.map_or("?".into(), |v| v.to_string()),
-                        q.height.map_or("?".into(), |v| v.to_string())
-                    )));
-                }
-                match m {
-                    DecodedMosaic::U16(f) => (Input::Dn(f.data), f.width, f.height),
-                    DecodedMosaic::F32 {
-                        width,
-                        height,
-                        data,
-                    } => (Input::Volts(data), width, height),
-                }
-            };
-            if white_dn <= black {
-                return Err(bad_levels(black, white_dn));
-            }
-            let mosaic = match &input {
-                Input::Dn(d) => Mosaic::Dn {
-                    data: d,
-                    black,
-                    white: white_dn,
-                },
-                Input::Volts(v) => Mosaic::Volts(v),
-            };
-            let (entry, source) = match query_entry {
-                Some(e) => (e, "query"),
-                None => {
-                    let metadata = FrameMetadata {
-                        illuminant: None,
-                        neutral: neutral.as_deref(),
-                    };
-                    let (spec, source) = active
-                        .table
-                        .frame_illuminant(metadata, &mosaic, w, h, st.iset.as_ref())
-                        .map_err(|e| {
-                            ServiceError::from_l3(e, |m| {
-                                ServiceError::Unprocessable(format!(
-                                    "the illuminant cannot be taken from the DNG's AsShotNeutral ({m}); name one with illuminant="
-                                ))
-                            })
-                        })?;
-                    (st.resolve_illuminant(&spec)?, source.name())
-                }
-            };
-            let decode_ms = t0.elapsed().as_secs_f64() * 1e3;
-            let pipeline = st.renderer_for(&active, &entry, correction)?;
-            let out = pipeline.render(mosaic, w, h, pipeline_format, &opts, &cancel)?;
-            Ok(Rendered {
-                illuminant: entry.name.clone(),
-                illuminant_source: source,
-                out,
-                in_width: w,
-                in_height: h,
-                decode_ms,
-            })
+            prepared.run(&ctx, &cancel)
         };
-        let result = run();
         if cancel.load(Ordering::Relaxed) {
-            st.metrics
-                .admission
-                .renders_canceled
-                .fetch_add(1, Ordering::Relaxed);
+            let canceled = &ctx.state.metrics.admission.renders_canceled;
+            canceled.fetch_add(1, Ordering::Relaxed);
         }
         // free the slots before answering, so a client's next request finds them free
         drop(gate);
@@ -483,15 +395,29 @@ pub async fn render(
     })
     .await;
     cancel_on_drop.1 = true;
-    let r = r??;
-    state.metrics.rendered((r.in_width * r.in_height) as u64);
-    let length = r.out.output.len();
-    let out = r.out;
-    let mut resp = into_body(out.output).into_response();
+    let out = r??;
+    state
+        .metrics
+        .rendered((out.input_width * out.input_height) as u64);
+    Ok(respond(out, format, table_id, correction, queue_ms))
+}
+
+/// The answer of a render: the output with its media type, and what the render reports in
+/// `x-l3-*` headers and `Server-Timing`.
+fn respond(
+    out: RenderOutcome,
+    format: OutputFormat,
+    table_id: String,
+    correction: CorrectionMode,
+    queue_ms: f64,
+) -> Response {
+    let r = out.rendered;
+    let length = r.output.len();
+    let mut resp = into_body(r.output).into_response();
     let h = resp.headers_mut();
     h.insert(
         header::CONTENT_TYPE,
-        HeaderValue::from_static(format.content_type()),
+        HeaderValue::from_static(format.media_type()),
     );
     h.insert(header::VARY, HeaderValue::from_static("Accept"));
     // (a PPM body is a stream of two parts: its length is still known)
@@ -501,53 +427,33 @@ pub async fn render(
             h.insert(HeaderName::from_static(name), v);
         }
     };
+    let source = match out.light_origin {
+        LightOrigin::Named => "query",
+        LightOrigin::Frame(source) => source.name(),
+    };
     put("x-l3-table", table_id);
-    put("x-l3-illuminant", r.illuminant.clone());
-    put("x-l3-illuminant-source", r.illuminant_source.to_string());
+    put("x-l3-illuminant", out.light);
+    put("x-l3-illuminant-source", source.to_string());
     put("x-l3-correction", correction.as_str().to_string());
-    put("x-l3-width", out.width.to_string());
-    put("x-l3-height", out.height.to_string());
-    put("x-l3-input-pixels", (r.in_width * r.in_height).to_string());
+    put("x-l3-width", r.width.to_string());
+    put("x-l3-height", r.height.to_string());
+    let input_pixels = out.input_width * out.input_height;
+    put("x-l3-input-pixels", input_pixels.to_string());
     put("x-l3-queue-ms", format!("{queue_ms:.3}"));
-    put("x-l3-decode-ms", format!("{:.3}", r.decode_ms));
-    put("x-l3-render-ms", format!("{:.3}", out.render_ms));
-    put("x-l3-encode-ms", format!("{:.3}", out.encode_ms));
-    put("x-l3-saturated-pixels", out.stats.saturated.to_string());
-    put("x-l3-texture-pixels", out.stats.texture.to_string());
-    put("x-l3-fallback-pixels", out.stats.fallback.to_string());
-    put("x-l3-clamped-pixels", out.stats.clamped.to_string());
-    put("x-l3-exact-path-pixels", out.stats.exact_path.to_string());
+    put("x-l3-decode-ms", format!("{:.3}", out.decode_ms));
+    put("x-l3-render-ms", format!("{:.3}", r.render_ms));
+    put("x-l3-encode-ms", format!("{:.3}", r.encode_ms));
+    put("x-l3-saturated-pixels", r.stats.saturated.to_string());
+    put("x-l3-texture-pixels", r.stats.texture.to_string());
+    put("x-l3-fallback-pixels", r.stats.fallback.to_string());
+    put("x-l3-clamped-pixels", r.stats.clamped.to_string());
+    put("x-l3-exact-path-pixels", r.stats.exact_path.to_string());
     put(
         "server-timing",
         format!(
             "queue;dur={queue_ms:.3}, decode;dur={:.3}, render;dur={:.3}, encode;dur={:.3}",
-            r.decode_ms, out.render_ms, out.encode_ms
+            out.decode_ms, r.render_ms, r.encode_ms
         ),
     );
-    Ok(resp)
-}
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-
-    #[test]
-    fn accept_negotiation() {
-        assert_eq!(negotiate(None).unwrap(), OutputFormat::Png);
-        assert_eq!(negotiate(Some("*/*")).unwrap(), OutputFormat::Png);
-        assert_eq!(negotiate(Some("image/tiff")).unwrap(), OutputFormat::Tiff);
-        assert_eq!(
-            negotiate(Some("image/x-portable-pixmap, image/png;q=0.9")).unwrap(),
-            OutputFormat::Ppm
-        );
-        assert_eq!(
-            negotiate(Some("image/png;q=0.5, application/octet-stream")).unwrap(),
-            OutputFormat::F32
-        );
-        assert_eq!(
-            negotiate(Some("text/html, image/tiff;q=0.1")).unwrap(),
-            OutputFormat::Tiff
-        );
-        assert_eq!(negotiate(Some("text/html")).unwrap_err().status(), 406);
-    }
+    resp
 }

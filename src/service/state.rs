@@ -17,7 +17,7 @@ use super::metrics::Metrics;
 use super::store::{IlluminantRow, Store};
 use crate::l3::L3Table;
 use crate::l3::correct::{IlluminantEntry, IlluminantRegistry};
-use crate::render_pipeline::{CorrectionMode, RenderPipeline, correction_for, uses_own_kernels};
+use crate::pipeline::{KernelChoice, KernelKey, PipelineError, RenderPipeline};
 use crate::spectral::IsetData;
 
 /// The table renders use, with its id. Renders hold an `Arc` of it, so an activation never
@@ -29,8 +29,9 @@ pub struct ActiveTable {
     pub table: L3Table,
 }
 
-/// Render pipelines (fused kernels) by (table id, lower-case illuminant name).
-pub type KernelCache = HashMap<(String, String, CorrectionMode), Arc<RenderPipeline>>;
+/// Prepared renderers by table id and [`KernelKey`] (made by the kernel selection itself, so
+/// the key names everything a renderer depends on besides its table).
+pub type KernelCache = HashMap<(String, KernelKey), Arc<RenderPipeline>>;
 
 /// Everything the handlers share (cheap to clone).
 #[derive(Clone)]
@@ -62,7 +63,7 @@ pub struct Inner {
     /// to swapping in the result, so that changes apply one after another.
     pub registry_writes: tokio::sync::Mutex<()>,
     pub active: ArcSwapOption<ActiveTable>,
-    /// Fused kernels per (table id, lower-case illuminant name).
+    /// Prepared renderers per (table id, kernel key).
     pub kernel_cache: Mutex<KernelCache>,
     /// Admission of renders: the body budget, the queue and the render slots.
     pub admission: super::admission::Admission,
@@ -119,27 +120,14 @@ impl Inner {
             .map_err(|e| unknown(e.to_string()))
     }
 
-    /// The render pipeline for `active` under `entry` (kernel selection:
-    /// [`crate::render_pipeline::kernels_for`]), cached per (table, illuminant).
+    /// The renderer for `active` under the kernel selection `choice`, cached per (table,
+    /// [`KernelKey`]).
     pub fn renderer_for(
         &self,
         active: &ActiveTable,
-        entry: &IlluminantEntry,
-        correction: CorrectionMode,
+        choice: &KernelChoice<'_>,
     ) -> Result<Arc<RenderPipeline>, ServiceError> {
-        let key = if uses_own_kernels(&active.table) {
-            (
-                active.id.clone(),
-                String::from("\0own"),
-                CorrectionMode::Colorimetric,
-            )
-        } else {
-            (
-                active.id.clone(),
-                entry.name.to_ascii_lowercase(),
-                correction,
-            )
-        };
+        let key = (active.id.clone(), choice.key().clone());
         if let Some(k) = self
             .kernel_cache
             .lock()
@@ -148,13 +136,12 @@ impl Inner {
         {
             return Ok(k.clone());
         }
-        let r = Arc::new(
-            RenderPipeline::new(
-                &active.table,
-                &correction_for(&active.table, entry, correction, self.iset.as_ref())?,
-            )
-            .map_err(|e| ServiceError::Internal(format!("table {}: {e}", active.id)))?,
-        );
+        let table_fault = |e| ServiceError::Internal(format!("table {}: {e}", active.id));
+        let kernels = choice.kernels(self.iset.as_ref()).map_err(|e| match e {
+            PipelineError::Kernels(e) => table_fault(e),
+            e => e.into(),
+        })?;
+        let r = Arc::new(RenderPipeline::prepare(&active.table, &kernels).map_err(table_fault)?);
         let mut cache = self.kernel_cache.lock().unwrap_or_else(|p| p.into_inner());
         if cache.len() >= KERNEL_CACHE_ENTRIES {
             cache.clear();
@@ -169,7 +156,7 @@ impl Inner {
         self.kernel_cache
             .lock()
             .unwrap_or_else(|p| p.into_inner())
-            .retain(|(_, ill, _), _| *ill != n);
+            .retain(|(_, key), _| key.light() != Some(n.as_str()));
     }
 }
 
