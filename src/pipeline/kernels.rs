@@ -170,8 +170,8 @@ pub fn kernels_for(table: &L3Table, entry: &IlluminantEntry) -> Result<Vec<f32>,
 }
 
 /// What a renderer prepared for a table depends on besides the table: where the kernels come
-/// from and, for fused kernels, the light by its lower-case name. Only [`KernelChoice::new`]
-/// makes one.
+/// from and, when it enters (fused kernels, or chroma classes balanced by its neutral), the
+/// light by its lower-case name. Only [`KernelChoice::new`] makes one.
 #[derive(Debug, Clone, PartialEq, Eq, Hash)]
 pub struct KernelKey {
     source: KernelSource,
@@ -210,7 +210,7 @@ pub struct KernelChoice<'a> {
 impl<'a> KernelChoice<'a> {
     pub fn new(table: &'a L3Table, entry: &'a IlluminantEntry, mode: CorrectionMode) -> Self {
         let source = KernelSource::of(table, mode);
-        let by_light = source != KernelSource::Own;
+        let by_light = source != KernelSource::Own || table.chroma_balances();
         Self {
             table,
             entry,
@@ -263,14 +263,16 @@ mod tests {
             .clone()
     }
 
-    /// The key names the light and the correction of fused kernels, and neither for a
-    /// cross-illuminant table whose classes do not balance by the light.
+    /// The key names the light and the correction of fused kernels; for a cross-illuminant
+    /// table, the light only when its chroma classes balance by it.
     #[test]
     fn the_key_follows_the_selection() {
         let si = tiny_table();
         assert!(!uses_own_kernels(si));
         let (d65, a) = (entry("D65"), entry("A"));
-        let key = |t, e, m| KernelChoice::new(t, e, m).key().clone();
+        fn key(t: &L3Table, e: &IlluminantEntry, m: CorrectionMode) -> KernelKey {
+            KernelChoice::new(t, e, m).key().clone()
+        }
         let k = key(si, &d65, CorrectionMode::Camera);
         assert_eq!(k.source(), KernelSource::Fused(CorrectionMode::Camera));
         assert_eq!(k.light(), Some("d65"));
@@ -283,5 +285,17 @@ mod tests {
         assert_eq!(own.source(), KernelSource::Own);
         assert_eq!(own.light(), None);
         assert_eq!(own, key(&ci, &a, CorrectionMode::Colorimetric));
+        // chroma classes balanced by the light: the renderer takes its neutral, so the key
+        // names the light
+        ci.meta.params.chroma = Some(crate::l3::ChromaClasses {
+            centroids: vec![vec![1.0; 4], vec![0.5; 4]],
+            white: Some(vec![1.0; 4]),
+        });
+        assert!(ci.chroma_balances());
+        let own = key(&ci, &d65, CorrectionMode::Camera);
+        assert_eq!(own.source(), KernelSource::Own);
+        assert_eq!(own.light(), Some("d65"));
+        assert_ne!(own, key(&ci, &a, CorrectionMode::Camera));
+        assert_eq!(own, key(&ci, &d65, CorrectionMode::Colorimetric));
     }
 }
