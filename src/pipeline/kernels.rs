@@ -287,7 +287,7 @@ mod tests {
         assert_eq!(own, key(&ci, &a, CorrectionMode::Colorimetric));
         // chroma classes balanced by the light: the renderer takes its neutral, so the key
         // names the light
-        ci.meta.params.chroma = Some(crate::l3::ChromaClasses {
+        ci.meta.params.chroma = Some(crate::l3::classify::ChromaClasses {
             centroids: vec![vec![1.0; 4], vec![0.5; 4]],
             white: Some(vec![1.0; 4]),
         });
