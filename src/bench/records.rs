@@ -116,7 +116,7 @@ pub struct BenchReport {
     pub pareto: Vec<ParetoFront>,
     pub total_seconds: f64,
     pub options: BenchOptions,
-    /// The skips of DESIGN.md §9 with and without, on the default table.
+    /// The skips of docs/design.md §9 with and without, on the default table.
     #[serde(default)]
     pub skips: Vec<SkipResult>,
     /// Encodings of the rendered frame.

@@ -115,7 +115,7 @@ fn skips_markdown(r: &BenchReport) -> String {
     let mut s = String::new();
     if !r.skips.is_empty() {
         s.push_str(
-            "\nSkips (DESIGN.md §9), default table, median ms with and without each skip, all threads:\n\n\
+            "\nSkips (docs/design.md §9), default table, median ms with and without each skip, all threads:\n\n\
              | skip | case | applies | with (ms) | without (ms) | speed-up | max output difference |\n\
              |---|---|---|---:|---:|---:|---|\n",
         );

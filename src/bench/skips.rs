@@ -1,4 +1,4 @@
-//! The skips of DESIGN.md §9, each timed with and without it on a frame where
+//! The skips of docs/design.md §9, each timed with and without it on a frame where
 //! it applies and on one where it does not, with the output difference.
 
 use rayon::prelude::*;

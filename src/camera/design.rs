@@ -292,7 +292,7 @@ fn band_average(grid: &WavelengthGrid, f: impl Fn(f64) -> f64) -> Spectrum {
     })
 }
 
-/// A complete sensor design (DESIGN.md §3). Units are in the field names.
+/// A complete sensor design (docs/design.md §3). Units are in the field names.
 /// Fields omitted from a TOML file take the paper's Figure 2 value
 /// ([`SensorDesign::paper_default`]), except that a file giving its own `cfa`
 /// must also give the matching `filters`.

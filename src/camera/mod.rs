@@ -1,4 +1,4 @@
-//! The camera simulator: scene → optics → sensor (DESIGN.md §3).
+//! The camera simulator: scene → optics → sensor (docs/design.md §3).
 //!
 //! - [`SensorDesign`]: every parameter as data (TOML in `config/sensors/`),
 //!   with parametric or CSV filters ([`FilterSpec`]).

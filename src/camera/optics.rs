@@ -29,7 +29,7 @@ const MARGIN_LAMBDA_N: f64 = 16.0;
 /// error below 1e-5).
 const OTF_LUT_LEN: usize = 4097;
 
-/// A diffraction-limited lens (DESIGN.md §3): f-number and focal length,
+/// A diffraction-limited lens (docs/design.md §3): f-number and focal length,
 /// and how finely the simulation samples its image.
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(default, deny_unknown_fields)]

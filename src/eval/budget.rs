@@ -1,4 +1,4 @@
-//! The error budget of a sensor on a chart (DESIGN.md §7): what T alone
+//! The error budget of a sensor on a chart (docs/design.md §7): what T alone
 //! costs, and the best any linear map from the sensor's channels can do.
 //! Noise-free and without optics: these are floors, not simulations.
 

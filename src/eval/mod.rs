@@ -1,5 +1,5 @@
 //! Evaluation: CIEDE2000 colour error of a rendered chart against the
-//! chart's ideal XYZ under D65 (DESIGN.md §7), as a stable JSON report.
+//! chart's ideal XYZ under D65 (docs/design.md §7), as a stable JSON report.
 
 mod budget;
 mod captured_floor;

@@ -1,6 +1,6 @@
 //! The L3 method: classify each sensor pixel by CFA position, response level, saturation
 //! case, local contrast and (optionally) chroma, and apply the class's learned affine kernel
-//! to its patch (DESIGN.md §2, §5).
+//! to its patch (docs/design.md §2, §5).
 //!
 //! The pipeline, by module:
 //! - [`params`]: what a table is made with ([`L3Params`]: patch size, levels, the ridge,

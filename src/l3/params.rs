@@ -17,7 +17,7 @@ pub enum ParamsError {
     Classify(#[from] ClassifyError),
 }
 
-/// ISET's tuned RGBW luminance levels for a 1.8 V swing (DESIGN.md §5), volts.
+/// ISET's tuned RGBW luminance levels for a 1.8 V swing (docs/design.md §5), volts.
 pub const DEFAULT_LEVELS_1V8: [f64; 20] = [
     0.001, 0.0016, 0.0026, 0.0041, 0.0065, 0.0104, 0.0166, 0.0266, 0.0424, 0.0678, 0.1082, 0.1729,
     0.2762, 0.4505, 0.6753, 0.9, 1.1248, 1.3495, 1.5743, 1.782,

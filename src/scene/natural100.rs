@@ -1,4 +1,4 @@
-//! The Natural-100 chart (DESIGN §7, the paper's §3.3): 100 natural
+//! The Natural-100 chart (docs/design.md §7, the paper's §3.3): 100 natural
 //! reflectances picked by clustering principal-component weights per
 //! category, plus a 10-step grey strip; and a chart of the 99 CES from
 //! crate data.

@@ -1,4 +1,4 @@
-//! The render service over HTTP (DESIGN.md §8): render, training jobs, tables, illuminants,
+//! The render service over HTTP (docs/design.md §8): render, training jobs, tables, illuminants,
 //! ΔE evaluations, health, metrics and the OpenAPI document. It depends on the numeric core;
 //! the core knows nothing of it. CPU work runs on rayon, never on the async runtime's threads.
 

@@ -12,7 +12,7 @@ pub struct WavelengthGrid {
 }
 
 impl Default for WavelengthGrid {
-    /// 400–700 nm at 10 nm: 31 bands (DESIGN.md §3).
+    /// 400–700 nm at 10 nm: 31 bands (docs/design.md §3).
     fn default() -> Self {
         Self {
             start_nm: 400.0,

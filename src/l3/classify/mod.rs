@@ -1,5 +1,5 @@
 //! Classification: where each channel sits in a pixel's patch and the statistics that put
-//! the pixel in a class ([`PatchGeometry`], DESIGN.md §5), and the chroma classes that split
+//! the pixel in a class ([`PatchGeometry`], docs/design.md §5), and the chroma classes that split
 //! every level by the ratios of the channel responses ([`ChromaClasses`]).
 
 pub mod chroma;

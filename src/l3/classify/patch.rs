@@ -1,4 +1,4 @@
-//! Patch geometry and per-pixel class statistics (DESIGN.md §5).
+//! Patch geometry and per-pixel class statistics (docs/design.md §5).
 
 use std::borrow::Cow;
 

@@ -1,7 +1,7 @@
 //! Illuminant correction: the 3×3 matrix T that maps XYZ under an
 //! acquisition illuminant to XYZ under D65, from first principles (least
 //! squares over surface reflectances, independent of the camera), and the
-//! registry of named corrections (DESIGN.md §6).
+//! registry of named corrections (docs/design.md §6).
 
 use std::collections::BTreeMap;
 

@@ -1,5 +1,5 @@
 //! Illuminant correction: what takes a same-illuminant table's output under the light a
-//! frame was taken under to XYZ under D65 (DESIGN.md §6).
+//! frame was taken under to XYZ under D65 (docs/design.md §6).
 //!
 //! - the paper's T, fitted on surface reflectances independently of the camera, and the
 //!   registry of named lights ([`IlluminantRegistry`], `correction.rs`);

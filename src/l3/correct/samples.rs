@@ -1,7 +1,7 @@
 //! The spectral data a table's colour maps and its camera-aware corrections are fitted on
 //! ([`ColourSamples`]): noise-free channel responses and target XYZ of the natural
-//! reflectances (`scene::natural_reflectances`) under the training illuminants (DESIGN.md
-//! §5, `src/l3/learn/colour_map.rs`), and the per-light corrections T a same-illuminant table
+//! reflectances (`scene::natural_reflectances`) under the training illuminants
+//! (docs/design.md §5, `src/l3/learn/colour_map.rs`), and the per-light corrections T a same-illuminant table
 //! is judged through. The same samples give the evaluation's matching linear map and the
 //! conventional baseline's colour matrix, so every comparison is fitted on one set.
 

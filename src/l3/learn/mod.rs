@@ -1,4 +1,4 @@
-//! Training an L3 table from the camera simulation (DESIGN.md §5).
+//! Training an L3 table from the camera simulation (docs/design.md §5).
 //!
 //! A [`TrainingRun`] (`run.rs`) is prepared from a [`TrainingSpec`] (`spec.rs`): the camera,
 //! the training scenes (`scenes.rs`) and lights, the L3 parameters and the per-level colour

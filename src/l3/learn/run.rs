@@ -1,6 +1,6 @@
 //! Training an L3 table from the camera simulation: the training scenes,
 //! the frames simulated from them, and the call into the learner
-//! (DESIGN.md §5). Shared by the CLI and the service's training jobs.
+//! (docs/design.md §5). Shared by the CLI and the service's training jobs.
 //!
 //! A [`TrainingRun`] trains in one call or in shards (batch ranges) whose
 //! partial sums can be computed on other machines and merged into the same

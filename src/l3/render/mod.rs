@@ -1,5 +1,5 @@
 //! Rendering a mosaic with a table: the reference renderer (`reference.rs`: simple,
-//! parallel over rows), the fast renderer ([`FastRenderer`], DESIGN.md §9: the same classes
+//! parallel over rows), the fast renderer ([`FastRenderer`], docs/design.md §9: the same classes
 //! and kernels, organised for speed) and the output encodings (`output.rs`).
 
 pub(super) mod error;

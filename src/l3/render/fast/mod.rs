@@ -1,4 +1,4 @@
-//! The fast renderer (DESIGN.md §9). Same classes and kernels as
+//! The fast renderer (docs/design.md §9). Same classes and kernels as
 //! [`render_reference`](super::render_reference), organised for speed:
 //!
 //! - the frame is cut into bands of rows (one rayon task each) and column tiles
