@@ -15,9 +15,8 @@ mod jobs;
 mod metrics;
 mod render;
 mod routes;
-mod shard_jobs;
 mod state;
-mod store;
+pub mod store;
 mod sync;
 mod tables;
 
@@ -32,7 +31,7 @@ use tokio::sync::{Notify, Semaphore};
 pub use admission::Admission;
 pub use config::{DEFAULT_CONFIG_TOML, DataConfig, ServerConfig, ServiceConfig, TrainingConfig};
 pub use error::ServiceError;
-// what the fuzz bodies (`crate::fuzzing`, test support only) run as the service does
+// what the fuzz bodies (src/fuzzing.rs, test support only) run as the service does
 #[cfg(feature = "test-support")]
 pub(crate) use illuminants::{IlluminantDefinition, apply as apply_illuminant};
 #[cfg(feature = "test-support")]
