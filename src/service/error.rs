@@ -3,6 +3,8 @@
 use axum::http::{HeaderValue, StatusCode, header};
 use axum::response::{IntoResponse, Response};
 
+use super::store::StoreError;
+
 /// Everything a request (or the service's start) can fail with. Each variant has a stable
 /// machine-readable `code` and an HTTP status; the message says exactly what was wrong.
 #[derive(Debug, thiserror::Error)]
@@ -177,15 +179,20 @@ impl IntoResponse for ServiceError {
     }
 }
 
-impl From<sqlx::Error> for ServiceError {
-    fn from(e: sqlx::Error) -> Self {
-        ServiceError::Database(e.to_string())
-    }
-}
-
-impl From<sqlx::migrate::MigrateError> for ServiceError {
-    fn from(e: sqlx::migrate::MigrateError) -> Self {
-        ServiceError::Database(format!("migration failed: {e}"))
+/// The one mapping of the store's errors to HTTP: a row not found is 404, a taken idempotency
+/// key 409, a value none of a column's values (given by a request) 400; the database failing,
+/// a stored row the service cannot read, or its URL 500.
+impl From<StoreError> for ServiceError {
+    fn from(e: StoreError) -> Self {
+        match e {
+            StoreError::NotFound { .. } => ServiceError::NotFound(e.to_string()),
+            StoreError::KeyConflict { .. } => ServiceError::Conflict(e.to_string()),
+            StoreError::UnknownValue { .. } => ServiceError::BadRequest(e.to_string()),
+            StoreError::CorruptRow { .. } => ServiceError::Database(e.to_string()),
+            StoreError::Url(m) => ServiceError::Config(m),
+            StoreError::Migration(e) => ServiceError::Database(format!("migration failed: {e}")),
+            StoreError::Database(e) => ServiceError::Database(e.to_string()),
+        }
     }
 }
 

@@ -10,15 +10,18 @@ use axum::response::{IntoResponse, Response};
 use serde::Deserialize;
 use serde_json::{Value, json};
 
-use super::ServiceError;
-use super::state::{AppState, new_id, now_ms};
-use super::store::EvaluationRow;
-use crate::camera::{Camera, SensorDesign};
-use crate::eval::{ChartSetup, LightLevel, Method, evaluate_method, fit_baseline_matrix};
-use crate::spectral::WavelengthGrid;
+use std::sync::Arc;
 
-/// Charts an evaluation can use.
-pub const CHARTS: [&str; 1] = ["natural100"];
+use super::ServiceError;
+use super::state::{ActiveTable, AppState, new_id, now_ms};
+use super::store::{EvaluationChart, EvaluationMethod, EvaluationRow};
+use crate::camera::{Camera, SensorDesign};
+use crate::eval::{
+    ChartSetup, DeltaEReport, EvalError, LightLevel, Method, evaluate_method, fit_baseline_matrix,
+};
+use crate::spectral::{IsetData, WavelengthGrid};
+
+use crate::l3::correct::IlluminantEntry;
 
 /// The body of `POST /v1/evaluations`.
 #[derive(Debug, Clone, Deserialize)]
@@ -103,8 +106,8 @@ fn evaluation_json(row: &EvaluationRow) -> Result<Value, ServiceError> {
     Ok(json!({
         "id": id,
         "table_id": row.table_id,
-        "method": row.method,
-        "chart": row.chart,
+        "method": row.method.as_str(),
+        "chart": row.chart.as_str(),
         "acquisition_illuminant": row.acquisition_illuminant,
         "mean_delta_e": row.mean_delta_e,
         "created_at_ms": row.created_at,
@@ -114,12 +117,140 @@ fn evaluation_json(row: &EvaluationRow) -> Result<Value, ServiceError> {
     }))
 }
 
-async fn evaluation_row(state: &AppState, id: &str) -> Result<EvaluationRow, ServiceError> {
-    state
-        .store
-        .evaluation(id)
-        .await?
-        .ok_or_else(|| ServiceError::NotFound(format!("no evaluation with id '{id}'")))
+/// The request of a `POST /v1/evaluations` body: a JSON object of [`EvaluationRequest`]'s
+/// fields (whole floats read as integers).
+fn parse_request(body: &[u8]) -> Result<EvaluationRequest, ServiceError> {
+    let mut value: Value = serde_json::from_slice(body)
+        .map_err(|e| ServiceError::InvalidJson(format!("evaluation request: {e}")))?;
+    super::jobs::integral_floats_to_ints(&mut value);
+    if !value.is_object() {
+        // (serde would read a struct from an array too, field by field)
+        return Err(ServiceError::InvalidJson(
+            "evaluation request: the body must be a JSON object".into(),
+        ));
+    }
+    serde_json::from_value(value)
+        .map_err(|e| ServiceError::InvalidJson(format!("evaluation request: {e}")))
+}
+
+/// What a valid request evaluates: the chart, its set-up, the method.
+struct Checked {
+    chart: EvaluationChart,
+    setup: ChartSetup,
+    method: EvaluationMethod,
+}
+
+impl EvaluationRequest {
+    /// Checks the request's values (a 400 naming the first wrong one).
+    fn check(&self) -> Result<Checked, ServiceError> {
+        // an unknown chart is a 400 naming the charts
+        let chart = EvaluationChart::parse(&self.chart)?;
+        if !(8..=64).contains(&self.patch_px) {
+            return Err(ServiceError::BadRequest(format!(
+                "patch_px {}: 8 to 64",
+                self.patch_px
+            )));
+        }
+        let setup = self.chart_setup()?;
+        let method = EvaluationMethod::parse(&self.method).map_err(|_| {
+            ServiceError::BadRequest(format!("method '{}': l3 or baseline", self.method))
+        })?;
+        let lower = self.acquisition_illuminant.to_ascii_lowercase();
+        if lower.starts_with("csv:") || lower.starts_with("iset:") || lower.starts_with("xy:") {
+            return Err(ServiceError::UnknownIlluminant(format!(
+                "acquisition illuminant '{}': use a named illuminant or cct:K (its spectrum is needed to simulate the chart)",
+                self.acquisition_illuminant
+            )));
+        }
+        Ok(Checked {
+            chart,
+            setup,
+            method,
+        })
+    }
+}
+
+/// The table an `l3` evaluation uses: `table_id`'s (loaded through activation's checks
+/// without activating it, unless it is the active one), else the active table.
+async fn table_to_evaluate(
+    state: &AppState,
+    table_id: Option<&String>,
+) -> Result<Arc<ActiveTable>, ServiceError> {
+    let Some(id) = table_id else {
+        return state.active.load_full().ok_or_else(|| {
+            ServiceError::NotReady("no table is active yet and no table_id was given".into())
+        });
+    };
+    if let Some(active) = state.active.load_full().filter(|a| &a.id == id) {
+        return Ok(active);
+    }
+    let (_, table, _, _) = super::tables::load_verified(state, id).await?;
+    Ok(Arc::new(ActiveTable {
+        id: id.clone(),
+        sha256: String::new(),
+        table,
+    }))
+}
+
+/// Simulates the chart under `acquisition` through the camera of `table`'s sensor (the
+/// paper's default sensor for the baseline, `table` `None`), renders it with the table (or the
+/// baseline matrix fitted under D65), corrects with `correction` and scores it (blocking).
+fn evaluate(
+    table: Option<&ActiveTable>,
+    acquisition: &str,
+    correction: &IlluminantEntry,
+    iset: Option<&IsetData>,
+    setup: &ChartSetup,
+) -> Result<DeltaEReport, ServiceError> {
+    let grid = WavelengthGrid::default();
+    let design = match table {
+        Some(t) => t
+            .table
+            .sensor_design()
+            .map_err(|e| ServiceError::from_l3(e, ServiceError::Unprocessable))?,
+        None => SensorDesign::paper_default(),
+    };
+    let camera = Camera::new(&design, grid, iset)
+        .map_err(|e| ServiceError::from_camera(e, ServiceError::Unprocessable))?;
+    let eval_err = |e: EvalError| ServiceError::from_eval(e, ServiceError::Unprocessable);
+    let mut report = match table {
+        Some(t) => {
+            let name = format!(
+                "L3 {} ({})",
+                t.table.meta.kind,
+                t.table.meta.train_illuminants.join("+")
+            );
+            let method = Method::Table(&t.table);
+            evaluate_method(
+                &camera,
+                &method,
+                &name,
+                acquisition,
+                correction,
+                iset,
+                setup,
+            )
+            .map_err(eval_err)?
+        }
+        None => {
+            let m = fit_baseline_matrix(&camera, &["D65".to_string()], iset).map_err(eval_err)?;
+            let method = Method::Baseline(&m);
+            evaluate_method(
+                &camera,
+                &method,
+                "Baseline+T",
+                acquisition,
+                correction,
+                iset,
+                setup,
+            )
+            .map_err(eval_err)?
+        }
+    };
+    if let Value::Object(m) = &mut report.context {
+        m.insert("table_id".into(), json!(table.map(|t| t.id.clone())));
+    }
+    Ok(report)
 }
 
 /// `POST /v1/evaluations`: runs the evaluation (on rayon) and answers 201 with the ΔE JSON.
@@ -130,70 +261,12 @@ pub async fn create(
 ) -> Result<Response, ServiceError> {
     super::render::require_json(&headers)?;
     let body = super::render::body_bytes(body, state.config.server.max_body_bytes)?;
-    let mut value: Value = serde_json::from_slice(&body)
-        .map_err(|e| ServiceError::InvalidJson(format!("evaluation request: {e}")))?;
-    super::jobs::integral_floats_to_ints(&mut value);
-    if !value.is_object() {
-        // (serde would read a struct from an array too, field by field)
-        return Err(ServiceError::InvalidJson(
-            "evaluation request: the body must be a JSON object".into(),
-        ));
-    }
-    let req: EvaluationRequest = serde_json::from_value(value)
-        .map_err(|e| ServiceError::InvalidJson(format!("evaluation request: {e}")))?;
-    if !CHARTS.contains(&req.chart.as_str()) {
-        return Err(ServiceError::BadRequest(format!(
-            "chart '{}': one of {}",
-            req.chart,
-            CHARTS.join(", ")
-        )));
-    }
-    if !(8..=64).contains(&req.patch_px) {
-        return Err(ServiceError::BadRequest(format!(
-            "patch_px {}: 8 to 64",
-            req.patch_px
-        )));
-    }
-    let chart = req.chart_setup()?;
-    let is_l3 = match req.method.as_str() {
-        "l3" => true,
-        "baseline" => false,
-        other => {
-            return Err(ServiceError::BadRequest(format!(
-                "method '{other}': l3 or baseline"
-            )));
-        }
-    };
-    let lower = req.acquisition_illuminant.to_ascii_lowercase();
-    if lower.starts_with("csv:") || lower.starts_with("iset:") || lower.starts_with("xy:") {
-        return Err(ServiceError::UnknownIlluminant(format!(
-            "acquisition illuminant '{}': use a named illuminant or cct:K (its spectrum is needed to simulate the chart)",
-            req.acquisition_illuminant
-        )));
-    }
+    let req = parse_request(&body)?;
+    let checked = req.check()?;
     let correction = state.resolve_illuminant(&req.acquisition_illuminant)?;
-    let table = if is_l3 {
-        match &req.table_id {
-            Some(id) => {
-                if state.active.load().as_ref().is_some_and(|a| &a.id == id) {
-                    state.active.load_full()
-                } else {
-                    // load through activation's checks without activating
-                    let (_, t, _, _) = super::tables::load_verified(&state, id).await?;
-                    let id2 = id.clone();
-                    Some(std::sync::Arc::new(super::state::ActiveTable {
-                        id: id2,
-                        sha256: String::new(),
-                        table: t,
-                    }))
-                }
-            }
-            None => Some(state.active.load_full().ok_or_else(|| {
-                ServiceError::NotReady("no table is active yet and no table_id was given".into())
-            })?),
-        }
-    } else {
-        None
+    let table = match checked.method {
+        EvaluationMethod::L3 => Some(table_to_evaluate(&state, req.table_id.as_ref()).await?),
+        EvaluationMethod::Baseline => None,
     };
     let slot =
         state
@@ -205,65 +278,15 @@ pub async fn create(
                 retry_after_s: 2,
             })?;
     let table_id = table.as_ref().map(|t| t.id.clone());
-    let iset = state.iset.clone();
-    let r2 = req.clone();
-    let pool_state = state.clone();
-    let report = super::cpu::run(&pool_state.pools.background, "the evaluation", move || {
-        let run = || -> Result<crate::eval::DeltaEReport, ServiceError> {
-            let grid = WavelengthGrid::default();
-            let design = match &table {
-                Some(t) => t
-                    .table
-                    .sensor_design()
-                    .map_err(|e| ServiceError::from_l3(e, ServiceError::Unprocessable))?,
-                None => SensorDesign::paper_default(),
-            };
-            let camera = Camera::new(&design, grid, iset.as_ref())
-                .map_err(|e| ServiceError::from_camera(e, ServiceError::Unprocessable))?;
-            let eval_err =
-                |e: crate::eval::EvalError| ServiceError::from_eval(e, ServiceError::Unprocessable);
-            let mut report = match &table {
-                Some(t) => {
-                    let name = format!(
-                        "L3 {} ({})",
-                        t.table.meta.kind,
-                        t.table.meta.train_illuminants.join("+")
-                    );
-                    evaluate_method(
-                        &camera,
-                        &Method::Table(&t.table),
-                        &name,
-                        &r2.acquisition_illuminant,
-                        &correction,
-                        iset.as_ref(),
-                        &chart,
-                    )
-                    .map_err(eval_err)?
-                }
-                None => {
-                    let m = fit_baseline_matrix(&camera, &["D65".to_string()], iset.as_ref())
-                        .map_err(eval_err)?;
-                    evaluate_method(
-                        &camera,
-                        &Method::Baseline(&m),
-                        "Baseline+T",
-                        &r2.acquisition_illuminant,
-                        &correction,
-                        iset.as_ref(),
-                        &chart,
-                    )
-                    .map_err(eval_err)?
-                }
-            };
-            if let Value::Object(m) = &mut report.context {
-                m.insert(
-                    "table_id".into(),
-                    json!(table.as_ref().map(|t| t.id.clone())),
-                );
-            }
-            Ok(report)
-        };
-        let report = run();
+    let (iset, acquisition) = (state.iset.clone(), req.acquisition_illuminant.clone());
+    let report = super::cpu::run(&state.pools.background, "the evaluation", move || {
+        let report = evaluate(
+            table.as_deref(),
+            &acquisition,
+            &correction,
+            iset.as_ref(),
+            &checked.setup,
+        );
         drop(slot);
         report
     })
@@ -271,15 +294,14 @@ pub async fn create(
     let id = new_id("eval");
     let report_json = serde_json::to_string(&report)
         .map_err(|e| ServiceError::Internal(format!("report: {e}")))?;
-    let request_json = String::from_utf8_lossy(&body).to_string();
     let row = EvaluationRow {
         id: id.clone(),
-        table_id: table_id.clone(),
-        method: req.method.clone(),
-        chart: req.chart.clone(),
-        acquisition_illuminant: req.acquisition_illuminant.clone(),
+        table_id,
+        method: checked.method,
+        chart: checked.chart,
+        acquisition_illuminant: req.acquisition_illuminant,
         mean_delta_e: report.summary.mean,
-        request_json,
+        request_json: String::from_utf8_lossy(&body).to_string(),
         report_json,
         created_at: now_ms(),
     };
@@ -350,7 +372,7 @@ pub async fn get(
     headers: HeaderMap,
 ) -> Result<Response, ServiceError> {
     let format = negotiate(headers.get(header::ACCEPT).and_then(|v| v.to_str().ok()));
-    let row = evaluation_row(&state, &id).await?;
+    let row = state.store.evaluation(&id).await?;
     let mut resp = match format {
         EvaluationFormat::Json => Json(evaluation_json(&row)?).into_response(),
         EvaluationFormat::Svg => {

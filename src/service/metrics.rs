@@ -6,6 +6,8 @@ use std::fmt::Write;
 use std::sync::Mutex;
 use std::sync::atomic::{AtomicU64, Ordering};
 
+use super::store::JobStatus;
+
 /// Upper bounds (seconds) of the latency histogram buckets.
 pub const LATENCY_BUCKETS_S: [f64; 14] = [
     0.001, 0.0025, 0.005, 0.01, 0.025, 0.05, 0.1, 0.25, 0.5, 1.0, 2.5, 5.0, 10.0, 30.0,
@@ -65,7 +67,7 @@ impl Metrics {
     }
 
     /// The exposition text; `jobs` are (state, count) pairs read from the database.
-    pub fn render(&self, jobs: &[(String, i64)], ready: bool) -> String {
+    pub fn render(&self, jobs: &[(JobStatus, i64)], ready: bool) -> String {
         let mut out = String::new();
         let _ = writeln!(
             out,
@@ -156,9 +158,11 @@ impl Metrics {
             out,
             "# HELP l3_training_jobs Training jobs by state.\n# TYPE l3_training_jobs gauge"
         );
-        for state in super::store::JobStatus::ALL {
-            let state = state.as_str();
-            let n = jobs.iter().find(|(s, _)| s == state).map_or(0, |(_, n)| *n);
+        for state in JobStatus::ALL {
+            let n = jobs
+                .iter()
+                .find(|(s, _)| *s == state)
+                .map_or(0, |(_, n)| *n);
             let _ = writeln!(out, "l3_training_jobs{{state=\"{state}\"}} {n}");
         }
         let _ = writeln!(
@@ -180,7 +184,7 @@ mod tests {
         m.observe("POST", "/v1/render", 200, 0.02);
         m.observe("POST", "/v1/render", 200, 0.2);
         m.rendered(2_000_000);
-        let text = m.render(&[("queued".into(), 2)], true);
+        let text = m.render(&[(JobStatus::Queued, 2)], true);
         assert!(text.contains(
             "l3_http_requests_total{method=\"POST\",route=\"/v1/render\",status=\"200\"} 2"
         ));

@@ -15,9 +15,8 @@ mod jobs;
 mod metrics;
 mod render;
 mod routes;
-mod shard_jobs;
 mod state;
-mod store;
+pub mod store;
 mod sync;
 mod tables;
 

@@ -15,7 +15,7 @@ use serde_json::{Value, json};
 
 use super::ServiceError;
 use super::state::{ActiveTable, AppState, Inner, now_ms, sha256_hex};
-use super::store::{NewTable, Store, TableRow};
+use super::store::{NewTable, Store, TableRow, TableStatus};
 use crate::l3::L3Table;
 
 /// A table file written to disk.
@@ -105,7 +105,7 @@ pub async fn insert_table(
         .file_name()
         .and_then(|n| n.to_str())
         .unwrap_or_default();
-    state
+    Ok(state
         .store
         .insert_table(&NewTable {
             id: &stored.id,
@@ -118,15 +118,12 @@ pub async fn insert_table(
             created_at: now_ms(),
             content: content.as_deref(),
         })
-        .await
+        .await?)
 }
 
+/// The table `id` (404 when there is none).
 async fn table_row(state: &Inner, id: &str) -> Result<TableRow, ServiceError> {
-    state
-        .store
-        .table(id)
-        .await?
-        .ok_or_else(|| ServiceError::NotFound(format!("no table with id '{id}'")))
+    Ok(state.store.existing_table(id).await?)
 }
 
 /// Why a stored table file cannot be used.
@@ -144,10 +141,10 @@ pub(super) enum TableFileError {
 }
 
 impl TableFileError {
-    fn status(&self) -> Option<&'static str> {
+    fn status(&self) -> Option<TableStatus> {
         match self {
-            TableFileError::Missing(_) => Some("missing"),
-            TableFileError::Corrupt(_) => Some("corrupt"),
+            TableFileError::Missing(_) => Some(TableStatus::Missing),
+            TableFileError::Corrupt(_) => Some(TableStatus::Corrupt),
             TableFileError::Io(_) => None,
         }
     }
@@ -233,14 +230,14 @@ async fn fetch_checked_in(
     .map_err(|e| TableFileError::Io(format!("table loader: {e}")))?
 }
 
-/// Records a table's file health (`ok`, `corrupt` or `missing`) when it changed.
+/// Records a table's file health when it changed.
 async fn set_status(
     state: &Inner,
     id: &str,
-    status: &str,
+    status: TableStatus,
     detail: Option<&str>,
 ) -> Result<(), ServiceError> {
-    state.store.set_table_status(id, status, detail).await
+    Ok(state.store.set_table_status(id, status, detail).await?)
 }
 
 /// Loads table `id` with its checksum verified. A corrupt or missing file is recorded in the
@@ -253,7 +250,7 @@ pub(super) async fn load_verified(
     let row = table_row(state, id).await?;
     match fetch_checked(state, &row).await {
         Ok((bytes, table)) => {
-            set_status(state, id, "ok", None).await?;
+            set_status(state, id, TableStatus::Ok, None).await?;
             Ok((bytes, table, row.sha256, row.path))
         }
         Err(e) => {
@@ -279,7 +276,7 @@ pub async fn verify_all(state: &Inner) -> Result<Vec<(String, String)>, ServiceE
     for r in rows {
         let id = r.id.clone();
         match fetch_checked(state, &r).await.map(|_| ()) {
-            Ok(()) => set_status(state, &id, "ok", None).await?,
+            Ok(()) => set_status(state, &id, TableStatus::Ok, None).await?,
             Err(e) => {
                 if let Some(st) = e.status() {
                     tracing::error!(
@@ -386,7 +383,7 @@ pub async fn activate_table(state: &AppState, id: &str) -> Result<(), ServiceErr
 
 /// The id recorded as active, if any.
 pub async fn recorded_active(state: &Inner) -> Result<Option<String>, ServiceError> {
-    state.store.recorded_active().await
+    Ok(state.store.recorded_active().await?)
 }
 
 fn row_json(state: &Inner, row: &TableRow, full: bool) -> Result<Value, ServiceError> {
@@ -402,7 +399,7 @@ fn row_json(state: &Inner, row: &TableRow, full: bool) -> Result<Value, ServiceE
         "job_id": row.job_id,
         "created_at_ms": row.created_at,
         "active": active,
-        "status": row.status,
+        "status": row.status.as_str(),
         "status_detail": row.status_detail,
         "last_activated_at_ms": row.last_activated_at,
         "train_illuminants": meta["train_illuminants"].clone(),

@@ -1,6 +1,6 @@
 //! Training sharded across replicas: a job that asks for `shards: N` is queued as N survey
 //! shards (then N accumulation shards), rows of their own that any replica claims like jobs,
-//! under the same lease and heartbeat ([`super::jobs::Lease`]), retried after a lease expiry.
+//! under the same lease and heartbeat ([`super::queue::Lease`]), retried after a lease expiry.
 //!
 //! The steps are those of `l3 train --phase survey|accumulate|merge` (`src/cli/train.rs`),
 //! through the same core calls ([`TrainingRun::survey_shard`], [`TrainingRun::classes`],
@@ -23,17 +23,15 @@ use std::sync::Arc;
 use std::sync::atomic::Ordering;
 use std::time::Instant;
 
-use super::ServiceError;
-use super::jobs::{
-    JobRequest, Lease, finish, on_background, parse_job_request, publish_table, wake_workers,
-    write_job_table,
-};
-use super::state::{AppState, now_ms, sha256_hex};
-use super::store::{
-    JOB_KIND_ACCUMULATE_SHARD, JOB_KIND_SURVEY_SHARD, JobRow, JobStatus, NewPartial,
-    ShardCompletion, shard_stage,
-};
+use super::queue::{Lease, finish, wake_workers};
+use super::request::{JobRequest, parse_job_request};
+use super::training::{on_background, publish_table, write_job_table};
 use crate::l3::learn::{Classes, GramPartial, LearnError, ShardSpec, SurveyPartial, TrainingRun};
+use crate::service::ServiceError;
+use crate::service::state::{AppState, now_ms, sha256_hex};
+use crate::service::store::{
+    JobKind, JobRow, JobStage, JobStatus, NewPartial, ShardCompletion, ShardStage, StoreError,
+};
 
 /// What stops a shard.
 #[derive(Debug, thiserror::Error)]
@@ -42,10 +40,12 @@ pub enum ShardError {
     Learn(#[from] LearnError),
     #[error(transparent)]
     Service(#[from] ServiceError),
+    #[error(transparent)]
+    Store(#[from] StoreError),
     /// Stored partial sums that are missing, damaged or not of this job.
     #[error("partial sums of {stage} shard {shard}: {why}")]
     Partial {
-        stage: &'static str,
+        stage: ShardStage,
         shard: i64,
         why: String,
     },
@@ -79,7 +79,7 @@ enum Step {
 struct Shard<'a> {
     row: &'a JobRow,
     job: &'a str,
-    stage: &'static str,
+    stage: ShardStage,
     index: i64,
     count: i64,
     req: JobRequest,
@@ -98,7 +98,7 @@ impl Shard<'_> {
 /// Runs a claimed shard and records how it ended: succeeded (the job too when it merged),
 /// canceled, re-queued by a shutdown, or failed (which fails its job and stops the job's
 /// other shards).
-pub async fn run_shard(state: &AppState, row: JobRow) {
+pub(super) async fn run_shard(state: &AppState, row: JobRow) {
     let id = row.id.clone();
     let Some(job) = row.parent_id.clone() else {
         let msg = ShardError::NotAShard(id.clone()).to_string();
@@ -134,8 +134,9 @@ pub async fn run_shard(state: &AppState, row: JobRow) {
             tracing::info!(shard = %id, "training shard interrupted by shutdown; re-queued");
             state
                 .store
-                .requeue_job(&id, &state.replica_id, "interrupted by shutdown")
+                .requeue_job(&id, &state.replica_id, JobStage::InterruptedByShutdown)
                 .await
+                .map_err(ServiceError::from)
         }
         Err(e) if e.is_canceled() => {
             tracing::info!(job = %job, shard = %id, "training shard canceled");
@@ -201,20 +202,20 @@ fn forget_run(state: &AppState, job: &str) {
 async fn stored_parts(
     state: &AppState,
     shard: &Shard<'_>,
-    stage: &'static str,
+    stage: ShardStage,
     only: Option<i64>,
 ) -> Result<Vec<Vec<u8>>, ShardError> {
-    let rows = state.store.partials(shard.job, stage, only).await?;
-    let mut out = Vec::with_capacity(rows.len());
-    for (k, bytes, sha) in rows {
-        if sha256_hex(&bytes) != sha {
+    let parts = state.store.partials(shard.job, stage, only).await?;
+    let mut out = Vec::with_capacity(parts.len());
+    for p in parts {
+        if sha256_hex(&p.content) != p.sha256 {
             return Err(ShardError::Partial {
                 stage,
-                shard: k + 1,
+                shard: p.shard_index + 1,
                 why: "the stored bytes do not match their SHA-256".into(),
             });
         }
-        out.push(bytes);
+        out.push(p.content);
     }
     Ok(out)
 }
@@ -223,7 +224,7 @@ async fn stored_parts(
 async fn all_parts(
     state: &AppState,
     shard: &Shard<'_>,
-    stage: &'static str,
+    stage: ShardStage,
 ) -> Result<Vec<Vec<u8>>, ShardError> {
     let parts = stored_parts(state, shard, stage, None).await?;
     if parts.len() as i64 != shard.count {
@@ -246,7 +247,10 @@ async fn steps(
     job: &str,
     lease: &Lease,
 ) -> Result<Step, ShardError> {
-    let stage = shard_stage(&row.kind).ok_or_else(|| ShardError::NotAShard(row.id.clone()))?;
+    let stage = row
+        .kind
+        .shard_stage()
+        .ok_or_else(|| ShardError::NotAShard(row.id.clone()))?;
     let (req, _) = parse_job_request(row.request_json.as_bytes())?;
     let shard = Shard {
         row,
@@ -264,8 +268,8 @@ async fn steps(
         .ok_or_else(|| shard.bad(format!("no shard {} of {}", shard.index + 1, shard.count)))?;
     let started = Instant::now();
     // an accumulation needs the run's classes, from every survey part
-    let classes = if row.kind == JOB_KIND_ACCUMULATE_SHARD {
-        let surveys = all_parts(state, &shard, "survey").await?;
+    let classes = if row.kind == JobKind::AccumulateShard {
+        let surveys = all_parts(state, &shard, ShardStage::Survey).await?;
         let r = run.clone();
         let classes = on_background(state, &row.id, move || -> Result<Classes, ShardError> {
             let parts = surveys
@@ -293,7 +297,7 @@ async fn steps(
     tracing::info!(
         job = %job,
         shard = %row.id,
-        stage,
+        stage = stage.as_str(),
         batches = format!("{}..{}", spec.start, spec.end),
         seconds = format!("{:.3}", compute_ms as f64 / 1e3),
         bytes = size,
@@ -310,7 +314,7 @@ async fn steps(
         ShardCompletion::Done => Step::Done,
         ShardCompletion::ParentEnded => Step::JobEnded,
         ShardCompletion::LeaseLost => Step::LeaseLost,
-        ShardCompletion::Last if row.kind == JOB_KIND_SURVEY_SHARD => {
+        ShardCompletion::Last if row.kind == JobKind::SurveyShard => {
             wake_workers(state);
             Step::Done
         }
@@ -376,7 +380,7 @@ async fn merge(
     lease: &Lease,
 ) -> Result<Step, ShardError> {
     let started = Instant::now();
-    let parts = all_parts(state, shard, "accumulate").await?;
+    let parts = all_parts(state, shard, ShardStage::Accumulate).await?;
     let read_s = started.elapsed().as_secs_f64();
     let job_row = state
         .store
