@@ -2,6 +2,7 @@
 //! activated → used for a render; cancel; restart with a queued and a running job.
 
 mod service_support;
+mod store_compat;
 
 use service_support::*;
 
