@@ -500,4 +500,68 @@ mod tests {
         );
         assert_eq!(e.code(), "internal");
     }
+
+    /// The store's errors map to HTTP here, once, with the store's message.
+    #[test]
+    fn store_errors_map_by_kind() {
+        use crate::service::store::{RowKind, StoreError};
+        let cases = [
+            (
+                StoreError::NotFound {
+                    kind: RowKind::Table,
+                    id: "t".into(),
+                },
+                404,
+                "not_found",
+                "no table with id 't'".to_string(),
+            ),
+            (
+                StoreError::KeyConflict { key: "k".into() },
+                409,
+                "conflict",
+                "Idempotency-Key 'k' was already used with a different request body".into(),
+            ),
+            (
+                StoreError::UnknownValue {
+                    column: "status",
+                    value: "x".into(),
+                    expected: "queued, running".into(),
+                },
+                400,
+                "bad_request",
+                "status 'x': one of queued, running".into(),
+            ),
+            (
+                StoreError::CorruptRow {
+                    table: "training_jobs",
+                    id: "j".into(),
+                    column: "stage",
+                    value: "x".into(),
+                    expected: "queued".into(),
+                },
+                500,
+                "database",
+                "database: training_jobs row 'j': stage 'x' is none of queued".into(),
+            ),
+            (
+                StoreError::Url("database_url 'x': expected sqlite://… or postgres://…".into()),
+                500,
+                "config",
+                "configuration: database_url 'x': expected sqlite://… or postgres://…".into(),
+            ),
+            (
+                StoreError::Database(sqlx::Error::PoolTimedOut),
+                500,
+                "database",
+                format!("database: {}", sqlx::Error::PoolTimedOut),
+            ),
+        ];
+        for (e, status, code, message) in cases {
+            let e = ServiceError::from(e);
+            assert_eq!(
+                (e.status().as_u16(), e.code(), e.to_string()),
+                (status, code, message)
+            );
+        }
+    }
 }

@@ -69,51 +69,12 @@ impl Metrics {
     /// The exposition text; `jobs` are (state, count) pairs read from the database.
     pub fn render(&self, jobs: &[(JobStatus, i64)], ready: bool) -> String {
         let mut out = String::new();
-        let _ = writeln!(
-            out,
-            "# HELP l3_http_requests_total HTTP requests by method, route and status.\n# TYPE l3_http_requests_total counter"
-        );
-        let m = self
+        let requests = self
             .requests
             .lock()
             .unwrap_or_else(|p| p.into_inner())
             .clone();
-        for ((method, route, status), h) in &m {
-            let _ = writeln!(
-                out,
-                "l3_http_requests_total{{method=\"{method}\",route=\"{route}\",status=\"{status}\"}} {}",
-                h.count
-            );
-        }
-        let _ = writeln!(
-            out,
-            "# HELP l3_http_request_duration_seconds HTTP request latency by method, route and status.\n# TYPE l3_http_request_duration_seconds histogram"
-        );
-        for ((method, route, status), h) in &m {
-            let labels = format!("method=\"{method}\",route=\"{route}\",status=\"{status}\"");
-            for (i, b) in LATENCY_BUCKETS_S.iter().enumerate() {
-                let _ = writeln!(
-                    out,
-                    "l3_http_request_duration_seconds_bucket{{{labels},le=\"{b}\"}} {}",
-                    h.counts[i]
-                );
-            }
-            let _ = writeln!(
-                out,
-                "l3_http_request_duration_seconds_bucket{{{labels},le=\"+Inf\"}} {}",
-                h.count
-            );
-            let _ = writeln!(
-                out,
-                "l3_http_request_duration_seconds_sum{{{labels}}} {}",
-                h.sum
-            );
-            let _ = writeln!(
-                out,
-                "l3_http_request_duration_seconds_count{{{labels}}} {}",
-                h.count
-            );
-        }
+        write_requests(&mut out, &requests);
         let px = self.rendered_pixels.load(Ordering::Relaxed);
         let _ = writeln!(
             out,
@@ -171,6 +132,50 @@ impl Metrics {
             u8::from(ready)
         );
         out
+    }
+}
+
+/// The request counters and latency histograms, by (method, route, status).
+fn write_requests(out: &mut String, requests: &BTreeMap<(String, String, u16), Histogram>) {
+    let _ = writeln!(
+        out,
+        "# HELP l3_http_requests_total HTTP requests by method, route and status.\n# TYPE l3_http_requests_total counter"
+    );
+    for ((method, route, status), h) in requests {
+        let _ = writeln!(
+            out,
+            "l3_http_requests_total{{method=\"{method}\",route=\"{route}\",status=\"{status}\"}} {}",
+            h.count
+        );
+    }
+    let _ = writeln!(
+        out,
+        "# HELP l3_http_request_duration_seconds HTTP request latency by method, route and status.\n# TYPE l3_http_request_duration_seconds histogram"
+    );
+    for ((method, route, status), h) in requests {
+        let labels = format!("method=\"{method}\",route=\"{route}\",status=\"{status}\"");
+        for (i, b) in LATENCY_BUCKETS_S.iter().enumerate() {
+            let _ = writeln!(
+                out,
+                "l3_http_request_duration_seconds_bucket{{{labels},le=\"{b}\"}} {}",
+                h.counts[i]
+            );
+        }
+        let _ = writeln!(
+            out,
+            "l3_http_request_duration_seconds_bucket{{{labels},le=\"+Inf\"}} {}",
+            h.count
+        );
+        let _ = writeln!(
+            out,
+            "l3_http_request_duration_seconds_sum{{{labels}}} {}",
+            h.sum
+        );
+        let _ = writeln!(
+            out,
+            "l3_http_request_duration_seconds_count{{{labels}}} {}",
+            h.count
+        );
     }
 }
 

@@ -44,6 +44,7 @@ pub use state::{ActiveTable, AppState, Inner, sha256_hex};
 pub use store::{JobStatus, Store};
 pub use tables::{StoredTable, write_table_file};
 
+use crate::l3::L3Table;
 use crate::l3::correct::IlluminantRegistry;
 use crate::l3::learn::TrainingSpec;
 use crate::spectral::{IsetData, WavelengthGrid};
@@ -162,6 +163,44 @@ pub async fn start_with(
             addr: cfg.server.bind,
             source,
         })?;
+    let (state, default_spec) = open_state(&cfg).await?;
+    illuminants::load_registry(&state).await?;
+    let requeued = jobs::requeue_interrupted(&state).await?;
+    if requeued > 0 {
+        tracing::info!("{requeued} interrupted training job(s) re-queued");
+    }
+    activate_stored_table(&state).await?;
+    if state.active.load().is_none() && cfg.training.auto_train_default {
+        queue_default_table(&state, &default_spec).await?;
+    }
+    let mut workers: Vec<_> = (0..cfg.training.max_concurrent_jobs)
+        .map(|_| tokio::spawn(jobs::worker(state.clone())))
+        .collect();
+    workers.push(tokio::spawn(sync::follower(state.clone())));
+    let addr = listener
+        .local_addr()
+        .map_err(|e| ServiceError::Internal(format!("local address: {e}")))?;
+    let (tx, rx) = tokio::sync::oneshot::channel::<()>();
+    let task = serve(listener, state.clone(), async move {
+        tokio::select! {
+            _ = rx => {}
+            _ = signal => {}
+        }
+    });
+    tracing::info!("l3 service listening on http://{addr}");
+    Ok(Server {
+        addr,
+        state,
+        shutdown: Some(tx),
+        task,
+        workers,
+    })
+}
+
+/// The state of a starting service: its data directory's `tables/`, the database (migrated),
+/// the spectral data, the built-in illuminants and the CPU pools; and the default table's
+/// training spec.
+async fn open_state(cfg: &ServiceConfig) -> Result<(AppState, TrainingSpec), ServiceError> {
     let data = cfg.data.dir.clone();
     let tables_dir = data.join("tables");
     std::fs::create_dir_all(&tables_dir).map_err(|e| {
@@ -174,7 +213,7 @@ pub async fn start_with(
         replica = replica_id,
         "database ready"
     );
-    let iset = locate_iset(&cfg);
+    let iset = locate_iset(cfg);
     match iset.as_ref().and_then(IsetData::dir) {
         Some(d) => tracing::info!(
             "spectral data: the ISET directory {} over the built-in data",
@@ -185,7 +224,7 @@ pub async fn start_with(
     let grid = WavelengthGrid::default();
     let defaults = IlluminantRegistry::with_defaults(grid, iset.as_ref())
         .map_err(|e| ServiceError::Internal(format!("default illuminants: {e}")))?;
-    let default_spec = default_training_spec(&cfg)?;
+    let default_spec = default_training_spec(cfg)?;
     let pools = cpu::CpuPools::new(
         cfg.server.render_threads,
         cfg.training.background_threads,
@@ -216,25 +255,24 @@ pub async fn start_with(
         shutting_down: AtomicBool::new(false),
         shutdown_notify: Notify::new(),
     }));
-    illuminants::load_registry(&state).await?;
-    let requeued = jobs::requeue_interrupted(&state).await?;
-    if requeued > 0 {
-        tracing::info!("{requeued} interrupted training job(s) re-queued");
-    }
-    // table files: drop half-written temporaries, verify every stored file's checksum
+    Ok((state, default_spec))
+}
+
+/// Checks the stored table files and activates the table a start serves: the recorded one,
+/// else the last good one (most recently activated, then the newest stored), skipping files
+/// found corrupt or missing. Half-written temporary files are removed first.
+async fn activate_stored_table(state: &AppState) -> Result<(), ServiceError> {
     let dir = state.tables_dir.clone();
     tokio::task::spawn_blocking(move || tables::remove_orphan_temp_files(&dir))
         .await
         .map_err(|e| ServiceError::Internal(format!("table directory scan: {e}")))?;
-    let unusable = tables::verify_all(&state).await?;
-    // the active table: the recorded one, else the last good one (most recently activated,
-    // then the newest stored), skipping files found corrupt or missing
-    let recorded = tables::recorded_active(&state).await?;
+    let unusable = tables::verify_all(state).await?;
+    let recorded = tables::recorded_active(state).await?;
     for id in tables::activation_candidates(&state.store).await? {
         if unusable.iter().any(|(b, _)| *b == id) {
             continue;
         }
-        match tables::activate_table(&state, &id).await {
+        match tables::activate_table(state, &id).await {
             Ok(()) => break,
             Err(e) => tracing::error!(table = id, "cannot activate: {e}"),
         }
@@ -252,51 +290,45 @@ pub async fn start_with(
             ),
         }
     }
-    if state.active.load().is_none() && cfg.training.auto_train_default {
-        let pending = state.store.pending_activating_job().await?;
-        if pending.is_none() {
-            let mut v = serde_json::to_value(&default_spec)
-                .map_err(|e| ServiceError::Internal(format!("default spec: {e}")))?;
-            v["activate"] = serde_json::Value::Bool(true);
-            // once per database: replicas starting together queue one job
-            if let Some(id) = jobs::enqueue_default(&state, &v).await? {
-                tracing::info!(
-                    job = id,
-                    "no table yet: training the default table ({}); /readyz is 503 until it is active",
-                    default_spec.illuminants.join("+")
-                );
-            }
-        }
+    Ok(())
+}
+
+/// Queues the training of the default table (`spec`, activated when done) unless a job that
+/// will activate a table is already queued or running: once per database, so that replicas
+/// starting together queue one job.
+async fn queue_default_table(state: &AppState, spec: &TrainingSpec) -> Result<(), ServiceError> {
+    if state.store.pending_activating_job().await?.is_some() {
+        return Ok(());
     }
-    let mut workers: Vec<_> = (0..cfg.training.max_concurrent_jobs)
-        .map(|_| tokio::spawn(jobs::worker(state.clone())))
-        .collect();
-    workers.push(tokio::spawn(sync::follower(state.clone())));
-    let addr = listener
-        .local_addr()
-        .map_err(|e| ServiceError::Internal(format!("local address: {e}")))?;
+    let mut v = serde_json::to_value(spec)
+        .map_err(|e| ServiceError::Internal(format!("default spec: {e}")))?;
+    v["activate"] = serde_json::Value::Bool(true);
+    if let Some(id) = jobs::enqueue_default(state, &v).await? {
+        tracing::info!(
+            job = id,
+            "no table yet: training the default table ({}); /readyz is 503 until it is active",
+            spec.illuminants.join("+")
+        );
+    }
+    Ok(())
+}
+
+/// Serves the routes on `listener` until `stop` completes (or the server is shut down), then
+/// begins the shutdown.
+fn serve(
+    listener: tokio::net::TcpListener,
+    state: AppState,
+    stop: impl std::future::Future<Output = ()> + Send + 'static,
+) -> tokio::task::JoinHandle<Result<(), ServiceError>> {
     let app = routes::router(state.clone());
-    let (tx, rx) = tokio::sync::oneshot::channel::<()>();
-    let st = state.clone();
-    let task = tokio::spawn(async move {
+    tokio::spawn(async move {
         axum::serve(listener, app)
             .with_graceful_shutdown(async move {
-                tokio::select! {
-                    _ = rx => {}
-                    _ = signal => {}
-                }
-                begin_shutdown(&st);
+                stop.await;
+                begin_shutdown(&state);
             })
             .await
             .map_err(|e| ServiceError::Internal(format!("server: {e}")))
-    });
-    tracing::info!("l3 service listening on http://{addr}");
-    Ok(Server {
-        addr,
-        state,
-        shutdown: Some(tx),
-        task,
-        workers,
     })
 }
 
@@ -311,7 +343,7 @@ pub struct ServedTable {
     pub id: String,
     /// Its file in the data directory's `tables/`.
     pub path: std::path::PathBuf,
-    pub table: crate::l3::L3Table,
+    pub table: L3Table,
     /// The candidates passed over before it (a recorded active table whose file is corrupt
     /// or missing, …), each with the reason.
     pub passed_over: Vec<String>,
@@ -336,7 +368,7 @@ pub async fn served_table(cfg: &ServiceConfig) -> Result<Option<ServedTable>, Se
 /// activates it; returns its id. Used to seed a data directory and by tests.
 pub async fn import_table(
     state: &AppState,
-    table: &crate::l3::L3Table,
+    table: &L3Table,
     activate: bool,
 ) -> Result<String, ServiceError> {
     table

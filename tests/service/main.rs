@@ -1,13 +1,15 @@
 //! The HTTP service, one test binary: the API end to end (`api`), training jobs (`jobs`), the
 //! evaluation figure (`figure`), render admission (`admission`), crash safety of the real
-//! `l3 serve` process (`crash`), and openapi.yaml against the served routes (`spec`: not named
+//! `l3 serve` process (`crash`), the typed store over rows the previous store wrote
+//! (`store_compat`), and openapi.yaml against the served routes (`spec`: not named
 //! `openapi`, so that the filter `api::` selects the API tests alone).
 //!
 //! Every test starts its own server (in process on 127.0.0.1:0, or `l3 serve` on a free port)
 //! with its own temporary data directory; the tests share only the tiny table
 //! ([`service_support::tiny_table`], trained once) and, with `L3_TEST_BACKEND=postgres`, one
 //! PostgreSQL server with a database per data directory. `L3_TEST_BACKEND=postgres cargo test
-//! --test service -- api:: jobs:: figure::` runs the API, job and figure tests on PostgreSQL.
+//! --test service -- api:: jobs:: figure:: store_compat::` runs the API, job, figure and
+//! migration-compatibility tests on PostgreSQL.
 
 #[path = "../service_support/mod.rs"]
 mod service_support;
@@ -18,3 +20,4 @@ mod crash;
 mod figure;
 mod jobs;
 mod spec;
+mod store_compat;

@@ -135,3 +135,37 @@ pub(super) async fn run_job(state: &AppState, id: &str, request: &str) {
 async fn req_activate(state: &AppState, id: &str) -> Result<bool, ServiceError> {
     Ok(state.store.existing_job(id).await?.activate)
 }
+
+#[cfg(test)]
+mod tests {
+    use std::collections::BTreeSet;
+    use std::sync::Mutex;
+    use std::sync::atomic::AtomicBool;
+
+    use super::*;
+
+    /// Every stage the training reports is one a job records (a stage it does not know would
+    /// leave the job's stage as it was).
+    #[test]
+    fn the_training_reports_stages_a_job_records() {
+        let body = br#"{"illuminants":["D65"],"scenes":4,"scene_size":48,"levels":10}"#;
+        let (req, _) = parse_job_request(body).unwrap();
+        let stages = Mutex::new(BTreeSet::new());
+        let progress = |stage: &str, _: f64| {
+            stages.lock().unwrap().insert(stage.to_string());
+        };
+        train_table(
+            &req.sensor,
+            &req.spec,
+            None,
+            &progress,
+            &AtomicBool::new(false),
+        )
+        .unwrap();
+        let stages = stages.into_inner().unwrap();
+        assert!(!stages.is_empty());
+        for s in &stages {
+            assert!(JobStage::parse(s).is_ok(), "{s} of {stages:?}");
+        }
+    }
+}
