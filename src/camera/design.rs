@@ -25,8 +25,10 @@ const PARAMETRIC_SUBSAMPLES: usize = 20;
 ///
 /// Parametric curves are band-averaged onto the simulation grid; CSV columns
 /// are resampled area-preserving with zero outside their range. A relative CSV
-/// path is a table of the spectral data ([`IsetData::table`]: the ISET data
-/// directory's file, else the built-in copy).
+/// path is looked up beside the sensor TOML first (when the design is loaded
+/// from a file, [`SensorDesign::with_curves_beside`]), then as a table of the
+/// spectral data ([`IsetData::table`]: the ISET data directory's file, else the
+/// built-in copy).
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(try_from = "FilterToml", into = "FilterToml")]
 pub enum FilterSpec {
@@ -469,8 +471,45 @@ impl SensorDesign {
             }
             other => other,
         })?;
-        design.resolve_curves(&WavelengthGrid::default(), iset)?;
+        let dir = p.parent().unwrap_or(Path::new(""));
+        let design = design.with_curves_beside(dir);
+        design
+            .resolve_curves(&WavelengthGrid::default(), iset)
+            .map_err(|e| match e {
+                CameraError::InvalidDesign(m) if m.contains("is neither") => {
+                    CameraError::InvalidDesign(format!(
+                        "{m}; looked first beside the sensor TOML, in {}",
+                        if dir.as_os_str().is_empty() {
+                            Path::new(".").display()
+                        } else {
+                            dir.display()
+                        }
+                    ))
+                }
+                other => other,
+            })?;
         Ok(design)
+    }
+
+    /// The design with every relative CSV path that names a file in `dir` (the sensor
+    /// TOML's folder) made absolute: a user's curves beside their TOML are found from any
+    /// working directory. Other relative paths stay tables of the spectral data.
+    pub fn with_curves_beside(mut self, dir: &Path) -> Self {
+        let beside = |f: &mut FilterSpec| {
+            if let FilterSpec::Csv { path, .. } = f
+                && Path::new(path.as_str()).is_relative()
+            {
+                let cand = dir.join(path.as_str());
+                if cand.is_file() {
+                    let abs = std::fs::canonicalize(&cand).unwrap_or(cand);
+                    *path = abs.display().to_string();
+                }
+            }
+        };
+        self.filters.values_mut().for_each(beside);
+        beside(&mut self.ir_cut);
+        beside(&mut self.qe);
+        self
     }
 
     /// Parse and validate TOML text.

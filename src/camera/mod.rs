@@ -13,6 +13,7 @@
 //! Units: wavelengths in nm, radiance W/(sr·m²·nm), irradiance W/(m²·nm),
 //! rates in electrons/s, frames in volts.
 
+pub mod catalogue;
 mod cfa;
 mod colour_matrix;
 mod design;

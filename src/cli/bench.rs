@@ -22,7 +22,7 @@ pub struct BenchArgs {
     /// A tiny run (2 configurations, 6 scenes, a 0.6 MP frame, 2 runs) for smoke tests.
     #[arg(long)]
     pub quick: bool,
-    /// Sensor design TOML (default: the paper's RGBW sensor). Several (repeat
+    /// Sensor: a design TOML or a catalogue name (default: the paper's RGBW sensor). Several (repeat
     /// it, or a comma-separated list) run the sensor sweep: the default
     /// configuration and the baselines on each sensor.
     #[arg(long, value_delimiter = ',')]

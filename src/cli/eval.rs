@@ -35,8 +35,8 @@ pub struct EvalArgs {
     /// for --patch-px. Needs --table.
     #[arg(long, conflicts_with_all = ["paper_table", "captures", "estimate_illuminant"])]
     pub frame: Option<PathBuf>,
-    /// Sensor design TOML (default: the paper's RGBW sensor). With
-    /// --paper-table, repeat it (or give a comma-separated list) to run the
+    /// Sensor: a design TOML or a catalogue name (`l3 sensors`; default: the paper's RGBW
+    /// sensor). With --paper-table, repeat it (or give a comma-separated list) to run the
     /// table on several sensors in one go.
     #[arg(long, value_delimiter = ',')]
     pub sensor: Vec<PathBuf>,

@@ -121,7 +121,7 @@ pub(crate) fn load_sensor(
     iset: Option<&IsetData>,
 ) -> Result<SensorDesign, CliError> {
     match path {
-        Some(p) => Ok(SensorDesign::load(p, iset)?),
+        Some(p) => Ok(crate::camera::catalogue::load_named_or_file(p, iset)?),
         None => Ok(SensorDesign::paper_default()),
     }
 }

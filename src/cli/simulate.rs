@@ -20,7 +20,7 @@ pub struct SimulateArgs {
     /// D65 | A | F11 | Tungsten | cct:3200 | csv:PATH[:COLUMN]
     #[arg(long, default_value = "D65")]
     pub illuminant: String,
-    /// Sensor design TOML (default: the paper's RGBW sensor).
+    /// Sensor: a design TOML or a catalogue name (`l3 sensors`; default: the paper's RGBW sensor).
     #[arg(long)]
     pub sensor: Option<PathBuf>,
     #[arg(long, default_value_t = 1)]

@@ -30,7 +30,7 @@ pub enum Phase {
 
 #[derive(Args, Debug)]
 pub struct TrainArgs {
-    /// Sensor design TOML (default: the paper's RGBW sensor).
+    /// Sensor: a design TOML or a catalogue name (`l3 sensors`; default: the paper's RGBW sensor).
     #[arg(long)]
     pub sensor: Option<PathBuf>,
     /// `si` (same-illuminant) or `cross` (to D65).

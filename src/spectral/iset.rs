@@ -100,7 +100,15 @@ impl IsetData {
             Err(SpectralError::NoSuchTable {
                 path: rel.to_string(),
                 dir,
-                built_in: bundled_paths().collect::<Vec<_>>().join(", "),
+                built_in: {
+                    let (cams, rest): (Vec<&str>, Vec<&str>) =
+                        bundled_paths().partition(|p| p.starts_with("cameras/rawtoaces/"));
+                    format!(
+                        "{}, and {} catalogue cameras as cameras/rawtoaces/<maker>_<model>.csv",
+                        rest.join(", "),
+                        cams.len()
+                    )
+                },
             })
         })
     }

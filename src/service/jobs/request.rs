@@ -38,7 +38,7 @@ fn flag(map: &mut serde_json::Map<String, Value>, name: &str) -> Result<bool, Se
 }
 
 /// Parses and validates a job's JSON: the [`TrainingSpec`] fields, plus `sensor` (absent or
-/// `"paper_default"`, or a sensor design object), `activate` (bool), `shards` (1 to
+/// `"paper_default"`, a catalogue name, or a sensor design object), `activate` (bool), `shards` (1 to
 /// [`MAX_SHARDS`], at most `scenes`) and `reproducible` (bool).
 pub fn parse_job_request(body: &[u8]) -> Result<(JobRequest, Value), ServiceError> {
     let bad = |m: String| ServiceError::InvalidJson(m);
@@ -62,11 +62,14 @@ pub fn parse_job_request(body: &[u8]) -> Result<(JobRequest, Value), ServiceErro
     let sensor = match map.remove("sensor") {
         None | Some(Value::Null) => SensorDesign::paper_default(),
         Some(Value::String(s)) if s == "paper_default" => SensorDesign::paper_default(),
-        Some(Value::String(s)) => {
-            return Err(bad(format!(
-                "sensor '{s}': use \"paper_default\" or a sensor design object"
-            )));
-        }
+        Some(Value::String(s)) => crate::camera::catalogue::find(&s)
+            .ok_or_else(|| {
+                ServiceError::BadRequest(format!(
+                    "sensor '{s}': use \"paper_default\", a catalogue name (GET /v1/sensors) or a sensor design object"
+                ))
+            })?
+            .design()
+            .map_err(|e| ServiceError::Internal(format!("catalogue sensor '{s}': {e}")))?,
         Some(v) => {
             let d: SensorDesign =
                 serde_json::from_value(v).map_err(|e| bad(format!("sensor: {e}")))?;
