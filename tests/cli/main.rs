@@ -1,5 +1,7 @@
 //! The `l3` executable end to end, one test binary: simulate → train → render → eval and
-//! `l3 serve` (`cli`), and `l3 bench --quick` (`bench`).
+//! `l3 serve` (`cli`), `l3 bench --quick` (`bench`), and sensors by catalogue name or by a TOML
+//! beside its curves (`sensors`).
 
 mod bench;
 mod cli;
+mod sensors;

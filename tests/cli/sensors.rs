@@ -1,0 +1,109 @@
+//! Sensors named as users name them: a catalogue camera by name, and a design TOML whose CSV
+//! curves sit beside it, trained from another working directory.
+
+use std::path::Path;
+use std::process::Command;
+
+fn l3(args: &[&str], dir: &Path) -> (bool, String) {
+    let out = Command::new(env!("CARGO_BIN_EXE_l3"))
+        .args(args)
+        .current_dir(dir)
+        .output()
+        .expect("run l3");
+    let text = format!(
+        "{}{}",
+        String::from_utf8_lossy(&out.stdout),
+        String::from_utf8_lossy(&out.stderr)
+    );
+    (out.status.success(), text)
+}
+
+const TINY: [&str; 8] = [
+    "--illuminants",
+    "D65",
+    "--scenes",
+    "3",
+    "--scene-size",
+    "32",
+    "--levels",
+    "4",
+];
+
+fn train(sensor: &str, out: &Path, cwd: &Path) -> (bool, String) {
+    let mut args = vec!["train", "--sensor", sensor];
+    args.extend_from_slice(&TINY);
+    args.extend_from_slice(&["--out", out.to_str().unwrap()]);
+    l3(&args, cwd)
+}
+
+/// A design with Gaussian-free measured curves in `my_camera.csv` beside it.
+fn write_design(dir: &Path, csv_name: &str) {
+    std::fs::create_dir_all(dir).unwrap();
+    let mut csv = String::from("wavelength_nm,R,G,B\n");
+    for nm in (380..=780).step_by(5) {
+        let g = |c: f64, s: f64| (-0.5 * ((f64::from(nm) - c) / s).powi(2)).exp();
+        csv += &format!(
+            "{nm},{:.6},{:.6},{:.6}\n",
+            g(600.0, 40.0),
+            g(540.0, 40.0),
+            g(450.0, 30.0)
+        );
+    }
+    std::fs::write(dir.join("my_camera.csv"), csv).unwrap();
+    let toml = format!(
+        "name = \"my-camera\"\ncfa = \"RG/GB\"\n\n[filters]\n\
+         R = {{ csv = \"{csv_name}\", column = \"R\" }}\n\
+         G = {{ csv = \"{csv_name}\", column = \"G\" }}\n\
+         B = {{ csv = \"{csv_name}\", column = \"B\" }}\n\n\
+         [ir_cut]\nconstant = 1.0\n\n[qe]\nconstant = 1.0\n"
+    );
+    std::fs::write(dir.join("my_camera.toml"), toml).unwrap();
+}
+
+#[test]
+fn a_toml_beside_its_csv_trains_from_any_folder() {
+    let tmp = tempfile::tempdir().unwrap();
+    let cam = tmp.path().join("cams/mine");
+    let elsewhere = tmp.path().join("work");
+    std::fs::create_dir_all(&elsewhere).unwrap();
+    write_design(&cam, "my_camera.csv");
+    let out = tmp.path().join("t.safetensors");
+    // by absolute path, and by a path relative to another working directory
+    let abs = cam.join("my_camera.toml");
+    let (ok, text) = train(abs.to_str().unwrap(), &out, &elsewhere);
+    assert!(ok, "{text}");
+    let (ok, text) = train("../cams/mine/my_camera.toml", &out, &elsewhere);
+    assert!(ok, "{text}");
+    let t = l3::l3::L3Table::load(&out).unwrap();
+    assert_eq!(t.meta.sensor_name, "my-camera");
+
+    // a CSV that is nowhere: the error names every place looked in
+    write_design(&cam, "missing.csv");
+    let (ok, text) = train(abs.to_str().unwrap(), &out, &elsewhere);
+    assert!(!ok);
+    for place in [
+        "missing.csv",
+        "beside the sensor TOML",
+        "ISET data directory",
+        "built in",
+    ] {
+        assert!(text.contains(place), "{place} in: {text}");
+    }
+    assert!(text.contains(cam.to_str().unwrap()), "{text}");
+}
+
+#[test]
+fn a_catalogue_camera_trains_by_name() {
+    let tmp = tempfile::tempdir().unwrap();
+    let out = tmp.path().join("sony.safetensors");
+    let (ok, text) = train("bayer-sony-ilce-9", &out, tmp.path());
+    assert!(ok, "{text}");
+    let t = l3::l3::L3Table::load(&out).unwrap();
+    assert_eq!(t.meta.sensor_name, "bayer-sony-ilce-9");
+    let (ok, text) = train("bayer-sony-ilce-99", &out, tmp.path());
+    assert!(!ok);
+    assert!(
+        text.contains("neither a TOML file nor a catalogue sensor"),
+        "{text}"
+    );
+}
