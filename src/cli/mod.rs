@@ -4,6 +4,7 @@ mod bench;
 mod eval;
 mod render;
 mod serve;
+mod sfr;
 mod simulate;
 mod train;
 
@@ -39,6 +40,8 @@ pub enum Command {
     Eval(eval::EvalArgs),
     /// Run time against colour error for a sweep of configurations (JSON, markdown, SVG plot).
     Bench(bench::BenchArgs),
+    /// Sharpness: the ISO 12233 slanted-edge SFR of an edge in an image (JSON).
+    Sfr(sfr::SfrArgs),
     /// Run the HTTP render service (config/default.toml, --config FILE, L3_* variables).
     Serve(serve::ServeArgs),
 }
@@ -70,6 +73,8 @@ pub enum CliError {
     Io(#[from] crate::io::IoError),
     #[error(transparent)]
     Eval(#[from] crate::eval::EvalError),
+    #[error(transparent)]
+    Sfr(#[from] crate::eval::SfrError),
     #[error(transparent)]
     Learn(#[from] crate::l3::learn::LearnError),
     #[error(transparent)]
@@ -149,6 +154,7 @@ pub fn main() -> ExitCode {
         Command::Render(a) => render::run(&cli, a),
         Command::Eval(a) => eval::run(&cli, a),
         Command::Bench(a) => bench::run(&cli, a),
+        Command::Sfr(a) => sfr::run(a),
         Command::Serve(a) => serve::run(&cli, a),
     };
     match result {

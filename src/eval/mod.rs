@@ -9,6 +9,7 @@ mod illuminant_estimation;
 mod noise_split;
 mod paper_table;
 mod report;
+mod sfr;
 mod workflow;
 
 pub use budget::{ErrorBudget, error_budget};
@@ -31,6 +32,7 @@ pub use report::{
     ChartTruth, DeltaEReport, ErrorStats, PatchResult, PixelStats, REPORT_SCHEMA, evaluate_chart,
     interior, patch_means, summarize, white_patch_index,
 };
+pub use sfr::{EdgeOrientation, Sfr, SfrError, slanted_edge_sfr};
 pub use workflow::{
     ChannelSet, ChartCapture, ChartSetup, ColourFit, LightLevel, Method, REFERENCE_LUMINANCE,
     capture_scene, chart_scene, evaluate_capture, evaluate_method, fit_baseline_matrix,

@@ -11,6 +11,7 @@ mod atomic;
 mod dng;
 mod error;
 mod limits;
+mod luminance;
 mod mosaic;
 mod pgm;
 mod png_format;
@@ -24,6 +25,7 @@ pub use dng::{
 };
 pub use error::{IoError, IoResult};
 pub use limits::Limits;
+pub use luminance::{Transfer, decode_luminance};
 pub use mosaic::{
     DecodedMosaic, LoadedMosaic, MosaicFormat, SourceInfo, decode_mosaic, decode_mosaic_with_info,
     decode_mosaic_with_meta, detect_format, read_mosaic,
