@@ -1439,3 +1439,42 @@ fn as_shot_neutral_of_a_tungsten_frame_corrects_natural100_like_tungsten() {
         m.spec()
     );
 }
+
+/// A DNG as PiDNG writes it by default (no CFAPlaneColor, DNGVersion twice: the reader's
+/// leniencies) renders over HTTP as the same mosaic posted as raw bytes with its levels.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_pidng_rgbw_dng_renders_as_its_raw_twin() {
+    let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/fixtures/pidng");
+    let dng = std::fs::read(dir.join("rgbw_pidng.dng")).unwrap();
+    let raw = std::fs::read(dir.join("rgbw_pidng.raw")).unwrap();
+    let data = tempfile::tempdir().unwrap();
+    let (server, _) = server_with_table(data.path(), None).await;
+    let c = client();
+    let mut pngs = Vec::new();
+    for (q, body, kind) in [
+        ("illuminant=A", dng, "image/x-adobe-dng"),
+        (
+            "illuminant=A&width=64&height=48&cfa=RG/WB&black_level=4096&white_level=65535",
+            raw,
+            "application/octet-stream",
+        ),
+    ] {
+        let r = c
+            .post(url(&server, &format!("/v1/render?{q}")))
+            .header("content-type", kind)
+            .header("accept", "image/png")
+            .body(body)
+            .send()
+            .await
+            .unwrap();
+        assert_eq!(r.status(), 200, "{kind}");
+        assert_eq!(r.headers()["x-l3-illuminant"], "A");
+        pngs.push(r.bytes().await.unwrap());
+    }
+    assert!(pngs[0].starts_with(b"\x89PNG"));
+    assert!(
+        pngs[0] == pngs[1],
+        "the PiDNG DNG renders differently from its raw bytes"
+    );
+    server.shutdown().await.unwrap();
+}

@@ -32,8 +32,19 @@ pub(super) fn layout(
 ) -> IoResult<Layout> {
     let tiled = ifd.has(TAG_TILE_OFFSETS);
     let (tile_w, tile_h, off_tag, count_tag) = if tiled {
-        let tw = required(t, ifd, TAG_TILE_WIDTH)?;
-        let th = required(t, ifd, TAG_TILE_LENGTH)?;
+        // one tile and no tile size (PiDNG writes TileOffsets itself, one tile of the
+        // whole image, and leaves TileWidth and TileLength to its caller): the image's size
+        let (tw, th) = if ifd.count(TAG_TILE_OFFSETS) == Some(1)
+            && !ifd.has(TAG_TILE_WIDTH)
+            && !ifd.has(TAG_TILE_LENGTH)
+        {
+            (w as u64, h as u64)
+        } else {
+            (
+                required(t, ifd, TAG_TILE_WIDTH)?,
+                required(t, ifd, TAG_TILE_LENGTH)?,
+            )
+        };
         (tw, th, TAG_TILE_OFFSETS, TAG_TILE_BYTES)
     } else {
         let rps = t.uint(ifd, TAG_ROWS_PER_STRIP)?.unwrap_or(h as u64);

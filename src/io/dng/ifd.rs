@@ -56,6 +56,8 @@ pub(super) fn tag_name(tag: u16) -> String {
         258 => "BitsPerSample",
         259 => "Compression",
         262 => "PhotometricInterpretation",
+        271 => "Make",
+        272 => "Model",
         273 => "StripOffsets",
         277 => "SamplesPerPixel",
         278 => "RowsPerStrip",
@@ -207,7 +209,9 @@ impl<'a> Tiff<'a> {
         self.first_ifd
     }
 
-    /// The raw value bytes of `tag` in `ifd`, with its type and count (bounds-checked).
+    /// The raw value bytes of `tag` in `ifd`, with its type and count (bounds-checked). A tag
+    /// written twice (PiDNG writes DNGVersion and DNGBackwardVersion itself and again when
+    /// its caller sets them) is read from its first entry.
     fn value(&self, ifd: &Ifd, tag: u16) -> IoResult<Option<(u16, u32, &'a [u8])>> {
         let Some(e) = ifd.entries.iter().find(|e| e.tag == tag) else {
             return Ok(None);
@@ -385,12 +389,18 @@ impl<'a> Tiff<'a> {
         Ok(Some(v))
     }
 
-    /// ASCII text up to the first NUL (invalid UTF-8 replaced), at most `max` bytes.
+    /// ASCII text of at most `max` bytes: leading NULs and spaces skipped, up to the next NUL
+    /// (a missing terminator is no error), trimmed; invalid UTF-8 replaced.
     pub fn ascii(&self, ifd: &Ifd, tag: u16, max: usize) -> IoResult<Option<String>> {
         let Some((_, _, b)) = self.value(ifd, tag)? else {
             return Ok(None);
         };
         let b = b.get(..b.len().min(max)).unwrap_or(&[]);
+        let start = b
+            .iter()
+            .position(|&c| c != 0 && !c.is_ascii_whitespace())
+            .unwrap_or(b.len());
+        let b = b.get(start..).unwrap_or(&[]);
         let end = b.iter().position(|&c| c == 0).unwrap_or(b.len());
         let s = String::from_utf8_lossy(b.get(..end).unwrap_or(&[]));
         Ok(Some(s.trim().to_string()))
@@ -400,6 +410,11 @@ impl<'a> Tiff<'a> {
 impl Ifd {
     pub fn has(&self, tag: u16) -> bool {
         self.entries.iter().any(|e| e.tag == tag)
+    }
+
+    /// How many values `tag`'s (first) entry declares, without reading them.
+    pub fn count(&self, tag: u16) -> Option<u32> {
+        self.entries.iter().find(|e| e.tag == tag).map(|e| e.count)
     }
 }
 

@@ -11,6 +11,10 @@
 //! [`RawMeta`] with the CFA (`"RG/WB"`), one black level and the white level, so a DNG renders
 //! exactly as its raw twin does.
 //!
+//! Files as common writers make them (PiDNG writes no CFAPlaneColor unless asked, and some
+//! tags twice) are read where their intent is unambiguous: `docs/dng.md`, "Leniencies", lists
+//! each reading; contradictions and every size, offset and count check stay errors.
+//!
 //! The writer uses the `tiff` crate's encoder: one uncompressed 16-bit strip with the CFA,
 //! levels, AsShotNeutral and CalibrationIlluminant1 tags.
 
@@ -74,7 +78,8 @@ pub struct DngInfo {
     /// 1 (uncompressed) or 7 (lossless JPEG).
     pub compression: u16,
     /// CFAPlaneColor as letters, e.g. `"RGBW"`: the order of AsShotNeutral and the colour
-    /// matrices' rows.
+    /// matrices' rows. Without the tag: the colours CFAPattern uses, in the order R, G, B, W
+    /// (what [`encode_dng`] writes; `"RGB"` for a Bayer pattern, the DNG default).
     pub plane_colors: String,
     /// BlackLevel as stored, one per BlackLevelRepeatDim position.
     pub black_levels: Vec<f64>,
@@ -85,7 +90,11 @@ pub struct DngInfo {
     pub calibration_illuminants: [Option<u16>; 2],
     /// ColorMatrix1/2 (XYZ → camera), row-major, `planes × 3` values.
     pub color_matrices: [Option<Vec<f64>>; 2],
+    /// UniqueCameraModel, Make and Model (IFD0), trimmed of NULs and spaces; `None` when
+    /// absent or empty.
     pub unique_camera_model: Option<String>,
+    pub make: Option<String>,
+    pub model: Option<String>,
 }
 
 impl DngInfo {
@@ -187,6 +196,12 @@ fn encode_err(e: tiff::TiffError) -> IoError {
 /// CFAPlaneColor order: R, G, B, then W, of the colours the CFA uses.
 const PLANE_ORDER: [char; 4] = ['R', 'G', 'B', 'W'];
 
+/// The colour planes of a CFA that uses the colours for which `uses` holds: R, G, B, then W.
+/// The writer's CFAPlaneColor, and the reader's when a file has none.
+fn plane_order(uses: impl Fn(char) -> bool) -> Vec<char> {
+    PLANE_ORDER.into_iter().filter(|&p| uses(p)).collect()
+}
+
 /// An uncompressed 16-bit DNG (version 1.4) of `frame`: CFAPattern, CFARepeatPatternDim and
 /// CFAPlaneColor from `meta.cfa` (one-letter channels R, G, B, W), BlackLevel and WhiteLevel
 /// from `meta`, and what `info` gives.
@@ -212,10 +227,7 @@ pub fn encode_dng(frame: &RawFrame, meta: &RawMeta, info: &DngWriteInfo) -> IoRe
             })?);
         }
     }
-    let planes: Vec<char> = PLANE_ORDER
-        .into_iter()
-        .filter(|p| meta.cfa.contains(*p))
-        .collect();
+    let planes = plane_order(|p| meta.cfa.contains(p));
     let plane_codes: Vec<u8> = planes.iter().filter_map(|&p| cfa_code(p)).collect();
     let bytes = u32::try_from(w as u64 * h as u64 * 2).map_err(|_| IoError::Encode {
         format: "DNG",

@@ -14,6 +14,8 @@ const MAX_REPEAT: u64 = 16;
 const MAX_IFDS: usize = 64;
 
 const TAG_NEW_SUBFILE_TYPE: u16 = 254;
+const TAG_MAKE: u16 = 271;
+const TAG_MODEL: u16 = 272;
 const TAG_WIDTH: u16 = 256;
 const TAG_HEIGHT: u16 = 257;
 const TAG_BITS: u16 = 258;
@@ -123,7 +125,7 @@ pub(super) fn decode(bytes: &[u8], limits: &Limits) -> IoResult<DngImage> {
         )));
     }
 
-    let cam = camera_metadata(&t, &ifd0, &cfa.plane_colors)?;
+    let cam = camera_metadata(&t, &ifd0, &cfa)?;
     let frame = RawFrame {
         width: crop.width,
         height: crop.height,
@@ -144,6 +146,8 @@ pub(super) fn decode(bytes: &[u8], limits: &Limits) -> IoResult<DngImage> {
             calibration_illuminants: cam.calibration_illuminants,
             color_matrices: cam.color_matrices,
             unique_camera_model: cam.unique_camera_model,
+            make: cam.make,
+            model: cam.model,
         },
     })
 }
@@ -223,6 +227,8 @@ struct CfaPattern {
     cols: usize,
     pattern: Vec<char>,
     plane_colors: String,
+    /// Where `plane_colors` comes from (for messages).
+    planes_from: &'static str,
 }
 
 impl CfaPattern {
@@ -253,18 +259,7 @@ fn cfa_pattern(t: &Tiff<'_>, raw: &Ifd) -> IoResult<CfaPattern> {
             "CFALayout {layout_tag}; only the rectangular layout (1) is supported"
         )));
     }
-    let dims = t
-        .uints(raw, TAG_CFA_REPEAT, 2)?
-        .ok_or_else(|| dng_err("the raw image has no CFARepeatPatternDim (33421)"))?;
-    let [rows, cols] = dims[..] else {
-        return Err(dng_err("CFARepeatPatternDim (33421) needs 2 values"));
-    };
-    if !(1..=MAX_REPEAT).contains(&rows) || !(1..=MAX_REPEAT).contains(&cols) {
-        return Err(dng_err(format!(
-            "CFARepeatPatternDim is {rows}×{cols}; each side must be 1–{MAX_REPEAT}"
-        )));
-    }
-    let (rows, cols) = (rows as usize, cols as usize);
+    let (rows, cols) = cfa_dims(t, raw)?;
     let codes = t
         .uints(raw, TAG_CFA_PATTERN, rows * cols)?
         .ok_or_else(|| dng_err("the raw image has no CFAPattern (33422)"))?;
@@ -286,7 +281,7 @@ fn cfa_pattern(t: &Tiff<'_>, raw: &Ifd) -> IoResult<CfaPattern> {
             ))
         })?);
     }
-    let plane_colors = plane_colors(t, raw)?;
+    let (plane_colors, planes_from) = plane_colors(t, raw, &pattern)?;
     if let Some(&l) = pattern.iter().find(|l| !plane_colors.contains(**l)) {
         return Err(dng_err(format!(
             "CFAPattern uses {l}, which CFAPlaneColor ({plane_colors}) does not list"
@@ -297,14 +292,46 @@ fn cfa_pattern(t: &Tiff<'_>, raw: &Ifd) -> IoResult<CfaPattern> {
         cols,
         pattern,
         plane_colors,
+        planes_from,
     })
 }
 
-/// CFAPlaneColor as letters (R, G, B by default), each listed once.
-fn plane_colors(t: &Tiff<'_>, raw: &Ifd) -> IoResult<String> {
-    let planes = t
-        .uints(raw, TAG_CFA_PLANE_COLOR, 16)?
-        .unwrap_or_else(|| vec![0, 1, 2]);
+/// CFARepeatPatternDim as (rows, columns). Without it, a CFAPattern of 4 values is 2×2 (as
+/// dcraw and LibRaw read it); any other count is ambiguous.
+fn cfa_dims(t: &Tiff<'_>, raw: &Ifd) -> IoResult<(usize, usize)> {
+    let Some(dims) = t.uints(raw, TAG_CFA_REPEAT, 2)? else {
+        return match raw.count(TAG_CFA_PATTERN) {
+            Some(4) => Ok((2, 2)),
+            Some(n) => Err(dng_err(format!(
+                "the raw image has no CFARepeatPatternDim (33421) and its CFAPattern has {n} values; only 4 (a 2×2 pattern) need none"
+            ))),
+            None => Err(dng_err("the raw image has no CFARepeatPatternDim (33421)")),
+        };
+    };
+    let [rows, cols] = dims[..] else {
+        return Err(dng_err("CFARepeatPatternDim (33421) needs 2 values"));
+    };
+    if !(1..=MAX_REPEAT).contains(&rows) || !(1..=MAX_REPEAT).contains(&cols) {
+        return Err(dng_err(format!(
+            "CFARepeatPatternDim is {rows}×{cols}; each side must be 1–{MAX_REPEAT}"
+        )));
+    }
+    Ok((rows as usize, cols as usize))
+}
+
+/// Where the colour planes come from, for messages.
+const PLANES_FROM_TAG: &str = "CFAPlaneColor";
+const PLANES_FROM_PATTERN: &str =
+    "the colours CFAPattern uses, R, G, B then W, as the file has no CFAPlaneColor";
+
+/// CFAPlaneColor as letters, each listed once, and where they come from. Without the tag, the
+/// colours `pattern` uses in the order R, G, B, W: what [`super::encode_dng`] writes, and for
+/// a Bayer pattern the DNG default R, G, B.
+fn plane_colors(t: &Tiff<'_>, raw: &Ifd, pattern: &[char]) -> IoResult<(String, &'static str)> {
+    let Some(planes) = t.uints(raw, TAG_CFA_PLANE_COLOR, 16)? else {
+        let planes = super::plane_order(|p| pattern.contains(&p));
+        return Ok((planes.into_iter().collect(), PLANES_FROM_PATTERN));
+    };
     let mut plane_colors = String::new();
     for &code in &planes {
         let l = cfa_letter(code).ok_or_else(|| {
@@ -318,7 +345,7 @@ fn plane_colors(t: &Tiff<'_>, raw: &Ifd) -> IoResult<String> {
         }
         plane_colors.push(l);
     }
-    Ok(plane_colors)
+    Ok((plane_colors, PLANES_FROM_TAG))
 }
 
 /// LinearizationTable, when there is one (it may not be empty).
@@ -453,6 +480,11 @@ fn levels(t: &Tiff<'_>, raw: &Ifd, bits: u32, area: &ActiveArea) -> IoResult<Lev
         None => vec![0.0; br * bc],
         Some(v) if v.len() == br * bc => v,
         Some(v) if v.len() == 1 => vec![v.first().copied().unwrap_or(0.0); br * bc],
+        // one black written once per CFA position without BlackLevelRepeatDim (or more
+        // times than it says): every pixel has that black
+        Some(v) if !v.is_empty() && v.windows(2).all(|p| p.first() == p.last()) => {
+            vec![v.first().copied().unwrap_or(0.0); br * bc]
+        }
         Some(v) => {
             return Err(dng_err(format!(
                 "BlackLevel has {} values; BlackLevelRepeatDim {br}×{bc} needs {}",
@@ -556,18 +588,24 @@ struct CameraMetadata {
     calibration_illuminants: [Option<u16>; 2],
     color_matrices: [Option<Vec<f64>>; 2],
     unique_camera_model: Option<String>,
+    make: Option<String>,
+    model: Option<String>,
 }
 
-/// AsShotNeutral, CalibrationIlluminant1/2, ColorMatrix1/2 (one value, or row, per plane of
-/// `plane_colors`) and UniqueCameraModel.
-fn camera_metadata(t: &Tiff<'_>, ifd0: &Ifd, plane_colors: &str) -> IoResult<CameraMetadata> {
+/// Longest camera name read (UniqueCameraModel, Make, Model).
+const MAX_NAME: usize = 1024;
+
+/// AsShotNeutral, CalibrationIlluminant1/2, ColorMatrix1/2 (one value, or row, per colour
+/// plane of `cfa`), UniqueCameraModel, Make and Model.
+fn camera_metadata(t: &Tiff<'_>, ifd0: &Ifd, cfa: &CfaPattern) -> IoResult<CameraMetadata> {
+    let (plane_colors, planes_from) = (&cfa.plane_colors, cfa.planes_from);
     let n_planes = plane_colors.len();
     let as_shot_neutral = match t.reals(ifd0, TAG_AS_SHOT_NEUTRAL, 16)? {
         None => None,
         Some(v) if v.len() == n_planes && v.iter().all(|&x| x > 0.0) => Some(v),
         Some(v) => {
             return Err(dng_err(format!(
-                "AsShotNeutral holds {v:?}; {n_planes} positive values (one per CFAPlaneColor entry, {plane_colors}) are expected"
+                "AsShotNeutral holds {v:?}; {n_planes} positive values (one per colour plane, {plane_colors}: {planes_from}) are expected"
             )));
         }
     };
@@ -582,18 +620,22 @@ fn camera_metadata(t: &Tiff<'_>, ifd0: &Ifd, plane_colors: &str) -> IoResult<Cam
             Some(v) if v.len() == 3 * n_planes => Some(v),
             Some(v) => {
                 return Err(dng_err(format!(
-                    "{} has {} values; 3 × {n_planes} planes are expected",
+                    "{} has {} values; 3 × {n_planes} colour planes ({plane_colors}: {planes_from}) are expected",
                     tag_name(TAG_COLOR_MATRIX[k]),
                     v.len()
                 )));
             }
         };
     }
-    let unique_camera_model = t.ascii(ifd0, TAG_CAMERA_MODEL, 1024)?;
+    let name = |tag: u16| -> IoResult<Option<String>> {
+        Ok(t.ascii(ifd0, tag, MAX_NAME)?.filter(|s| !s.is_empty()))
+    };
     Ok(CameraMetadata {
         as_shot_neutral,
         calibration_illuminants,
         color_matrices,
-        unique_camera_model,
+        unique_camera_model: name(TAG_CAMERA_MODEL)?,
+        make: name(TAG_MAKE)?,
+        model: name(TAG_MODEL)?,
     })
 }

@@ -1,5 +1,7 @@
 use super::*;
 
+mod leniency;
+
 /// Builds little- or big-endian TIFF/DNG files: data blocks and IFDs appended in order.
 struct Builder {
     be: bool,
@@ -127,7 +129,8 @@ fn cfa_tags(b: &Builder, pattern: &[u8]) -> Vec<E> {
     ]
 }
 
-/// A DNG of `img` (w × h) in IFD0, uncompressed, in strips of `rps` rows.
+/// A DNG of `img` (w × h) in IFD0, uncompressed, in strips of `rps` rows, with the CFA tags
+/// of `R G / W B` and `extra` replacing tags of the same number (type 0: removing them).
 fn strips_dng(
     be: bool,
     img: &[u16],
@@ -164,7 +167,10 @@ fn strips_dng(
     e.extend(cfa_tags(&b, &[0, 1, 6, 2]));
     for x in extra {
         e.retain(|y| y.0 != x.0);
-        e.push(x);
+        // (an entry of type 0 removes the tag)
+        if x.1 != 0 {
+            e.push(x);
+        }
     }
     let at = b.ifd(e);
     b.finish(at)
