@@ -5,8 +5,8 @@ use clap::Args;
 use super::{Cli, CliError, iset, load_sensor, write_file};
 use crate::camera::Camera;
 use crate::eval::{
-    ChartSetup, DeltaEReport, LightLevel, Method, MethodOnChart, PaperOptions, fit_baseline_matrix,
-    noise_split, paper_summary, run_paper_table,
+    ChartSetup, DeltaEReport, LightLevel, Method, MethodOnChart, PaperOptions, SweepOptions,
+    catalogue_sweep, fit_baseline_matrix, noise_split, paper_summary, run_paper_table,
 };
 use crate::l3::L3Table;
 use crate::l3::correct::IlluminantRegistry;
@@ -18,6 +18,12 @@ pub struct EvalArgs {
     /// Run the paper's Table 1 (trains every table it needs).
     #[arg(long)]
     pub paper_table: bool,
+    /// Accuracy on the sensor catalogue: for every `--sensor` (default: all 55 catalogue
+    /// sensors, docs/sensors.md), the noise-free SI_Tun+T row of Table 1 against its matching
+    /// linear map and the table's largest kernel norm; writes catalogue.json and catalogue.md
+    /// to --out. Takes --scenes, --scene-size, --seed and --patch-px.
+    #[arg(long, conflicts_with_all = ["paper_table", "table", "frame", "captures", "estimate_illuminant", "colour_classes", "illuminant", "no_noise", "exposure", "scene_luminance", "chroma_classes"])]
+    pub catalogue: bool,
     /// The table to evaluate (not with --paper-table or --method baseline).
     #[arg(long)]
     pub table: Option<PathBuf>,
@@ -95,7 +101,7 @@ pub struct EvalArgs {
     /// light; what `l3 render` and the service use by default).
     #[arg(long, default_value = "colorimetric")]
     pub correction: CorrectionMode,
-    /// Training scenes per table (with --paper-table).
+    /// Training scenes per table (with --paper-table or --catalogue).
     #[arg(long, default_value_t = 48)]
     pub scenes: usize,
     #[arg(long, default_value_t = 96)]
@@ -133,6 +139,9 @@ pub fn run(cli: &Cli, a: &EvalArgs) -> Result<(), CliError> {
     let chart = chart_setup(a)?;
     if a.paper_table {
         return run_paper_tables(a, iset.as_ref(), chart);
+    }
+    if a.catalogue {
+        return run_catalogue_sweep(a, iset.as_ref());
     }
     if a.estimate_illuminant {
         return run_estimation_study(a, iset.as_ref(), &chart);
@@ -429,6 +438,45 @@ fn run_paper_tables(
         write_file(&a.out.join("summary.md"), md.as_bytes())?;
         println!("wrote {}/summary.md", a.out.display());
     }
+    Ok(())
+}
+
+/// `--catalogue`: the sweep over every `--sensor` (default: the whole catalogue), its
+/// markdown printed, its JSON and markdown written to `--out`.
+fn run_catalogue_sweep(a: &EvalArgs, iset: Option<&IsetData>) -> Result<(), CliError> {
+    let designs = if a.sensor.is_empty() {
+        crate::camera::catalogue::catalogue()
+            .iter()
+            .map(|e| e.load(iset))
+            .collect::<Result<Vec<_>, _>>()?
+    } else {
+        a.sensor
+            .iter()
+            .map(|s| load_sensor(&Some(s.clone()), iset))
+            .collect::<Result<Vec<_>, _>>()?
+    };
+    let opts = SweepOptions {
+        scenes: a.scenes,
+        scene_size: a.scene_size,
+        seed: a.seed,
+        patch_px: a.patch_px.into(),
+    };
+    eprintln!(
+        "… training {} sensors ({} scenes of {} px each)",
+        designs.len(),
+        opts.scenes,
+        opts.scene_size
+    );
+    let sweep = catalogue_sweep(&designs, iset, &opts, &|m| eprintln!("… {m}"))?;
+    let md = sweep.markdown();
+    println!("{md}");
+    let json = serde_json::to_vec_pretty(&sweep).map_err(|e| CliError::Usage(e.to_string()))?;
+    write_file(&a.out.join("catalogue.json"), &json)?;
+    write_file(&a.out.join("catalogue.md"), md.as_bytes())?;
+    println!(
+        "wrote {0}/catalogue.json and {0}/catalogue.md",
+        a.out.display()
+    );
     Ok(())
 }
 

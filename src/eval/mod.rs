@@ -3,6 +3,7 @@
 
 mod budget;
 mod captured_floor;
+mod catalogue_sweep;
 mod colour_classes;
 mod figure;
 mod illuminant_estimation;
@@ -14,6 +15,10 @@ mod workflow;
 
 pub use budget::{ErrorBudget, error_budget};
 pub use captured_floor::{CapturedFloor, captured_floor};
+pub use catalogue_sweep::{
+    CatalogueSweep, LINEAR_MARGIN, NORM_BOUND, SWEEP_LIGHT, SweepOptions, SweepRow, SweepSummary,
+    catalogue_sweep, sweep_row,
+};
 pub use colour_classes::{
     ColourClassRow, ColourClassStudy, colour_class_markdown, colour_class_study,
 };

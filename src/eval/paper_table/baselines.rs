@@ -115,7 +115,7 @@ impl PaperTable {
 }
 
 /// The short name of an acquisition light in the row names (`Tun` for tungsten).
-pub(super) fn short(name: &str) -> String {
+pub(crate) fn short(name: &str) -> String {
     match name.to_ascii_lowercase().as_str() {
         "tungsten" => "Tun".into(),
         "fluorescent" => "Flu".into(),

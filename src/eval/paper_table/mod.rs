@@ -11,9 +11,11 @@ mod run;
 #[cfg(test)]
 mod tests;
 
+pub(crate) use baselines::short;
 pub use markdown::paper_summary;
 pub use rows::{
     BaselineComparison, BaselineFamily, ExposurePoint, PAPER_TABLE1, PaperOptions, PaperRow,
     PaperTable, StorageComparison,
 };
 pub use run::run_paper_table;
+pub(crate) use run::{linear_counterpart, table_spec};

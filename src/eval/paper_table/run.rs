@@ -41,6 +41,48 @@ fn base_training_spec(noise_free: bool) -> TrainingSpec {
     }
 }
 
+/// The training spec of a run's table of `kind` on the lights `ills`.
+pub(crate) fn table_spec(opts: &PaperOptions, kind: TableKind, ills: &[&str]) -> TrainingSpec {
+    TrainingSpec {
+        kind,
+        illuminants: ills.iter().map(|s| s.to_string()).collect(),
+        seed: opts.seed,
+        scenes: opts.scenes,
+        scene_size: opts.scene_size,
+        chroma_classes: opts.chroma_classes,
+        ..base_training_spec(!opts.chart.noise)
+    }
+}
+
+/// An L3 row's matching linear map under the light `acq` (a table whose every class holds
+/// the map) and the correction it is evaluated with: the row's own `corr`, or with
+/// `camera_aware` the map's own C, as the table gets its own.
+pub(crate) fn linear_counterpart(
+    camera: &Camera,
+    t: &L3Table,
+    acq: &str,
+    corr: &IlluminantEntry,
+    camera_aware: bool,
+    iset: Option<&IsetData>,
+) -> Result<(L3Table, IlluminantEntry), EvalError> {
+    let map = matching_linear_map(camera, t, acq, iset)?;
+    let lin_corr = if camera_aware {
+        camera_corrected(
+            camera,
+            &[LevelMap {
+                map: map.clone(),
+                noise: None,
+                chroma: None,
+            }],
+            corr,
+            iset,
+        )?
+    } else {
+        corr.clone()
+    };
+    Ok((linear_table(t, &map)?, lin_corr))
+}
+
 /// Train the tables and evaluate every row. `progress(message)` reports each step.
 pub fn run_paper_table(
     design: &SensorDesign,
@@ -161,16 +203,7 @@ type MethodRow<'t> = (String, Method<'t>, Option<f64>);
 impl Run<'_> {
     fn train(&self, kind: TableKind, ills: &[&str]) -> Result<L3Table, EvalError> {
         (self.progress)(&format!("training {kind} table on {}", ills.join("+")));
-        let opts = self.opts;
-        let spec = TrainingSpec {
-            kind,
-            illuminants: ills.iter().map(|s| s.to_string()).collect(),
-            seed: opts.seed,
-            scenes: opts.scenes,
-            scene_size: opts.scene_size,
-            chroma_classes: opts.chroma_classes,
-            ..base_training_spec(!opts.chart.noise)
-        };
+        let spec = table_spec(self.opts, kind, ills);
         train_table(self.design, &spec, self.iset, &|_, _| {}, &self.cancel)
             .map_err(|e| EvalError::Invalid(e.to_string()))
     }
@@ -384,24 +417,9 @@ impl Run<'_> {
         name: &str,
         camera_aware: bool,
     ) -> Result<(f64, Vec<f64>, BaselineFamily), EvalError> {
-        let (camera, iset, acq) = (&self.camera, self.iset, a.name);
-        let map = matching_linear_map(camera, t, acq, iset)?;
+        let (camera, acq) = (&self.camera, a.name);
         // the linear map gets its own C, as the table does
-        let lin_corr = if camera_aware {
-            camera_corrected(
-                camera,
-                &[LevelMap {
-                    map: map.clone(),
-                    noise: None,
-                    chroma: None,
-                }],
-                &a.corr,
-                iset,
-            )?
-        } else {
-            a.corr.clone()
-        };
-        let lt = linear_table(t, &map)?;
+        let (lt, lin_corr) = linear_counterpart(camera, t, acq, &a.corr, camera_aware, self.iset)?;
         let (lin_method, lin_name) = (Method::Table(&lt), format!("linear {name}"));
         let lin = evaluate_capture(
             camera,
