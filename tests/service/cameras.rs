@@ -109,13 +109,21 @@ async fn a_dng_renders_with_the_table_trained_for_its_camera_without_activating_
         (&s["cfa"], &s["source"]),
         (&"RG/GB".into(), &"rawtoaces".into())
     );
+    // and the active table's sensor (the tiny table is trained on rgbw-paper), no other
     let trained: Vec<_> = list["items"]
         .as_array()
         .unwrap()
         .iter()
         .filter(|s| s["trained"] == true)
+        .map(|s| (s["name"].as_str().unwrap(), s["table_id"].as_str().unwrap()))
         .collect();
-    assert_eq!(trained.len(), 1, "{trained:?}");
+    assert_eq!(
+        trained,
+        [
+            ("bayer-sony-ilce-9", sony_id.as_str()),
+            ("rgbw-paper", active_id.as_str())
+        ]
+    );
     let one = json(
         c.get(url(&server, "/v1/sensors/BAYER-SONY-ILCE-9"))
             .send()
