@@ -228,10 +228,18 @@ fn render_request(
 
 pub fn run(cli: &Cli, a: &RenderArgs) -> Result<(), CliError> {
     let iset = iset(&cli.iset_dir)?;
+    // a table file is read before the input, a data directory's table chosen after it
+    let given = match &a.table {
+        Some(t) => Some((t.clone(), L3Table::load(t)?)),
+        None => None,
+    };
     let white: WhiteLevel = a.white_level.parse()?;
     let loaded = read_mosaic(&a.input, &Limits::default())?;
     let request = render_request(a, white, loaded)?;
-    let (table_path, table) = table_of(a, &request.input)?;
+    let (table_path, table) = match given {
+        Some(t) => t,
+        None => table_of(a, &request.input)?,
+    };
     let ctx = CliRender {
         table: &table,
         iset: iset.as_ref(),
@@ -252,15 +260,12 @@ pub fn run(cli: &Cli, a: &RenderArgs) -> Result<(), CliError> {
     Ok(())
 }
 
-/// `--table`, else a table of the service's data directory chosen as the service chooses
+/// Without `--table`: a table of the service's data directory chosen as the service chooses
 /// ([`choose_table`]): `--table-id`, else the newest good table trained for the catalogue
 /// sensor of the DNG's camera, else the active table (the one a service started there renders
 /// with: [`crate::service::served_table`]). With none, an error that says how to get or
 /// choose one.
 fn table_of(a: &RenderArgs, input: &Input) -> Result<(PathBuf, L3Table), CliError> {
-    if let Some(t) = &a.table {
-        return Ok((t.clone(), L3Table::load(t)?));
-    }
     let cfg = data_config(&a.data_dir)?;
     let camera = if a.table_id.is_none() {
         input.camera()
