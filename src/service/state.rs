@@ -66,7 +66,7 @@ pub struct Inner {
     /// Prepared renderers per (table id, kernel key).
     pub kernel_cache: Mutex<KernelCache>,
     /// Tables other than the active one, loaded on demand, bounded by bytes.
-    pub tables: super::table_cache::TableCache,
+    pub tables: super::table_cache::TableCache<ActiveTable>,
     /// Admission of renders: the body budget, the queue and the render slots.
     pub admission: super::admission::Admission,
     /// Execution: renders running on rayon at once (FIFO); the rest of the admitted wait.

@@ -13,7 +13,6 @@ use std::fmt::Write;
 use std::sync::atomic::{AtomicU64, Ordering};
 use std::sync::{Arc, Mutex};
 
-use super::state::ActiveTable;
 use crate::l3::L3Table;
 
 /// A table's weight in the cache: its kernels' bytes.
@@ -21,41 +20,45 @@ pub fn table_bytes(t: &L3Table) -> usize {
     std::mem::size_of_val(t.kernels.as_slice())
 }
 
-struct Entry {
-    table: Arc<ActiveTable>,
+struct Entry<T> {
+    table: Arc<T>,
     bytes: usize,
     used: u64,
 }
 
-#[derive(Default)]
-struct Lru {
-    entries: HashMap<String, Entry>,
+struct Lru<T> {
+    entries: HashMap<String, Entry<T>>,
     held: usize,
     clock: u64,
 }
 
-/// The cache of tables by id, with its counters.
-pub struct TableCache {
+/// The cache of tables (`T`: a table with what the service keeps beside it) by id, with its
+/// counters.
+pub struct TableCache<T> {
     bound: usize,
-    lru: Mutex<Lru>,
+    lru: Mutex<Lru<T>>,
     pub hits: AtomicU64,
     pub misses: AtomicU64,
     pub evictions: AtomicU64,
 }
 
-impl TableCache {
+impl<T> TableCache<T> {
     /// A cache holding at most `bound` bytes of kernels.
     pub fn new(bound: usize) -> Self {
         TableCache {
             bound,
-            lru: Mutex::new(Lru::default()),
+            lru: Mutex::new(Lru {
+                entries: HashMap::new(),
+                held: 0,
+                clock: 0,
+            }),
             hits: AtomicU64::new(0),
             misses: AtomicU64::new(0),
             evictions: AtomicU64::new(0),
         }
     }
 
-    fn lock(&self) -> std::sync::MutexGuard<'_, Lru> {
+    fn lock(&self) -> std::sync::MutexGuard<'_, Lru<T>> {
         self.lru.lock().unwrap_or_else(|p| p.into_inner())
     }
 
@@ -70,7 +73,7 @@ impl TableCache {
     }
 
     /// The cached table `id` (a hit, made the most recently used), or `None` (a miss).
-    pub fn get(&self, id: &str) -> Option<Arc<ActiveTable>> {
+    pub fn get(&self, id: &str) -> Option<Arc<T>> {
         let mut lru = self.lock();
         lru.clock += 1;
         let now = lru.clock;
@@ -87,16 +90,16 @@ impl TableCache {
         }
     }
 
-    /// Keeps `table`, evicting the least recently used tables until it fits; returns the ids
-    /// evicted. A table larger than the bound is not kept (nothing is evicted for it).
-    pub fn insert(&self, table: Arc<ActiveTable>) -> Vec<String> {
-        let bytes = table_bytes(&table.table);
+    /// Keeps `table` as `id`, weighing `bytes` ([`table_bytes`]), evicting the least recently
+    /// used tables until it fits; returns the ids evicted. A table larger than the bound is not
+    /// kept (nothing is evicted for it).
+    pub fn insert(&self, id: &str, bytes: usize, table: Arc<T>) -> Vec<String> {
         let mut evicted = Vec::new();
         if bytes > self.bound {
             return evicted;
         }
         let mut lru = self.lock();
-        if let Some(old) = lru.entries.remove(&table.id) {
+        if let Some(old) = lru.entries.remove(id) {
             lru.held -= old.bytes;
         }
         while lru.held + bytes > self.bound {
@@ -117,8 +120,8 @@ impl TableCache {
         lru.clock += 1;
         let used = lru.clock;
         lru.held += bytes;
-        let id = table.id.clone();
-        lru.entries.insert(id, Entry { table, bytes, used });
+        lru.entries
+            .insert(id.to_string(), Entry { table, bytes, used });
         evicted
     }
 
@@ -176,32 +179,29 @@ impl TableCache {
 mod tests {
     use super::*;
 
-    fn table(id: &str, floats: usize) -> Arc<ActiveTable> {
+    /// Inserts a table of `floats` kernel values as `id`.
+    fn put(c: &TableCache<L3Table>, id: &str, floats: usize) -> Vec<String> {
         let mut t = crate::test_support::tiny_table().clone();
         t.kernels = vec![0.0; floats];
-        Arc::new(ActiveTable {
-            id: id.into(),
-            sha256: String::new(),
-            table: t,
-        })
+        c.insert(id, table_bytes(&t), Arc::new(t))
     }
 
     #[test]
     fn the_least_recently_used_tables_leave_to_keep_the_bound() {
         let c = TableCache::new(1000);
-        assert!(c.insert(table("a", 100)).is_empty());
-        assert!(c.insert(table("b", 100)).is_empty());
+        assert!(put(&c, "a", 100).is_empty());
+        assert!(put(&c, "b", 100).is_empty());
         assert_eq!(c.held_bytes(), 800);
         assert!(c.get("a").is_some());
         // c needs 400 bytes: b, the least recently used, leaves
-        assert_eq!(c.insert(table("c", 100)), ["b"]);
+        assert_eq!(put(&c, "c", 100), ["b"]);
         assert_eq!(c.held_bytes(), 800);
         assert!(c.contains("a") && c.contains("c") && !c.contains("b"));
         assert!(c.get("b").is_none());
         // larger than the bound: not kept, nothing evicted
-        assert!(c.insert(table("huge", 1000)).is_empty());
+        assert!(put(&c, "huge", 1000).is_empty());
         assert!(!c.contains("huge"));
-        assert_eq!(c.insert(table("d", 250)), ["a", "c"]);
+        assert_eq!(put(&c, "d", 250), ["a", "c"]);
         assert_eq!(c.held_bytes(), 1000);
         let n = |a: &AtomicU64| a.load(Ordering::Relaxed);
         assert_eq!((n(&c.hits), n(&c.misses), n(&c.evictions)), (1, 1, 3));

@@ -7,6 +7,7 @@ use std::sync::Arc;
 
 use super::ServiceError;
 use super::state::{ActiveTable, AppState};
+use super::table_cache::table_bytes;
 use super::tables;
 use crate::pipeline::{Input, StoredTables, TableChoice, choose_table};
 
@@ -61,7 +62,8 @@ async fn cached(state: &AppState, id: &str) -> Result<(Arc<ActiveTable>, bool), 
         return Ok((t, true));
     }
     let t = Arc::new(tables::load_usable(state, id).await?);
-    let evicted = state.tables.insert(t.clone());
+    let bytes = table_bytes(&t.table);
+    let evicted = state.tables.insert(id, bytes, t.clone());
     state.forget_tables(&evicted);
     Ok((t, state.tables.contains(id)))
 }
