@@ -203,6 +203,45 @@ pub fn find(name: &str) -> Option<&'static CatalogueEntry> {
         .find(|e| e.name.eq_ignore_ascii_case(name))
 }
 
+/// A catalogue sensor as `l3 sensors` and `GET /v1/sensors` list it.
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct SensorSummary {
+    pub name: String,
+    /// The CFA as text, rows separated by `/` (`RG/GB`).
+    pub cfa: String,
+    pub source: SensorSource,
+    pub make: Option<String>,
+    pub model: Option<String>,
+    /// Whether a good stored table was trained for it.
+    pub trained: bool,
+    /// The newest such table.
+    pub table_id: Option<String>,
+}
+
+impl CatalogueEntry {
+    /// The entry summarised, with the newest good table trained for it (if any).
+    pub fn summary(&self, table_id: Option<&str>) -> SensorSummary {
+        SensorSummary {
+            name: self.name.clone(),
+            cfa: self.cfa().map(|c| c.to_string()).unwrap_or_default(),
+            source: self.source,
+            make: self.make.clone(),
+            model: self.model.clone(),
+            trained: table_id.is_some(),
+            table_id: table_id.map(String::from),
+        }
+    }
+}
+
+/// Every catalogue sensor summarised, by name; `newest_table(name)` is the newest good table
+/// trained for the sensor `name`, if any.
+pub fn listing<'a>(newest_table: impl Fn(&str) -> Option<&'a str>) -> Vec<SensorSummary> {
+    catalogue()
+        .iter()
+        .map(|e| e.summary(newest_table(&e.name)))
+        .collect()
+}
+
 /// What a raw file says of its camera (each possibly absent).
 #[derive(Clone, Debug, Default, PartialEq, Eq, Serialize)]
 pub struct CameraId {
@@ -467,6 +506,19 @@ mod tests {
         assert_eq!(m.sensors, ["bayer-sony-ilce-7m4"]);
         assert!(match_camera(&id(Some("Nokia N900"), Some("Nokia"), Some("N900"))).is_none());
         assert!(match_camera(&CameraId::default()).is_none());
+    }
+
+    #[test]
+    fn the_listing_marks_trained_sensors() {
+        let l = listing(|n| (n == "bayer-sony-ilce-9").then_some("tbl_1"));
+        assert_eq!(l.len(), 55);
+        let sony = l.iter().find(|s| s.name == "bayer-sony-ilce-9").unwrap();
+        assert_eq!((sony.cfa.as_str(), sony.trained), ("RG/GB", true));
+        assert_eq!(sony.table_id.as_deref(), Some("tbl_1"));
+        assert_eq!(sony.make.as_deref(), Some("Sony"));
+        assert_eq!(l.iter().filter(|s| s.trained).count(), 1);
+        let rgbw = l.iter().find(|s| s.name == "rgbw-paper").unwrap();
+        assert_eq!(rgbw.cfa, "RG/WB");
     }
 
     #[test]

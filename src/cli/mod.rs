@@ -3,6 +3,7 @@
 mod bench;
 mod eval;
 mod render;
+mod sensors;
 mod serve;
 mod sfr;
 mod simulate;
@@ -42,6 +43,9 @@ pub enum Command {
     Bench(bench::BenchArgs),
     /// Sharpness: the ISO 12233 slanted-edge SFR of an edge in an image (JSON).
     Sfr(sfr::SfrArgs),
+    /// The sensor catalogue: name, CFA, source, and the newest table trained for each in the
+    /// data directory.
+    Sensors(sensors::SensorsArgs),
     /// Run the HTTP render service (config/default.toml, --config FILE, L3_* variables).
     Serve(serve::ServeArgs),
 }
@@ -108,6 +112,11 @@ impl From<crate::pipeline::PipelineError> for CliError {
             Kernels(e) | Render(e) => e.into(),
             FrameLight(e) => e.into(),
             Correction(e) => e.into(),
+            UntrainedCamera { ref sensors, .. } => CliError::Usage(format!(
+                "{e}; train one (`l3 train --sensor {} --out FILE`, or POST /v1/training-jobs {{\"sensor\":\"{}\"}} to a service on the data directory), or choose a table with --table FILE or --table-id ID",
+                sensors.first().map_or("", String::as_str),
+                sensors.first().map_or("", String::as_str),
+            )),
         }
     }
 }
@@ -155,6 +164,7 @@ pub fn main() -> ExitCode {
         Command::Eval(a) => eval::run(&cli, a),
         Command::Bench(a) => bench::run(&cli, a),
         Command::Sfr(a) => sfr::run(a),
+        Command::Sensors(a) => sensors::run(a),
         Command::Serve(a) => serve::run(&cli, a),
     };
     match result {

@@ -7,6 +7,7 @@ use std::sync::atomic::AtomicBool;
 
 use clap::Args;
 
+use super::sensors::{block_on, data_config};
 use super::{Cli, CliError, iset, write_file};
 use crate::io::{Limits, LoadedMosaic, PngCompression, read_mosaic};
 use crate::l3::L3Table;
@@ -16,9 +17,8 @@ use crate::l3::table::TableKind;
 use crate::pipeline::{
     CorrectionMode, DecodedFrame, Input, Levels, LightChoice, LightOrigin, OutputFormat,
     PipelineError, RenderContext, RenderOptions, RenderOutcome, RenderRequest, Renderer, Scaling,
-    check_preview, decode, parse_region,
+    StoredTables, TableChoice, check_preview, choose_table, decode, parse_region,
 };
-use crate::service::{ServiceConfig, ServiceError};
 use crate::spectral::IsetData;
 
 #[derive(Args, Debug)]
@@ -27,11 +27,16 @@ pub struct RenderArgs {
     /// directory (`--data-dir`), as recorded in its database.
     #[arg(long)]
     pub table: Option<PathBuf>,
-    /// The service's data directory, whose active table renders when `--table` is not given
-    /// (default: the service's, `L3_DATA_DIR` or ./data; its database: `L3_DATABASE_URL`, else
-    /// the directory's l3.sqlite).
+    /// The service's data directory, whose tables render when `--table` is not given: the one
+    /// `--table-id` names, else the newest trained for the catalogue sensor of a DNG's camera
+    /// (UniqueCameraModel, else Make and Model), else the active table (default: the service's
+    /// directory, `L3_DATA_DIR` or ./data; its database: `L3_DATABASE_URL`, else the
+    /// directory's l3.sqlite).
     #[arg(long, value_name = "DIR")]
     pub data_dir: Option<PathBuf>,
+    /// A stored table of the data directory to render with, by id (as `?table=` does).
+    #[arg(long, value_name = "ID", conflicts_with = "table")]
+    pub table_id: Option<String>,
     /// Acquisition illuminant: a registry name (D65, D50, A, F2, F11, Tungsten,
     /// Fluorescent), cct:K, xy:x,y (a chromaticity), or any illuminant spec. Default: the sidecar's `illuminant`, else
     /// a DNG's AsShotNeutral (matched to a colour temperature through the table's sensor),
@@ -223,10 +228,18 @@ fn render_request(
 
 pub fn run(cli: &Cli, a: &RenderArgs) -> Result<(), CliError> {
     let iset = iset(&cli.iset_dir)?;
-    let (table_path, table) = table_of(a)?;
+    // a table file is read before the input, a data directory's table chosen after it
+    let given = match &a.table {
+        Some(t) => Some((t.clone(), L3Table::load(t)?)),
+        None => None,
+    };
     let white: WhiteLevel = a.white_level.parse()?;
     let loaded = read_mosaic(&a.input, &Limits::default())?;
     let request = render_request(a, white, loaded)?;
+    let (table_path, table) = match given {
+        Some(t) => t,
+        None => table_of(a, &request.input)?,
+    };
     let ctx = CliRender {
         table: &table,
         iset: iset.as_ref(),
@@ -247,34 +260,47 @@ pub fn run(cli: &Cli, a: &RenderArgs) -> Result<(), CliError> {
     Ok(())
 }
 
-/// `--table`, else the active table of the service's data directory (the one a service
-/// started there renders with: [`crate::service::served_table`]); with none, an error that
-/// says how to get or choose one.
-fn table_of(a: &RenderArgs) -> Result<(PathBuf, L3Table), CliError> {
-    if let Some(t) = &a.table {
-        return Ok((t.clone(), L3Table::load(t)?));
-    }
-    let mut cfg = ServiceConfig::load(None).map_err(|e| CliError::Usage(e.to_string()))?;
-    if let Some(d) = &a.data_dir {
-        cfg.data.dir = d.clone();
-    }
-    let rt = tokio::runtime::Builder::new_current_thread()
-        .enable_all()
-        .build()
-        .map_err(|e| ServiceError::Internal(format!("cannot start the async runtime: {e}")))?;
-    let served = rt.block_on(crate::service::served_table(&cfg))?;
+/// Without `--table`: a table of the service's data directory chosen as the service chooses
+/// ([`choose_table`]): `--table-id`, else the newest good table trained for the catalogue
+/// sensor of the DNG's camera, else the active table (the one a service started there renders
+/// with: [`crate::service::served_table`]). With none, an error that says how to get or
+/// choose one.
+fn table_of(a: &RenderArgs, input: &Input) -> Result<(PathBuf, L3Table), CliError> {
+    let cfg = data_config(&a.data_dir)?;
+    let camera = if a.table_id.is_none() {
+        input.camera()
+    } else {
+        None
+    };
+    let stored = match &camera {
+        Some(_) => block_on(crate::service::stored_tables_in(&cfg))??,
+        None => StoredTables::default(),
+    };
+    let choice = choose_table(a.table_id.as_deref(), camera.as_ref(), &stored)
+        .map_err(|e| input_error(e, &a.input))?;
     let dir = cfg.data.dir.display();
-    let Some(served) = served else {
-        return Err(CliError::Usage(format!(
-            "no --table given and the data directory {dir} has no active table; pass --table FILE: \
-             train one with `l3 train --out FILE`, or start `l3 serve --data-dir {dir}` (it trains \
-             a default table), or activate a stored one (POST /v1/tables/{{id}}/activate)"
-        )));
+    let served = match choice.table_id() {
+        Some(id) => block_on(crate::service::stored_table_in(&cfg, id))??,
+        None => block_on(crate::service::served_table(&cfg))??.ok_or_else(|| {
+            CliError::Usage(format!(
+                "no --table given and the data directory {dir} has no active table; pass --table FILE: \
+                 train one with `l3 train --out FILE`, or start `l3 serve --data-dir {dir}` (it trains \
+                 a default table), or activate a stored one (POST /v1/tables/{{id}}/activate)"
+            ))
+        })?,
     };
     for why in &served.passed_over {
         eprintln!("warning: the data directory's table {why}; passed over");
     }
-    eprintln!("table: {} (active in {dir})", served.id);
+    let why = match &choice {
+        TableChoice::Active => format!("active in {dir}"),
+        TableChoice::Named(_) => format!("--table-id, in {dir}"),
+        TableChoice::Camera { sensor, camera, .. } => format!(
+            "in {dir}, trained for {sensor}, the sensor of the file's camera {} {}",
+            camera.make, camera.model
+        ),
+    };
+    eprintln!("table: {} ({why})", served.id);
     Ok((served.path, served.table))
 }
 

@@ -21,7 +21,8 @@ mod tiff_format;
 
 pub(crate) use atomic::{is_temp_of, write_bytes_atomic, write_bytes_atomic_then};
 pub use dng::{
-    DngImage, DngInfo, DngWriteInfo, decode_dng, encode_dng, exif_light_source, is_dng, write_dng,
+    DngCamera, DngImage, DngInfo, DngWriteInfo, decode_dng, encode_dng, exif_light_source, is_dng,
+    read_camera, write_dng,
 };
 pub use error::{IoError, IoResult};
 pub use limits::Limits;

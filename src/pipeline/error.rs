@@ -67,6 +67,14 @@ pub enum PipelineError {
     Render(#[from] RenderError),
     #[error(transparent)]
     Encode(IoError),
+    /// The file's camera is a catalogue sensor for which no good table is stored.
+    #[error("the file's camera ({camera}) is the catalogue sensor {}, and no table trained for it is stored", sensors.join(" or "))]
+    UntrainedCamera {
+        /// The catalogue's maker and model.
+        camera: String,
+        /// Its catalogue sensors, best first.
+        sensors: Vec<String>,
+    },
 }
 
 /// A declared dimension, `?` when not declared.

@@ -14,11 +14,13 @@
 //!   reference renderer;
 //! - [`output`] — the output formats (PNG, PPM, float XYZ or 16-bit sRGB TIFF, raw f32 XYZ) and
 //!   their one encoder;
+//! - [`choice`] — which table renders: the named one, the camera's, or the default;
 //! - [`error`] — [`PipelineError`].
 //!
 //! The caller supplies a [`RenderContext`]: the table, how a light's name resolves, and where
 //! prepared renderers come from (the service caches them by [`KernelKey`]).
 
+pub mod choice;
 pub mod error;
 pub mod input;
 pub mod kernels;
@@ -30,6 +32,7 @@ use std::sync::Arc;
 use std::sync::atomic::AtomicBool;
 use std::time::Instant;
 
+pub use choice::{StoredTables, TableChoice, choose_table};
 pub use error::{CfaOrigin, PipelineError};
 pub use input::{DecodedFrame, Input, Levels, Samples, Scaling, decode};
 pub use kernels::{

@@ -20,6 +20,30 @@ pub struct ServiceConfig {
     pub server: ServerConfig,
     pub data: DataConfig,
     pub training: TrainingConfig,
+    #[serde(default)]
+    pub tables: TablesConfig,
+}
+
+/// `[tables]`: tables other than the active one, loaded on demand.
+#[derive(Clone, Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct TablesConfig {
+    /// Bytes of kernels the cache of non-active tables may hold (least recently used first
+    /// out); the active table does not count.
+    #[serde(default = "default_table_cache_bytes")]
+    pub cache_bytes: usize,
+}
+
+impl Default for TablesConfig {
+    fn default() -> Self {
+        TablesConfig {
+            cache_bytes: default_table_cache_bytes(),
+        }
+    }
+}
+
+fn default_table_cache_bytes() -> usize {
+    256 << 20
 }
 
 /// `[server]`: listener, limits and authentication.
@@ -238,6 +262,7 @@ impl ServiceConfig {
                 }
             }
             "L3_MAX_CONCURRENT_JOBS" => self.training.max_concurrent_jobs = num(key, value)?,
+            "L3_TABLE_CACHE_BYTES" => self.tables.cache_bytes = num(key, value)?,
             _ => {}
         }
         Ok(())
@@ -314,6 +339,7 @@ mod tests {
             ("L3_BIND".to_string(), "0.0.0.0:9000".to_string()),
             ("L3_AUTO_TRAIN".to_string(), "false".to_string()),
             ("L3_PNG_COMPRESSION".to_string(), "best".to_string()),
+            ("L3_TABLE_CACHE_BYTES".to_string(), "1000".to_string()),
         ];
         let c = ServiceConfig::load_with_env(Some(&f), &env).unwrap();
         assert_eq!(c.server.max_pixels, 1000);
@@ -322,6 +348,9 @@ mod tests {
         assert_eq!(c.server.bind.to_string(), "0.0.0.0:9000");
         assert!(!c.training.auto_train_default);
         assert_eq!(c.server.png_compression, PngCompression::Best);
+        assert_eq!(c.tables.cache_bytes, 1000);
+        let c = ServiceConfig::load_with_env(None, &[]).unwrap();
+        assert_eq!(c.tables.cache_bytes, 268435456);
     }
 
     #[test]

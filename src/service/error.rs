@@ -24,14 +24,17 @@ pub enum ServiceError {
     /// An input the request's parameters make inconsistent.
     #[error("{0}")]
     Unprocessable(String),
-    /// The input's CFA (from the query or the file) is not the active table's.
-    #[error("{source_desc} CFA '{input}' does not match the active table's CFA '{table}'")]
+    /// The input's CFA (from the query or the file) is not the rendering table's.
+    #[error("{source_desc} CFA '{input}' does not match the table's CFA '{table}'")]
     CfaMismatch {
         /// Where the input's CFA comes from, e.g. "the query's" or "the DNG's".
         source_desc: &'static str,
         input: String,
         table: String,
     },
+    /// The file's camera is a catalogue sensor no stored table was trained for.
+    #[error("{0}")]
+    UntrainedCamera(String),
     #[error("{0}")]
     NotFound(String),
     #[error("{0}")]
@@ -85,7 +88,9 @@ impl ServiceError {
             BadRequest(_) | InvalidImage(_) | InvalidJson(_) | UnknownIlluminant(_) => {
                 StatusCode::BAD_REQUEST
             }
-            Unprocessable(_) | CfaMismatch { .. } => StatusCode::UNPROCESSABLE_ENTITY,
+            Unprocessable(_) | CfaMismatch { .. } | UntrainedCamera(_) => {
+                StatusCode::UNPROCESSABLE_ENTITY
+            }
             NotFound(_) => StatusCode::NOT_FOUND,
             Conflict(_) => StatusCode::CONFLICT,
             PayloadTooLarge(_) => StatusCode::PAYLOAD_TOO_LARGE,
@@ -112,6 +117,7 @@ impl ServiceError {
             UnknownIlluminant(_) => "unknown_illuminant",
             Unprocessable(_) => "unprocessable",
             CfaMismatch { .. } => "cfa_mismatch",
+            UntrainedCamera(_) => "untrained_camera",
             NotFound(_) => "not_found",
             Conflict(_) => "conflict",
             PayloadTooLarge(_) => "payload_too_large",
@@ -260,6 +266,12 @@ impl From<crate::pipeline::PipelineError> for ServiceError {
             Correction(e) => ServiceError::Internal(e.to_string()),
             Kernels(e) => ServiceError::Internal(e.to_string()),
             Render(e) => ServiceError::from_l3(e, ServiceError::InvalidImage),
+            UntrainedCamera { ref sensors, .. } => {
+                let sensor = sensors.first().map_or("", String::as_str);
+                ServiceError::UntrainedCamera(format!(
+                    "{e}; train one with POST /v1/training-jobs {{\"sensor\":\"{sensor}\"}} (GET /v1/sensors/{sensor} describes it), or name a table with ?table=ID"
+                ))
+            }
         }
     }
 }

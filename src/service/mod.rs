@@ -15,9 +15,12 @@ mod jobs;
 mod metrics;
 mod render;
 mod routes;
+mod sensors;
 mod state;
 pub mod store;
 mod sync;
+mod table_cache;
+mod table_choice;
 mod tables;
 
 use std::collections::HashMap;
@@ -29,7 +32,9 @@ use arc_swap::ArcSwapOption;
 use tokio::sync::{Notify, Semaphore};
 
 pub use admission::Admission;
-pub use config::{DEFAULT_CONFIG_TOML, DataConfig, ServerConfig, ServiceConfig, TrainingConfig};
+pub use config::{
+    DEFAULT_CONFIG_TOML, DataConfig, ServerConfig, ServiceConfig, TablesConfig, TrainingConfig,
+};
 pub use error::ServiceError;
 // what the fuzz bodies (`crate::fuzzing`, test support only) run as the service does
 pub use accept::negotiate;
@@ -247,6 +252,7 @@ async fn open_state(cfg: &ServiceConfig) -> Result<(AppState, TrainingSpec), Ser
         default_registry: defaults,
         active: ArcSwapOption::empty(),
         kernel_cache: Mutex::new(HashMap::new()),
+        tables: table_cache::TableCache::new(cfg.tables.cache_bytes),
         metrics: metrics::Metrics::default(),
         tables_dir,
         job_notify: Notify::new(),
@@ -354,14 +360,50 @@ pub struct ServedTable {
 /// the last good one, its file checked against its recorded SHA-256. Reads only; `None` when
 /// the data directory has no database (a service never ran there) or no usable table.
 pub async fn served_table(cfg: &ServiceConfig) -> Result<Option<ServedTable>, ServiceError> {
+    let Some(store) = existing_store(cfg).await? else {
+        return Ok(None);
+    };
+    let served = tables::served_table(&store, &cfg.data.dir.join("tables")).await;
+    store.close().await;
+    served
+}
+
+/// Opens the store of `cfg`'s data directory for reading, `None` when it has no database (a
+/// service never ran there).
+async fn existing_store(cfg: &ServiceConfig) -> Result<Option<Store>, ServiceError> {
     let url = cfg.data.database_url.trim();
     if url.is_empty() && !cfg.data.dir.join(store::SQLITE_FILE).is_file() {
         return Ok(None);
     }
-    let store = Store::connect(url, &cfg.data.dir).await?;
-    let served = tables::served_table(&store, &cfg.data.dir.join("tables")).await;
+    Ok(Some(Store::connect(url, &cfg.data.dir).await?))
+}
+
+/// The good stored tables of `cfg`'s data directory by the sensor they were trained for,
+/// newest first (none without a database): what `l3 sensors` and `l3 render`'s table choice
+/// read, as the service's do.
+pub async fn stored_tables_in(
+    cfg: &ServiceConfig,
+) -> Result<crate::pipeline::StoredTables, ServiceError> {
+    let Some(store) = existing_store(cfg).await? else {
+        return Ok(Default::default());
+    };
+    let stored = tables::stored_tables(&store).await;
     store.close().await;
-    served
+    stored
+}
+
+/// The stored table `id` of `cfg`'s data directory, its file checked against its recorded
+/// SHA-256 (what a render naming it uses). Reads only.
+pub async fn stored_table_in(cfg: &ServiceConfig, id: &str) -> Result<ServedTable, ServiceError> {
+    let Some(store) = existing_store(cfg).await? else {
+        return Err(ServiceError::NotFound(format!(
+            "no table with id '{id}': the data directory {} has no database",
+            cfg.data.dir.display()
+        )));
+    };
+    let t = tables::stored_table(&store, &cfg.data.dir.join("tables"), id).await;
+    store.close().await;
+    t
 }
 
 /// Stores a table in the service (file written atomically, checksum recorded) and optionally

@@ -27,6 +27,7 @@ use super::ServiceError;
 use super::accept::negotiate;
 use super::config::ServerConfig;
 use super::state::{ActiveTable, AppState};
+use super::table_choice::table_for;
 use crate::io::{Limits, UnknownPngCompression};
 use crate::l3::L3Table;
 use crate::l3::correct::IlluminantEntry;
@@ -34,7 +35,7 @@ use crate::l3::render::WhiteLevel;
 use crate::pipeline::{
     CorrectionMode, Encoded, Input, KernelChoice, Levels, LightChoice, LightOrigin, OutputFormat,
     PipelineError, RenderContext, RenderOptions, RenderOutcome, RenderPipeline, RenderRequest,
-    Renderer, Scaling, check_preview, parse_region,
+    Renderer, Scaling, TableChoice, check_preview, parse_region,
 };
 use crate::spectral::IsetData;
 
@@ -64,6 +65,8 @@ pub struct RenderQuery {
     pub png_compression: Option<String>,
     /// `camera` or `colorimetric` (default: the config's `correction`).
     pub correction: Option<String>,
+    /// A stored table to render with instead of the active one (or the DNG camera's).
+    pub table: Option<String>,
 }
 
 /// The request body, or a problem saying why it could not be read.
@@ -192,11 +195,13 @@ pub async fn admit(State(state): State<AppState>, req: Request, next: Next) -> R
     resp
 }
 
-/// A render against the active table: lights from the service's registry (no files over
-/// HTTP), prepared renderers from its cache.
+/// A render against the chosen table (the active one unless the request or its DNG's camera
+/// chose another: [`super::table_choice`]): lights from the service's registry (no files
+/// over HTTP), prepared renderers from its cache while the table is held.
 struct ServiceRender {
     state: AppState,
     active: Arc<ActiveTable>,
+    keep_renderers: bool,
 }
 
 impl RenderContext for ServiceRender {
@@ -215,7 +220,8 @@ impl RenderContext for ServiceRender {
     }
 
     fn renderer(&self, choice: &KernelChoice<'_>) -> Result<Arc<RenderPipeline>, ServiceError> {
-        self.state.renderer_for(&self.active, choice)
+        self.state
+            .renderer_for(&self.active, choice, self.keep_renderers)
     }
 }
 
@@ -337,19 +343,17 @@ pub async fn render(
     headers: HeaderMap,
     query: Result<Query<RenderQuery>, QueryRejection>,
 ) -> Result<Response, ServiceError> {
-    let Query(q) = query.map_err(|e| ServiceError::BadRequest(e.body_text()))?;
+    let Query(mut q) = query.map_err(|e| ServiceError::BadRequest(e.body_text()))?;
     let format = negotiate(headers.get(header::ACCEPT).and_then(|v| v.to_str().ok()))?;
+    let named = q.table.take();
     let request = render_request(q, &headers, admitted.body, format, &state.config.server)?;
     let (format, correction) = (request.format, request.correction);
-    let active = state.active.load_full().ok_or_else(|| {
-        ServiceError::NotReady(
-            "no table is active yet (the default table may still be training; see /readyz)".into(),
-        )
-    })?;
-    let table_id = active.id.clone();
+    let chosen = table_for(&state, named.as_deref(), &request.input).await?;
+    let table = (chosen.table.id.clone(), chosen.choice);
     let ctx = ServiceRender {
         state: state.clone(),
-        active,
+        active: chosen.table,
+        keep_renderers: chosen.keep_renderers,
     };
     // the query's CFA and a named illuminant are checked before the body is decoded
     let prepared = request.prepare(&ctx)?;
@@ -399,7 +403,7 @@ pub async fn render(
     state
         .metrics
         .rendered((out.input_width * out.input_height) as u64);
-    Ok(respond(out, format, table_id, correction, queue_ms))
+    Ok(respond(out, format, table, correction, queue_ms))
 }
 
 /// The answer of a render: the output with its media type, and what the render reports in
@@ -407,7 +411,7 @@ pub async fn render(
 fn respond(
     out: RenderOutcome,
     format: OutputFormat,
-    table_id: String,
+    (table_id, choice): (String, TableChoice),
     correction: CorrectionMode,
     queue_ms: f64,
 ) -> Response {
@@ -432,6 +436,10 @@ fn respond(
         LightOrigin::Frame(source) => source.name(),
     };
     put("x-l3-table", table_id);
+    put("x-l3-table-choice", choice.as_str().to_string());
+    if let Some(sensor) = choice.sensor() {
+        put("x-l3-sensor", sensor.to_string());
+    }
     put("x-l3-illuminant", out.light);
     put("x-l3-illuminant-source", source.to_string());
     put("x-l3-correction", correction.as_str().to_string());

@@ -18,7 +18,7 @@ use tower_http::request_id::{
 use tower_http::trace::TraceLayer;
 
 use super::state::AppState;
-use super::{ServiceError, evaluations, illuminants, jobs, render, tables};
+use super::{ServiceError, evaluations, illuminants, jobs, render, sensors, tables};
 
 /// Every served route as (method, path); openapi.yaml documents exactly these.
 pub const ROUTES: &[(&str, &str)] = &[
@@ -31,6 +31,8 @@ pub const ROUTES: &[(&str, &str)] = &[
     ("GET", "/v1/tables/{id}"),
     ("GET", "/v1/tables/{id}/download"),
     ("POST", "/v1/tables/{id}/activate"),
+    ("GET", "/v1/sensors"),
+    ("GET", "/v1/sensors/{name}"),
     ("GET", "/v1/illuminants"),
     ("GET", "/v1/illuminants/{name}"),
     ("PUT", "/v1/illuminants/{name}"),
@@ -63,6 +65,8 @@ fn handler(method: &str, path: &str) -> Option<MethodRouter<AppState>> {
         ("GET", "/v1/tables/{id}") => get(tables::get),
         ("GET", "/v1/tables/{id}/download") => get(tables::download),
         ("POST", "/v1/tables/{id}/activate") => post(tables::activate),
+        ("GET", "/v1/sensors") => get(sensors::list),
+        ("GET", "/v1/sensors/{name}") => get(sensors::get),
         ("GET", "/v1/illuminants") => get(illuminants::list),
         ("GET", "/v1/illuminants/{name}") => get(illuminants::get),
         ("PUT", "/v1/illuminants/{name}") => put(illuminants::put),
@@ -101,6 +105,7 @@ async fn metrics(State(state): State<AppState>) -> Result<Response, ServiceError
     let counts = jobs::counts(&state).await?;
     let mut text = state.metrics.render(&counts, state.active.load().is_some());
     text.push_str(&state.admission.exposition());
+    text.push_str(&state.tables.exposition());
     let mut r = text.into_response();
     r.headers_mut().insert(
         header::CONTENT_TYPE,

@@ -65,6 +65,8 @@ pub struct Inner {
     pub active: ArcSwapOption<ActiveTable>,
     /// Prepared renderers per (table id, kernel key).
     pub kernel_cache: Mutex<KernelCache>,
+    /// Tables other than the active one, loaded on demand, bounded by bytes.
+    pub tables: super::table_cache::TableCache<ActiveTable>,
     /// Admission of renders: the body budget, the queue and the render slots.
     pub admission: super::admission::Admission,
     /// Execution: renders running on rayon at once (FIFO); the rest of the admitted wait.
@@ -121,18 +123,20 @@ impl Inner {
     }
 
     /// The renderer for `active` under the kernel selection `choice`, cached per (table,
-    /// [`KernelKey`]).
+    /// [`KernelKey`]) when `keep` (the table is held: active, or in the table cache).
     pub fn renderer_for(
         &self,
         active: &ActiveTable,
         choice: &KernelChoice<'_>,
+        keep: bool,
     ) -> Result<Arc<RenderPipeline>, ServiceError> {
         let key = (active.id.clone(), choice.key().clone());
-        if let Some(k) = self
-            .kernel_cache
-            .lock()
-            .unwrap_or_else(|p| p.into_inner())
-            .get(&key)
+        if keep
+            && let Some(k) = self
+                .kernel_cache
+                .lock()
+                .unwrap_or_else(|p| p.into_inner())
+                .get(&key)
         {
             return Ok(k.clone());
         }
@@ -142,12 +146,28 @@ impl Inner {
             e => e.into(),
         })?;
         let r = Arc::new(RenderPipeline::prepare(&active.table, &kernels).map_err(table_fault)?);
+        if !keep {
+            return Ok(r);
+        }
         let mut cache = self.kernel_cache.lock().unwrap_or_else(|p| p.into_inner());
         if cache.len() >= KERNEL_CACHE_ENTRIES {
             cache.clear();
         }
         cache.insert(key, r.clone());
         Ok(r)
+    }
+
+    /// Drops the prepared renderers of tables evicted from the table cache (unless one is
+    /// the active table, whose renderers stay).
+    pub fn forget_tables(&self, ids: &[String]) {
+        if ids.is_empty() {
+            return;
+        }
+        let active = self.active.load().as_ref().map(|a| a.id.clone());
+        self.kernel_cache
+            .lock()
+            .unwrap_or_else(|p| p.into_inner())
+            .retain(|(id, _), _| !ids.contains(id) || active.as_deref() == Some(id.as_str()));
     }
 
     /// Drops cached kernels of an illuminant (after it was redefined or deleted).

@@ -17,6 +17,7 @@ use super::ServiceError;
 use super::state::{ActiveTable, AppState, Inner, now_ms, sha256_hex};
 use super::store::{NewTable, Store, TableRow, TableStatus};
 use crate::l3::L3Table;
+use crate::pipeline::StoredTables;
 
 /// A table file written to disk.
 #[derive(Debug, Clone)]
@@ -295,6 +296,45 @@ pub async fn verify_all(state: &Inner) -> Result<Vec<(String, String)>, ServiceE
     Ok(bad)
 }
 
+/// The good stored tables by the sensor they were trained for (`meta.sensor_name`), newest
+/// first: what the table choice of a render and the sensor listing read.
+pub(super) async fn stored_tables(store: &Store) -> Result<StoredTables, ServiceError> {
+    #[derive(serde::Deserialize)]
+    struct SensorName {
+        sensor_name: String,
+    }
+    let rows = store.usable_tables_newest_first().await?;
+    Ok(StoredTables::newest_first(rows.into_iter().filter_map(
+        |(id, meta)| {
+            let m: SensorName = serde_json::from_str(&meta).ok()?;
+            Some((m.sensor_name, id))
+        },
+    )))
+}
+
+/// The stored table `id` of the data directory `tables_dir` and its `store`, its bytes
+/// checked against the recorded SHA-256 (404 when there is none, 409 when its file is
+/// corrupt or missing). Reads only.
+pub(super) async fn stored_table(
+    store: &Store,
+    tables_dir: &Path,
+    id: &str,
+) -> Result<super::ServedTable, ServiceError> {
+    let row = store.existing_table(id).await?;
+    match fetch_checked_in(store, tables_dir, &row).await {
+        Ok((_, table)) => Ok(super::ServedTable {
+            id: row.id,
+            path: tables_dir.join(&row.path),
+            table,
+            passed_over: Vec::new(),
+        }),
+        Err(e @ (TableFileError::Missing(_) | TableFileError::Corrupt(_))) => Err(
+            ServiceError::Conflict(format!("table '{id}' cannot be used: {}", e.message())),
+        ),
+        Err(e) => Err(ServiceError::Internal(e.message().to_string())),
+    }
+}
+
 /// The ids a start tries to make active, in order: the recorded active table, then the
 /// usable ones, most recently activated first, then the newest.
 pub(super) async fn activation_candidates(store: &Store) -> Result<Vec<String>, ServiceError> {
@@ -336,8 +376,8 @@ pub(super) async fn served_table(
     Ok(None)
 }
 
-/// Loads table `id` (checksum verified) for activation.
-async fn load_for_activation(state: &Inner, id: &str) -> Result<ActiveTable, ServiceError> {
+/// Loads table `id` (checksum verified) for activation or for renders that name it.
+pub(super) async fn load_usable(state: &Inner, id: &str) -> Result<ActiveTable, ServiceError> {
     let (_, table, sha, _) = load_verified(state, id).await?;
     if table.meta.grid != *state.default_registry.grid() {
         return Err(ServiceError::Unprocessable(format!(
@@ -360,7 +400,7 @@ pub async fn follow_recorded_active(state: &Inner) -> Result<(), ServiceError> {
     if state.active.load().as_ref().is_some_and(|a| a.id == id) {
         return Ok(());
     }
-    let loaded = load_for_activation(state, &id).await?;
+    let loaded = load_usable(state, &id).await?;
     state.active.store(Some(Arc::new(loaded)));
     tracing::info!(table = id, "table activated (through another replica)");
     Ok(())
@@ -370,7 +410,7 @@ pub async fn follow_recorded_active(state: &Inner) -> Result<(), ServiceError> {
 /// (and the activation time, so a start can fall back to the last good table) and announces
 /// it to the other replicas.
 pub async fn activate_table(state: &AppState, id: &str) -> Result<(), ServiceError> {
-    let loaded = load_for_activation(state, id).await?;
+    let loaded = load_usable(state, id).await?;
     #[cfg(feature = "fault-injection")]
     if state.active.load().is_some() {
         super::fault_injection::pause_before_recording_activation(id).await;

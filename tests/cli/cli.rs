@@ -7,7 +7,7 @@ use std::process::Command;
 
 /// Runs `f` on the state of a service started on `data` (no listener in use beyond a free
 /// local port, no default training), then stops the service.
-fn with_service<F, Fut, T>(data: &Path, f: F) -> T
+pub(crate) fn with_service<F, Fut, T>(data: &Path, f: F) -> T
 where
     F: FnOnce(l3::service::AppState) -> Fut,
     Fut: std::future::Future<Output = T>,
@@ -25,7 +25,7 @@ where
     })
 }
 
-fn l3(args: &[&str], dir: &Path) -> (bool, String, String) {
+pub(crate) fn l3(args: &[&str], dir: &Path) -> (bool, String, String) {
     let out = Command::new(env!("CARGO_BIN_EXE_l3"))
         .args(args)
         .current_dir(dir)

@@ -1,4 +1,5 @@
-//! The HTTP service, one test binary: the API end to end (`api`), training jobs (`jobs`), the
+//! The HTTP service, one test binary: the API end to end (`api`), training jobs (`jobs`), renders
+//! with the table of a DNG's camera or a named table and the sensor catalogue (`cameras`), the
 //! evaluation figure (`figure`), render admission (`admission`), crash safety of the real
 //! `l3 serve` process (`crash`), the typed store over rows the previous store wrote
 //! (`store_compat`), and openapi.yaml against the served routes (`spec`: not named
@@ -16,6 +17,7 @@ mod service_support;
 
 mod admission;
 mod api;
+mod cameras;
 mod crash;
 mod figure;
 mod jobs;

@@ -93,11 +93,36 @@ pub struct DngInfo {
     /// UniqueCameraModel, Make and Model (IFD0), trimmed of NULs and spaces; `None` when
     /// absent or empty.
     pub unique_camera_model: Option<String>,
+    /// Make (271) and Model (272) of IFD0, trimmed of NULs and spaces.
     pub make: Option<String>,
     pub model: Option<String>,
 }
 
+/// What a DNG says of its camera: UniqueCameraModel, Make and Model of IFD0 (each trimmed of
+/// NULs and spaces; an empty one is absent).
+#[derive(Debug, Clone, Default, PartialEq, Eq)]
+pub struct DngCamera {
+    pub unique_camera_model: Option<String>,
+    pub make: Option<String>,
+    pub model: Option<String>,
+}
+
+/// The camera a DNG names, from IFD0's tags alone: no pixel is read or decoded, so a render
+/// can choose its table before it decodes the frame.
+pub fn read_camera(bytes: &[u8]) -> IoResult<DngCamera> {
+    read::camera(bytes)
+}
+
 impl DngInfo {
+    /// The camera the DNG names.
+    pub fn camera(&self) -> DngCamera {
+        DngCamera {
+            unique_camera_model: self.unique_camera_model.clone(),
+            make: self.make.clone(),
+            model: self.model.clone(),
+        }
+    }
+
     /// AsShotNeutral as (channel letter, value) pairs.
     pub fn neutral(&self) -> Option<Vec<(String, f64)>> {
         self.as_shot_neutral.as_ref().map(|n| {

@@ -3,7 +3,7 @@
 
 use super::chunks::{check_chunks, decode_chunks, layout};
 use super::ifd::{Ifd, Tiff, dng_err, required, tag_name};
-use super::{DngImage, DngInfo, cfa_letter};
+use super::{DngCamera, DngImage, DngInfo, cfa_letter};
 use crate::io::IoResult;
 use crate::io::limits::Limits;
 use crate::io::raw::RawFrame;
@@ -21,6 +21,8 @@ const TAG_HEIGHT: u16 = 257;
 const TAG_BITS: u16 = 258;
 const TAG_COMPRESSION: u16 = 259;
 const TAG_PHOTOMETRIC: u16 = 262;
+const TAG_MAKE: u16 = 271;
+const TAG_MODEL: u16 = 272;
 const TAG_SAMPLES_PER_PIXEL: u16 = 277;
 const TAG_SUB_IFDS: u16 = 330;
 const TAG_SAMPLE_FORMAT: u16 = 339;
@@ -592,6 +594,28 @@ struct CameraMetadata {
     model: Option<String>,
 }
 
+/// The camera's names in IFD0 (UniqueCameraModel, Make, Model), each trimmed of NULs and
+/// spaces; an empty one is absent.
+fn camera_names(t: &Tiff<'_>, ifd0: &Ifd) -> IoResult<DngCamera> {
+    let name = |tag| -> IoResult<Option<String>> {
+        Ok(t.ascii(ifd0, tag, MAX_NAME)?.filter(|s| !s.is_empty()))
+    };
+    Ok(DngCamera {
+        unique_camera_model: name(TAG_CAMERA_MODEL)?,
+        make: name(TAG_MAKE)?,
+        model: name(TAG_MODEL)?,
+    })
+}
+
+/// What a DNG says of its camera, from IFD0's tags alone (no pixel is read); see
+/// [`super::read_camera`].
+pub(super) fn camera(bytes: &[u8]) -> IoResult<DngCamera> {
+    let t = Tiff::parse(bytes)?;
+    let ifd0 = t.first_ifd()?;
+    version(&t, &ifd0)?;
+    camera_names(&t, &ifd0)
+}
+
 /// Longest camera name read (UniqueCameraModel, Make, Model).
 const MAX_NAME: usize = 1024;
 
@@ -627,15 +651,13 @@ fn camera_metadata(t: &Tiff<'_>, ifd0: &Ifd, cfa: &CfaPattern) -> IoResult<Camer
             }
         };
     }
-    let name = |tag: u16| -> IoResult<Option<String>> {
-        Ok(t.ascii(ifd0, tag, MAX_NAME)?.filter(|s| !s.is_empty()))
-    };
+    let names = camera_names(t, ifd0)?;
     Ok(CameraMetadata {
         as_shot_neutral,
         calibration_illuminants,
         color_matrices,
-        unique_camera_model: name(TAG_CAMERA_MODEL)?,
-        make: name(TAG_MAKE)?,
-        model: name(TAG_MODEL)?,
+        unique_camera_model: names.unique_camera_model,
+        make: names.make,
+        model: names.model,
     })
 }

@@ -618,3 +618,35 @@ fn written_dng_reads_back() {
     assert_eq!(exif_light_source("d65"), Some(21));
     assert_eq!(exif_light_source("cct:3200"), None);
 }
+
+#[test]
+fn make_model_and_the_camera_alone() {
+    let (w, h) = (4, 4);
+    let img = ramp(w, h, 16);
+    let ascii = |tag: u16, s: &[u8]| (tag, 2u16, s.len() as u32, s.to_vec());
+    let bytes = strips_dng(
+        false,
+        &img,
+        w,
+        h,
+        16,
+        h,
+        vec![
+            ascii(271, b"SONY \0\0"),
+            ascii(272, b"  ILCE-9\0"),
+            ascii(50708, b"Sony ILCE-9\0"),
+        ],
+    );
+    let d = decode_dng(&bytes, &lim()).unwrap();
+    assert_eq!(d.info.make.as_deref(), Some("SONY"));
+    assert_eq!(d.info.model.as_deref(), Some("ILCE-9"));
+    let cam = read_camera(&bytes).unwrap();
+    assert_eq!(cam, d.info.camera());
+    assert_eq!(cam.unique_camera_model.as_deref(), Some("Sony ILCE-9"));
+    // empty names are absent
+    let no_make = strips_dng(false, &img, w, h, 16, h, vec![ascii(272, b"\0\0")]);
+    let cam = read_camera(&no_make).unwrap();
+    assert_eq!(cam, DngCamera::default());
+    // not a DNG
+    assert!(read_camera(b"II*\0\x08\0\0\0\0\0").is_err());
+}

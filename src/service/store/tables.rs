@@ -206,6 +206,16 @@ impl Store {
         .await?))
     }
 
+    /// Healthy tables' ids and metadata (JSON), newest first.
+    pub async fn usable_tables_newest_first(&self) -> Result<Vec<(String, String)>, StoreError> {
+        Ok(on_pool!(self, p => sqlx::query_as::<_, (String, String)>(
+            "SELECT id, meta_json FROM l3_tables WHERE status = $1 ORDER BY created_at DESC, id",
+        )
+        .bind(TableStatus::Ok.as_str())
+        .fetch_all(p)
+        .await?))
+    }
+
     /// Healthy tables, most recently activated first, then the newest.
     pub async fn usable_tables_by_recency(&self) -> Result<Vec<String>, StoreError> {
         Ok(on_pool!(self, p => sqlx::query_scalar(
