@@ -14,8 +14,6 @@ const MAX_REPEAT: u64 = 16;
 const MAX_IFDS: usize = 64;
 
 const TAG_NEW_SUBFILE_TYPE: u16 = 254;
-const TAG_MAKE: u16 = 271;
-const TAG_MODEL: u16 = 272;
 const TAG_WIDTH: u16 = 256;
 const TAG_HEIGHT: u16 = 257;
 const TAG_BITS: u16 = 258;
