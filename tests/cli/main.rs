@@ -10,3 +10,4 @@ mod catalogue;
 mod cli;
 mod sensors;
 mod sfr;
+mod support;

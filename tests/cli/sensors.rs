@@ -2,21 +2,8 @@
 //! curves sit beside it, trained from another working directory.
 
 use std::path::Path;
-use std::process::Command;
 
-fn l3(args: &[&str], dir: &Path) -> (bool, String) {
-    let out = Command::new(env!("CARGO_BIN_EXE_l3"))
-        .args(args)
-        .current_dir(dir)
-        .output()
-        .expect("run l3");
-    let text = format!(
-        "{}{}",
-        String::from_utf8_lossy(&out.stdout),
-        String::from_utf8_lossy(&out.stderr)
-    );
-    (out.status.success(), text)
-}
+use crate::support::run_l3 as l3;
 
 const TINY: [&str; 8] = [
     "--illuminants",

@@ -2,21 +2,13 @@
 //! without a region, against the analytic MTF50 of a linear-ramp edge.
 
 use std::path::Path;
-use std::process::Command;
+
+use crate::support::run_l3;
 
 fn sfr(args: &[&str], dir: &Path) -> (bool, String) {
-    let out = Command::new(env!("CARGO_BIN_EXE_l3"))
-        .arg("sfr")
-        .args(args)
-        .current_dir(dir)
-        .output()
-        .expect("run l3");
-    let text = format!(
-        "{}{}",
-        String::from_utf8_lossy(&out.stdout),
-        String::from_utf8_lossy(&out.stderr)
-    );
-    (out.status.success(), text)
+    let mut all = vec!["sfr"];
+    all.extend_from_slice(args);
+    run_l3(&all, dir)
 }
 
 /// A ramp edge `width` px wide (its LSF a box: MTF |sinc(π f width)|, MTF50 = 0.60335 /
