@@ -3,6 +3,7 @@
 
 mod budget;
 mod captured_floor;
+pub mod colorchecker;
 mod colour_classes;
 mod figure;
 mod illuminant_estimation;
@@ -13,10 +14,13 @@ mod workflow;
 
 pub use budget::{ErrorBudget, error_budget};
 pub use captured_floor::{CapturedFloor, captured_floor};
+pub use colorchecker::{
+    COLORCHECKER_SCHEMA, ColorCheckerOptions, ColorCheckerReport, evaluate_colorchecker,
+};
 pub use colour_classes::{
     ColourClassRow, ColourClassStudy, colour_class_markdown, colour_class_study,
 };
-pub use figure::report_svg;
+pub use figure::{colorchecker_svg, report_svg};
 pub use illuminant_estimation::{
     EstimateResult, EstimationRow, STUDY_LIGHTS, estimation_markdown, illuminant_estimation_study,
 };
@@ -32,10 +36,10 @@ pub use report::{
     interior, patch_means, summarize, white_patch_index,
 };
 pub use workflow::{
-    ChannelSet, ChartCapture, ChartSetup, ColourFit, LightLevel, Method, REFERENCE_LUMINANCE,
-    capture_scene, chart_scene, evaluate_capture, evaluate_method, fit_baseline_matrix,
-    fit_colour_matrix, frame_chart_capture, linear_table, matching_linear_map, render_method,
-    simulate_chart,
+    ChannelSet, ChartCapture, ChartSetup, ColourFit, EvalChart, LightLevel, Method,
+    REFERENCE_LUMINANCE, capture_scene, chart_scene, evaluate_capture, evaluate_method,
+    fit_baseline_matrix, fit_colour_matrix, frame_chart_capture, linear_table, matching_linear_map,
+    render_method, simulate_chart,
 };
 
 /// Errors of the evaluation layer.

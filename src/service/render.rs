@@ -194,9 +194,9 @@ pub async fn admit(State(state): State<AppState>, req: Request, next: Next) -> R
 
 /// A render against the active table: lights from the service's registry (no files over
 /// HTTP), prepared renderers from its cache.
-struct ServiceRender {
-    state: AppState,
-    active: Arc<ActiveTable>,
+pub(super) struct ServiceRender {
+    pub(super) state: AppState,
+    pub(super) active: Arc<ActiveTable>,
 }
 
 impl RenderContext for ServiceRender {
@@ -217,6 +217,12 @@ impl RenderContext for ServiceRender {
     fn renderer(&self, choice: &KernelChoice<'_>) -> Result<Arc<RenderPipeline>, ServiceError> {
         self.state.renderer_for(&self.active, choice)
     }
+}
+
+/// Whether the request's Content-Type is one of a mosaic (raw or an image file).
+pub(super) fn is_mosaic(headers: &HeaderMap) -> bool {
+    content_type(headers)
+        .is_some_and(|t| t == "application/octet-stream" || IMAGE_TYPES.contains(&t.as_str()))
 }
 
 /// Whether a body of the request's Content-Type is a raw mosaic (else an image file).
@@ -272,7 +278,7 @@ fn output_of(
 /// The render a request asks for, its parts checked in this order: the Content-Type, a
 /// body, the output ([`output_of`]), `correction`, the size of a raw body. `format` is the
 /// negotiated one.
-fn render_request(
+pub(super) fn render_request(
     q: RenderQuery,
     headers: &HeaderMap,
     body: Bytes,

@@ -1,5 +1,5 @@
 //! The HTTP service, one test binary: the API end to end (`api`), training jobs (`jobs`), the
-//! evaluation figure (`figure`), render admission (`admission`), crash safety of the real
+//! evaluation figure (`figure`), ColorChecker frames (`colorchecker`), render admission (`admission`), crash safety of the real
 //! `l3 serve` process (`crash`), the typed store over rows the previous store wrote
 //! (`store_compat`), and openapi.yaml against the served routes (`spec`: not named
 //! `openapi`, so that the filter `api::` selects the API tests alone).
@@ -16,6 +16,7 @@ mod service_support;
 
 mod admission;
 mod api;
+mod colorchecker;
 mod crash;
 mod figure;
 mod jobs;
