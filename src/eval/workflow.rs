@@ -304,7 +304,7 @@ pub fn frame_chart_capture(
     setup: &ChartSetup,
 ) -> Result<ChartCapture, EvalError> {
     let mut setup = setup.clone();
-    if setup.chart == EvalChart::Macbeth && width % 6 == 0 && height * 6 == width * 4 {
+    if setup.chart == EvalChart::Macbeth && width.is_multiple_of(6) && height * 6 == width * 4 {
         setup.patch_px = width / 6;
     }
     let (scene, _) = chart_scene(camera, "D65", iset, &setup)?;

@@ -1,7 +1,7 @@
 //! `l3 eval --colorchecker` on simulated ColorChecker captures, through the real executable:
 //! with ISET's reflectances as the reference it agrees, patch by patch, with the chart
 //! evaluation of the same frame (`l3 eval --frame … --chart macbeth`, whose truth is the
-//! simulator's), under D65 and under tungsten.
+//! simulator's optical image), under D65 and under tungsten, up to the lens's flare.
 
 use std::path::Path;
 use std::process::Command;
@@ -156,7 +156,13 @@ fn colorchecker_agrees_with_the_chart_evaluation() {
                 .sum::<f64>()
                 / 24.0
         );
-        assert!(worst <= 0.3, "{light}: per-patch differences {diffs:?}");
+        // The two truths differ by the lens: the chart evaluation's is the optical image relit
+        // by D65 (blur and flare lift the dark patches by up to 6 % in XYZ), the
+        // ColorChecker's the bare reflectances; and the samples differ (the middle 50 %,
+        // trimmed, against the middle 60 %). Measured (docs/accuracy.md): per patch 0.14–0.19
+        // on average, 0.32 (D65) and 0.55 (tungsten) at worst.
+        assert!(mean <= 0.25, "{light}: per-patch differences {diffs:?}");
+        assert!(worst <= 0.65, "{light}: per-patch differences {diffs:?}");
         let svg = std::fs::read_to_string(cc_path.with_extension("svg")).unwrap();
         assert!(svg.starts_with("<?xml") && svg.trim_end().ends_with("</svg>"));
         assert_eq!(svg.matches("class=\"cc-patch\"").count(), 24);

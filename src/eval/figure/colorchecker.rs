@@ -1,4 +1,4 @@
-//! The figure of a ColorChecker report (1200 × 640): (a) the chart as captured, each patch
+//! The figure of a ColorChecker report (1200 × 660): (a) the chart as captured, each patch
 //! split into the reference (left half) and the rendering (right half) with its ΔE2000, and
 //! (b) the ΔE2000 per patch as bars, with the mean, the 90th percentile and, per patch, the
 //! ΔE2000 between the two references (how much of the error the reference alone explains).
@@ -10,10 +10,10 @@ use super::svg::{
     AXIS, FONT, GRID, INK, MEAN, MUTED, N, P90, clip_chars, de, esc, panel_title, srgb_hex, text,
 };
 use crate::colour::Xyz;
-use crate::eval::colorchecker::{ColorCheckerPatch, ColorCheckerReport};
+use crate::eval::colorchecker::{ColorCheckerPatch, ColorCheckerReport, Reference};
 
 const W: f64 = 1200.0;
-const H: f64 = 640.0;
+const H: f64 = 660.0;
 /// The panel titles (the tests look for them).
 pub(super) const CC_TITLE_A: &str = "a. Reference | rendered, per patch";
 pub(super) const CC_TITLE_B: &str = "b. ΔE2000 per patch";
@@ -61,9 +61,12 @@ pub(super) fn draw_colorchecker(s: &mut String, r: &ColorCheckerReport) -> fmt::
         de(r.references.max),
     );
     text(s, 24.0, 56.0, 14.0, "start", "", &line)?;
+    let reference = match r.reference {
+        Reference::Xrite2014 => "X-Rite 2014 (ICC D50, adapted to D65 by Bradford)",
+        Reference::Iset => "ISET's Macbeth reflectances under D65",
+    };
     let note = format!(
-        "reference: {} · exposure: the rendering scaled ×{} so that {} has Y {}",
-        clip_chars(&r.reference_description, 150),
+        "reference: {reference} · exposure: the rendering scaled ×{} so that {} has Y {}",
         sig(r.normalisation.scale),
         r.normalisation.patch,
         sig(r.normalisation.reference_y),
@@ -257,7 +260,7 @@ fn bars(s: &mut String, r: &ColorCheckerReport) -> fmt::Result {
         )?;
         text(
             s,
-            px(p.delta_e) + 6.0,
+            px(p.delta_e).max(m + 4.0) + 6.0,
             y + row_h - 5.0,
             10.5,
             "start",

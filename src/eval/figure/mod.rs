@@ -40,7 +40,7 @@ pub fn report_svg(report: &DeltaEReport) -> Result<String, EvalError> {
     Ok(s)
 }
 
-/// The figure of a ColorChecker report (1200 × 640): the chart with each patch split into
+/// The figure of a ColorChecker report (1200 × 660): the chart with each patch split into
 /// reference and rendering, and the ΔE2000 per patch as bars beside the references' own
 /// difference.
 pub fn colorchecker_svg(
