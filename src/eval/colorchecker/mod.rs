@@ -4,8 +4,8 @@
 //! reference's white, and compared in CIELAB (D65 white) with CIEDE2000 ([`reference`]).
 //!
 //! Exposure is normalised on the white patch (patch 19): the rendered image is scaled so its
-//! white patch has the reference white's Y (0.88 for both references). The white patch is the
-//! brightest and least noisy sample; it is also what the chart evaluation of a simulated chart
+//! white patch has the reference white's Y (0.880 for X-Rite's, 0.815 for ISET's). It is the
+//! brightest and least noisy sample, and what the chart evaluation of a simulated chart
 //! normalises by (`evaluate_chart`), so the two agree (docs/accuracy.md). A clipped white patch
 //! would darken every other patch: expose the chart so that it is not clipped.
 
