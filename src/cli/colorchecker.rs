@@ -2,9 +2,8 @@
 //! `l3 render` renders it, scored against published values
 //! ([`crate::eval::colorchecker`]), written as JSON and an SVG figure.
 
-use std::path::Path;
+use std::path::{Path, PathBuf};
 
-use super::eval::EvalArgs;
 use super::render::{light_source, render_file_xyz};
 use super::{CliError, write_file};
 use crate::eval::colorchecker::{
@@ -14,24 +13,35 @@ use crate::l3::L3Table;
 use crate::pipeline::CorrectionMode;
 use crate::spectral::IsetData;
 
-pub fn run(a: &EvalArgs, frame: &Path, iset: Option<&IsetData>) -> Result<(), CliError> {
+/// What `l3 eval --colorchecker` was asked (its flags).
+pub struct ColorCheckerArgs<'a> {
+    pub frame: &'a Path,
+    pub table: Option<&'a PathBuf>,
+    pub corners: Option<&'a str>,
+    pub reference: &'a str,
+    pub gap: f64,
+    pub correction: Option<CorrectionMode>,
+    pub illuminant: Option<&'a str>,
+    pub out: &'a Path,
+}
+
+pub fn run(a: &ColorCheckerArgs, iset: Option<&IsetData>) -> Result<(), CliError> {
+    let frame = a.frame;
     let table_path = a
         .table
-        .as_ref()
         .ok_or_else(|| CliError::Usage("--colorchecker needs --table".into()))?;
     let corners = a
         .corners
-        .as_deref()
         .ok_or_else(|| CliError::Usage("--colorchecker needs --corners".into()))?;
     let usage = |e: crate::eval::EvalError| CliError::Usage(e.to_string());
     let opts = ColorCheckerOptions {
         corners: corners.parse().map_err(usage)?,
-        gap: a.chart_gap,
+        gap: a.gap,
         reference: a.reference.parse().map_err(usage)?,
     };
     let table = L3Table::load(table_path)?;
     let correction = a.correction.unwrap_or(CorrectionMode::Camera);
-    let named = a.illuminant.first().map(String::as_str);
+    let named = a.illuminant;
     let out = render_file_xyz(&table, frame, named, correction, iset)?;
     let (light, origin) = (out.light.clone(), light_source(out.light_origin));
     let (xyz, width, height) = rendered_xyz(out)?;
@@ -55,7 +65,7 @@ pub fn run(a: &EvalArgs, frame: &Path, iset: Option<&IsetData>) -> Result<(), Cl
     let report = evaluate_colorchecker(&xyz, width, height, &opts, iset, labels)?;
     print_report(&report, origin);
     let path = if a.out.extension().is_some() {
-        a.out.clone()
+        a.out.to_path_buf()
     } else {
         a.out.join("colorchecker.json")
     };

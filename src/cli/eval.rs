@@ -164,7 +164,17 @@ pub fn run(cli: &Cli, a: &EvalArgs) -> Result<(), CliError> {
         return run_paper_tables(a, iset.as_ref(), chart);
     }
     if let Some(frame) = &a.colorchecker {
-        return super::colorchecker::run(a, frame, iset.as_ref());
+        let args = super::colorchecker::ColorCheckerArgs {
+            frame,
+            table: a.table.as_ref(),
+            corners: a.corners.as_deref(),
+            reference: &a.reference,
+            gap: a.chart_gap,
+            correction: a.correction,
+            illuminant: a.illuminant.first().map(String::as_str),
+            out: &a.out,
+        };
+        return super::colorchecker::run(&args, iset.as_ref());
     }
     if a.estimate_illuminant {
         return run_estimation_study(a, iset.as_ref(), &chart);

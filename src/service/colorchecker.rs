@@ -6,16 +6,17 @@
 
 use std::sync::atomic::AtomicBool;
 
+use std::sync::Arc;
+
 use axum::body::Bytes;
 use axum::extract::Query;
-use axum::extract::rejection::BytesRejection;
 use axum::http::{HeaderMap, Uri};
-use axum::response::Response;
 use serde::{Deserialize, Serialize};
+use tokio::sync::OwnedSemaphorePermit;
 
 use super::ServiceError;
-use super::render::{RenderQuery, ServiceRender, body_bytes, render_request};
-use super::state::{AppState, new_id, now_ms};
+use super::render::{RenderQuery, ServiceRender, render_request};
+use super::state::{ActiveTable, AppState, new_id, now_ms};
 use super::store::{EvaluationChart, EvaluationMethod, EvaluationRow};
 use crate::eval::colorchecker::{
     CLASSIC_GAP, ColorCheckerOptions, Labels, evaluate_colorchecker, rendered_xyz,
@@ -101,32 +102,38 @@ impl ColorCheckerQuery {
     }
 }
 
-/// `POST /v1/evaluations` with a mosaic body: renders it, scores the chart (on the background
-/// pool, in an evaluation slot) and answers 201 with the evaluation.
-pub async fn create(
-    state: AppState,
-    headers: HeaderMap,
-    uri: Uri,
-    body: Result<Bytes, BytesRejection>,
-) -> Result<Response, ServiceError> {
-    let body = body_bytes(body, state.config.server.max_body_bytes)?;
-    let Query(q) = Query::<ColorCheckerQuery>::try_from_uri(&uri).map_err(|e| {
+/// The query of a request whose body is a frame, or a 400 saying what it needs.
+pub fn query(uri: &Uri) -> Result<ColorCheckerQuery, ServiceError> {
+    let Query(q) = Query::<ColorCheckerQuery>::try_from_uri(uri).map_err(|e| {
         ServiceError::BadRequest(format!(
             "a frame body needs chart=colorchecker and corners in the query: {}",
             e.body_text()
         ))
     })?;
+    Ok(q)
+}
+
+/// The evaluation of a frame `body` (`POST /v1/evaluations` with a mosaic body, its query
+/// `q`): renders it with `table`, scores the chart on the background pool while holding the
+/// evaluation `slot`, and gives the row to store.
+pub async fn evaluate(
+    state: &AppState,
+    headers: &HeaderMap,
+    q: ColorCheckerQuery,
+    body: Bytes,
+    table: Arc<ActiveTable>,
+    slot: OwnedSemaphorePermit,
+) -> Result<EvaluationRow, ServiceError> {
     let opts = q.options()?;
     let frame_bytes = body.len();
     let request = render_request(
         q.render_query(),
-        &headers,
+        headers,
         body,
         OutputFormat::F32,
         &state.config.server,
     )?;
     let correction = request.correction;
-    let table = super::evaluations::table_to_evaluate(&state, q.table_id.as_ref()).await?;
     let table_id = table.id.clone();
     let ctx = ServiceRender {
         state: state.clone(),
@@ -134,7 +141,6 @@ pub async fn create(
     };
     // a wrong CFA or an unknown light is refused before the frame is decoded
     let prepared = request.prepare(&ctx)?;
-    let slot = super::evaluations::evaluation_slot(&state)?;
     let iset = state.iset.clone();
     let context = serde_json::json!({ "table_id": table_id, "correction": correction.as_str() });
     let report = super::cpu::run(&state.pools.background, "the evaluation", move || {
@@ -147,7 +153,7 @@ pub async fn create(
     request_json["frame_bytes"] = serde_json::json!(frame_bytes);
     let report_json = serde_json::to_string(&report)
         .map_err(|e| ServiceError::Internal(format!("report: {e}")))?;
-    let row = EvaluationRow {
+    Ok(EvaluationRow {
         id: new_id("eval"),
         table_id: Some(table_id),
         method: EvaluationMethod::L3,
@@ -157,8 +163,7 @@ pub async fn create(
         request_json: request_json.to_string(),
         report_json,
         created_at: now_ms(),
-    };
-    super::evaluations::store_and_answer(&state, row).await
+    })
 }
 
 /// Renders the frame and scores it (blocking).

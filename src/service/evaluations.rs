@@ -178,7 +178,7 @@ impl EvaluationRequest {
 
 /// The table an `l3` evaluation uses: `table_id`'s (loaded through activation's checks
 /// without activating it, unless it is the active one), else the active table.
-pub(super) async fn table_to_evaluate(
+async fn table_to_evaluate(
     state: &AppState,
     table_id: Option<&String>,
 ) -> Result<Arc<ActiveTable>, ServiceError> {
@@ -260,9 +260,7 @@ fn evaluate(
 }
 
 /// An evaluation slot, or 503 when evaluations already run at capacity.
-pub(super) fn evaluation_slot(
-    state: &AppState,
-) -> Result<tokio::sync::OwnedSemaphorePermit, ServiceError> {
+fn evaluation_slot(state: &AppState) -> Result<tokio::sync::OwnedSemaphorePermit, ServiceError> {
     state
         .eval_slots
         .clone()
@@ -274,10 +272,7 @@ pub(super) fn evaluation_slot(
 }
 
 /// Stores the evaluation and answers 201 with it and its Location.
-pub(super) async fn store_and_answer(
-    state: &AppState,
-    row: EvaluationRow,
-) -> Result<Response, ServiceError> {
+async fn store_and_answer(state: &AppState, row: EvaluationRow) -> Result<Response, ServiceError> {
     state.store.insert_evaluation(&row).await?;
     let mut resp = (StatusCode::CREATED, Json(evaluation_json(&row)?)).into_response();
     if let Ok(v) = HeaderValue::from_str(&format!("/v1/evaluations/{}", row.id)) {
@@ -287,7 +282,7 @@ pub(super) async fn store_and_answer(
 }
 
 /// `POST /v1/evaluations`: runs the evaluation (on rayon) and answers 201 with the ΔE JSON. A
-/// mosaic body is a ColorChecker capture ([`super::colorchecker::create`]).
+/// mosaic body is a ColorChecker capture ([`super::colorchecker::evaluate`]).
 pub async fn create(
     State(state): State<AppState>,
     headers: HeaderMap,
@@ -295,7 +290,12 @@ pub async fn create(
     body: Result<Bytes, BytesRejection>,
 ) -> Result<Response, ServiceError> {
     if super::render::is_mosaic(&headers) {
-        return super::colorchecker::create(state, headers, uri, body).await;
+        let body = super::render::body_bytes(body, state.config.server.max_body_bytes)?;
+        let q = super::colorchecker::query(&uri)?;
+        let table = table_to_evaluate(&state, q.table_id.as_ref()).await?;
+        let slot = evaluation_slot(&state)?;
+        let row = super::colorchecker::evaluate(&state, &headers, q, body, table, slot).await?;
+        return store_and_answer(&state, row).await;
     }
     super::render::require_json(&headers)?;
     let body = super::render::body_bytes(body, state.config.server.max_body_bytes)?;
