@@ -98,9 +98,39 @@ pub struct EvalArgs {
     /// The correction an SI table's output gets under the acquisition light:
     /// `colorimetric` (or `t`: the paper's T, from colorimetry alone) or
     /// `camera` (C, fitted per level on the table's colour maps and the sensor under that
-    /// light; what `l3 render` and the service use by default).
-    #[arg(long, default_value = "colorimetric")]
-    pub correction: CorrectionMode,
+    /// light; what `l3 render` and the service use by default). Default: colorimetric, but
+    /// camera with --colorchecker (which renders as `l3 render` does).
+    #[arg(long)]
+    pub correction: Option<CorrectionMode>,
+    /// The chart simulated (or read with --frame): `natural100` (the paper's) or `macbeth`
+    /// (ISET's Macbeth ColorChecker, as `l3 simulate --scene macbeth` draws it; with
+    /// --frame its patch size is taken from the frame). The grey row of the Macbeth chart
+    /// is left out of the summary, as Natural-100's grey strip is.
+    #[arg(long, default_value = "natural100")]
+    pub chart: String,
+    /// Evaluate a capture of a ColorChecker Classic against published values: FRAME (any
+    /// mosaic file `l3 render` reads) is rendered with --table as `l3 render` renders it,
+    /// the 24 patches are found from --corners and compared with --reference (ΔE2000
+    /// after scaling the rendering so its white patch matches the reference's). Writes
+    /// JSON and an SVG figure. See docs/cli.md.
+    #[arg(long, value_name = "FRAME", requires_all = ["corners", "table"], conflicts_with_all = ["paper_table", "catalogue", "frame", "captures", "estimate_illuminant", "colour_classes"])]
+    pub colorchecker: Option<PathBuf>,
+    /// With --colorchecker: the outer corners of the chart's 6 × 4 grid of patches in the
+    /// frame, in pixels, `x1,y1,x2,y2,x3,y3,x4,y4`: dark skin's corner, bluish green's,
+    /// black's, white's (clockwise as the chart is seen, whichever way up it is in the frame).
+    #[arg(long, requires = "colorchecker")]
+    pub corners: Option<String>,
+    /// With --colorchecker: `xrite2014` (X-Rite's published values for charts made after
+    /// November 2014, adapted from D50 to D65 with Bradford), `iset` (ISET's Macbeth
+    /// reflectances under D65: the chart `l3 simulate --scene macbeth` draws), or a CSV file
+    /// of your own chart's measured values (L,a,b under D50, or X,Y,Z under D65; docs/cli.md),
+    /// such as the truth.csv `l3 simulate --scene macbeth` writes.
+    #[arg(long, default_value = "xrite2014", requires = "colorchecker")]
+    pub reference: String,
+    /// With --colorchecker: the gap between patches as a fraction of a patch's side (0.1, a
+    /// ColorChecker Classic's; 0 for `l3 simulate --scene macbeth`'s chart, drawn edge to edge).
+    #[arg(long, default_value_t = crate::eval::colorchecker::CLASSIC_GAP, requires = "colorchecker")]
+    pub chart_gap: f64,
     /// Training scenes per table (with --paper-table or --catalogue).
     #[arg(long, default_value_t = 48)]
     pub scenes: usize,
@@ -118,6 +148,7 @@ pub struct EvalArgs {
 /// The chart set-up the arguments describe.
 fn chart_setup(a: &EvalArgs) -> Result<ChartSetup, CliError> {
     let chart = ChartSetup {
+        chart: a.chart.parse()?,
         seed: a.seed,
         noise: !a.no_noise,
         patch_px: a.patch_px.into(),
@@ -142,6 +173,19 @@ pub fn run(cli: &Cli, a: &EvalArgs) -> Result<(), CliError> {
     }
     if a.catalogue {
         return run_catalogue_sweep(a, iset.as_ref());
+    }
+    if let Some(frame) = &a.colorchecker {
+        let args = super::colorchecker::ColorCheckerArgs {
+            frame,
+            table: a.table.as_ref(),
+            corners: a.corners.as_deref(),
+            reference: &a.reference,
+            gap: a.chart_gap,
+            correction: a.correction,
+            illuminant: a.illuminant.first().map(String::as_str),
+            out: &a.out,
+        };
+        return super::colorchecker::run(&args, iset.as_ref());
     }
     if a.estimate_illuminant {
         return run_estimation_study(a, iset.as_ref(), &chart);
@@ -194,12 +238,13 @@ fn evaluate_simulated(
             } else {
                 &camera
             };
-            let corr = correction_for(&table, &corr, a.correction, iset)?;
+            let mode = a.correction.unwrap_or(CorrectionMode::Colorimetric);
+            let corr = correction_for(&table, &corr, mode, iset)?;
             let name = format!(
                 "L3 {} ({}){}",
                 table.meta.kind,
                 table.meta.train_illuminants.join("+"),
-                match a.correction {
+                match mode {
                     CorrectionMode::Camera if !uses_own_kernels(&table) => " + camera-aware C",
                     _ => "",
                 }
@@ -256,6 +301,8 @@ fn evaluate_frame(
     let camera = Camera::new(&design, grid, iset)?;
     let mut registry = IlluminantRegistry::with_defaults(grid, iset)?;
     let corr = registry.resolve(&spec, iset)?;
+    let mode = a.correction.unwrap_or(CorrectionMode::Colorimetric);
+    let corr = correction_for(&table, &corr, mode, iset)?;
     println!("illuminant {} (from {source})", corr.name);
     let cap = crate::eval::frame_chart_capture(
         &camera,
@@ -274,6 +321,7 @@ fn evaluate_frame(
     let mut report =
         crate::eval::evaluate_capture(&camera, &cap, &Method::Table(&table), &name, &corr, chart)?;
     report.context["frame"] = serde_json::json!(frame.display().to_string());
+    report.context["correction_mode"] = serde_json::json!(mode.as_str());
     report.context["illuminant_source"] = serde_json::json!(source);
     Ok(report)
 }

@@ -1,6 +1,7 @@
 //! The `l3` command line: thin wrappers over the core.
 
 mod bench;
+mod colorchecker;
 mod eval;
 mod render;
 mod sensors;
@@ -37,7 +38,8 @@ pub enum Command {
     Train(train::TrainArgs),
     /// Render a raw mosaic with a table and an illuminant correction.
     Render(render::RenderArgs),
-    /// ΔE2000 evaluation on the Natural-100 chart; `--paper-table` for Table 1.
+    /// ΔE2000 evaluation on the Natural-100 chart; `--paper-table` for Table 1;
+    /// `--colorchecker` for a real ColorChecker capture.
     Eval(eval::EvalArgs),
     /// Run time against colour error for a sweep of configurations (JSON, markdown, SVG plot).
     Bench(bench::BenchArgs),

@@ -240,24 +240,58 @@ pub fn run(cli: &Cli, a: &RenderArgs) -> Result<(), CliError> {
         Some(t) => t,
         None => table_of(a, &request.input)?,
     };
-    let ctx = CliRender {
-        table: &table,
-        iset: iset.as_ref(),
-        registry: RefCell::new(IlluminantRegistry::with_defaults(
-            table.meta.grid,
-            iset.as_ref(),
-        )?),
-    };
-    let out = request
-        .run(&ctx, &AtomicBool::new(false))
-        .map_err(|f| match f {
-            Failure::Pipeline(e) => input_error(e, &a.input),
-            Failure::Cli(e) => e,
-        })?;
+    let out = run_request(request, &table, iset.as_ref(), &a.input)?;
     let summary = summary(a, &table_path, &out);
     write_file(&a.out, &out.rendered.output.into_vec())?;
     println!("{summary}");
     Ok(())
+}
+
+/// Runs `request` with `table`, lights from a registry of the built-in illuminants (and
+/// `iset`'s); errors about the input name `input`.
+fn run_request(
+    request: RenderRequest,
+    table: &L3Table,
+    iset: Option<&IsetData>,
+    input: &Path,
+) -> Result<RenderOutcome, CliError> {
+    let ctx = CliRender {
+        table,
+        iset,
+        registry: RefCell::new(IlluminantRegistry::with_defaults(table.meta.grid, iset)?),
+    };
+    request
+        .run(&ctx, &AtomicBool::new(false))
+        .map_err(|f| match f {
+            Failure::Pipeline(e) => input_error(e, input),
+            Failure::Cli(e) => e,
+        })
+}
+
+/// The mosaic file `path` rendered as `l3 render --table … --out frame.raw` renders it: float
+/// XYZ referred to D65, under the light `named` (else the file's metadata, else an estimate,
+/// else D65) with `correction`.
+pub(crate) fn render_file_xyz(
+    table: &L3Table,
+    path: &Path,
+    named: Option<&str>,
+    correction: CorrectionMode,
+    iset: Option<&IsetData>,
+) -> Result<RenderOutcome, CliError> {
+    let loaded = read_mosaic(path, &Limits::default())?;
+    let request = RenderRequest {
+        input: Input::Decoded(Box::new(loaded)),
+        levels: Levels::default(),
+        cfa: None,
+        light: named.map_or(LightChoice::FromFrame, |s| LightChoice::Named(s.into())),
+        correction,
+        options: RenderOptions::default(),
+        format: OutputFormat::F32,
+        renderer: Renderer::Fast,
+        scaling: Scaling::Upfront,
+        limits: Limits::default(),
+    };
+    run_request(request, table, iset, path)
 }
 
 /// Without `--table`: a table of the service's data directory chosen as the service chooses

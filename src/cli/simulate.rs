@@ -2,7 +2,7 @@ use std::path::PathBuf;
 
 use clap::Args;
 
-use super::{Cli, CliError, iset, load_sensor};
+use super::{Cli, CliError, iset, load_sensor, write_file};
 use crate::camera::{Camera, Exposure, NoiseSwitches, simulate};
 use crate::io::{
     DngWriteInfo, IoError, PngCompression, RawFrame, RawMeta, exif_light_source, write_dng,
@@ -106,6 +106,16 @@ pub fn run(cli: &Cli, a: &SimulateArgs) -> Result<(), CliError> {
         Err(IoError::InvalidMeta(why)) => format!("no mosaic.dng ({why}), "),
         Err(e) => return Err(e.into()),
     };
+    // a ColorChecker's truth as the chart evaluation takes it, for `l3 eval --colorchecker
+    // --reference truth.csv`
+    let truth_note = if matches!(kind, SceneKind::Macbeth) {
+        let ideal = crate::eval::ideal_d65_patch_means(&camera, &scene)?;
+        let csv = crate::eval::colorchecker::simulated_truth_csv(&ideal, iset.as_ref())?;
+        write_file(&a.out.join("truth.csv"), csv.as_bytes())?;
+        "truth.csv, "
+    } else {
+        ""
+    };
     let xyz = cap.ideal_xyz.as_slice().unwrap_or(&[]);
     write_tiff_f32_rgb(&a.out.join("ideal_xyz.tiff"), w, h, xyz)?;
     let wy = white_y(xyz, w, h, WhiteLevel::Auto);
@@ -127,7 +137,7 @@ pub fn run(cli: &Cli, a: &SimulateArgs) -> Result<(), CliError> {
         secs * 1e3
     );
     println!(
-        "wrote {} (+ .json), {dng_note}mosaic.png, ideal_xyz.tiff, preview.png in {}",
+        "wrote {} (+ .json), {dng_note}mosaic.png, ideal_xyz.tiff, {truth_note}preview.png in {}",
         raw_paths.raw.display(),
         a.out.display()
     );

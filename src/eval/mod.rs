@@ -4,6 +4,7 @@
 mod budget;
 mod captured_floor;
 mod catalogue_sweep;
+pub mod colorchecker;
 mod colour_classes;
 mod figure;
 mod illuminant_estimation;
@@ -19,10 +20,13 @@ pub use catalogue_sweep::{
     CatalogueSweep, LINEAR_MARGIN, NORM_BOUND, SWEEP_LIGHT, SweepOptions, SweepRow, SweepSummary,
     catalogue_sweep, sweep_row,
 };
+pub use colorchecker::{
+    COLORCHECKER_SCHEMA, ColorCheckerOptions, ColorCheckerReport, evaluate_colorchecker,
+};
 pub use colour_classes::{
     ColourClassRow, ColourClassStudy, colour_class_markdown, colour_class_study,
 };
-pub use figure::report_svg;
+pub use figure::{colorchecker_svg, report_svg};
 pub use illuminant_estimation::{
     EstimateResult, EstimationRow, STUDY_LIGHTS, estimation_markdown, illuminant_estimation_study,
 };
@@ -39,10 +43,10 @@ pub use report::{
 };
 pub use sfr::{EdgeOrientation, Sfr, SfrError, slanted_edge_sfr};
 pub use workflow::{
-    ChannelSet, ChartCapture, ChartSetup, ColourFit, LightLevel, Method, REFERENCE_LUMINANCE,
-    capture_scene, chart_scene, evaluate_capture, evaluate_method, fit_baseline_matrix,
-    fit_colour_matrix, frame_chart_capture, linear_table, matching_linear_map, render_method,
-    simulate_chart,
+    ChannelSet, ChartCapture, ChartSetup, ColourFit, EvalChart, LightLevel, Method,
+    REFERENCE_LUMINANCE, capture_scene, chart_scene, evaluate_capture, evaluate_method,
+    fit_baseline_matrix, fit_colour_matrix, frame_chart_capture, ideal_d65_patch_means,
+    linear_table, matching_linear_map, render_method, simulate_chart,
 };
 
 /// Errors of the evaluation layer.

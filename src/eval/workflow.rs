@@ -14,7 +14,7 @@ use crate::l3::correct::{
 };
 use crate::l3::render::Mosaic;
 use crate::l3::table::TableKind;
-use crate::scene::{Scene, SceneOptions, natural100_chart};
+use crate::scene::{Scene, SceneOptions, macbeth, natural100_chart};
 use crate::spectral::{Extrapolation, IlluminantSpec, IsetData, Spectrum, cie_illuminant};
 
 /// A rendering method under evaluation.
@@ -38,6 +38,44 @@ pub struct ChartSetup {
     /// of the light, ten times the relative shot and read noise).
     #[serde(default = "one")]
     pub exposure_factor: f64,
+    /// The chart: Natural-100 (the paper's) or the Macbeth ColorChecker.
+    #[serde(default)]
+    pub chart: EvalChart,
+}
+
+/// The chart an evaluation simulates (or reads from a frame).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum EvalChart {
+    /// Natural-100 and its grey strip (the paper's §3.3).
+    #[default]
+    Natural100,
+    /// ISET's Macbeth ColorChecker, 6 × 4 patches edge to edge (`l3 simulate --scene
+    /// macbeth`'s chart); its bottom row (white … black) is the grey category.
+    Macbeth,
+}
+
+impl std::str::FromStr for EvalChart {
+    type Err = EvalError;
+    fn from_str(s: &str) -> Result<Self, EvalError> {
+        match s.to_ascii_lowercase().replace('-', "").as_str() {
+            "natural100" => Ok(EvalChart::Natural100),
+            "macbeth" => Ok(EvalChart::Macbeth),
+            _ => Err(EvalError::Invalid(format!(
+                "chart '{s}': expected natural100 or macbeth"
+            ))),
+        }
+    }
+}
+
+impl EvalChart {
+    /// Its name in reports.
+    pub fn name(self) -> &'static str {
+        match self {
+            EvalChart::Natural100 => "Natural-100",
+            EvalChart::Macbeth => "Macbeth",
+        }
+    }
 }
 
 fn one() -> f64 {
@@ -53,6 +91,7 @@ impl Default for ChartSetup {
             seed: 7,
             noise: true,
             exposure_factor: 1.0,
+            chart: EvalChart::Natural100,
         }
     }
 }
@@ -122,7 +161,8 @@ pub(super) fn acquisition_and_d65(
     Ok((acq, d65))
 }
 
-/// The evaluation chart under an acquisition illuminant: Natural-100.
+/// The evaluation chart (`setup.chart`: Natural-100 or the Macbeth chart) under an
+/// acquisition illuminant.
 pub fn chart_scene(
     camera: &Camera,
     acquisition: &str,
@@ -133,7 +173,11 @@ pub fn chart_scene(
     let grid = *camera.grid();
     let opts = SceneOptions::from_samples(grid, &named.spd, named.name.clone())?
         .with_mean_luminance(setup.mean_luminance);
-    let scene = natural100_chart(IsetData::or_built_in(iset), &opts, setup.patch_px)?;
+    let data = IsetData::or_built_in(iset);
+    let scene = match setup.chart {
+        EvalChart::Natural100 => natural100_chart(data, &opts, setup.patch_px)?,
+        EvalChart::Macbeth => macbeth(data, &opts, setup.patch_px)?,
+    };
     Ok((scene, named.name))
 }
 
@@ -228,8 +272,9 @@ pub fn capture_scene(
 }
 
 /// Per patch of `scene`: the noise-free XYZ of its optical image relit by D65, averaged over
-/// the patch interior.
-fn ideal_d65_patch_means(
+/// the patch interior: the truth the chart evaluation scores against (in the optical image's
+/// units; the evaluation normalises by the white patch).
+pub fn ideal_d65_patch_means(
     camera: &Camera,
     scene: &Scene,
 ) -> Result<Vec<crate::colour::Xyz>, EvalError> {
@@ -248,7 +293,8 @@ fn ideal_d65_patch_means(
 
 /// A captured frame of the evaluation chart (e.g. `l3 simulate --scene natural100`'s mosaic,
 /// read from its `.raw` or DNG) in volts, with the truth of the chart `setup` lays out. The
-/// frame must have the chart's size. `acquisition` only labels the report.
+/// frame must have the chart's size; a Macbeth chart's patch size is taken from the frame
+/// (6 × 4 patches edge to edge). `acquisition` only labels the report.
 pub fn frame_chart_capture(
     camera: &Camera,
     volts: Vec<f32>,
@@ -258,13 +304,22 @@ pub fn frame_chart_capture(
     iset: Option<&IsetData>,
     setup: &ChartSetup,
 ) -> Result<ChartCapture, EvalError> {
-    let (scene, _) = chart_scene(camera, "D65", iset, setup)?;
+    let mut setup = setup.clone();
+    if setup.chart == EvalChart::Macbeth && width.is_multiple_of(6) && height * 6 == width * 4 {
+        setup.patch_px = width / 6;
+    }
+    let (scene, _) = chart_scene(camera, "D65", iset, &setup)?;
     if (scene.cols(), scene.rows()) != (width, height) || volts.len() != width * height {
         return Err(EvalError::Invalid(format!(
-            "the frame is {width}×{height} but the Natural-100 chart with {} px patches is {}×{} (simulate it with `l3 simulate --scene natural100`)",
+            "the frame is {width}×{height} but the {} chart with {} px patches is {}×{} (simulate it with `l3 simulate --scene {}`)",
+            setup.chart.name(),
             setup.patch_px,
             scene.cols(),
-            scene.rows()
+            scene.rows(),
+            serde_json::to_value(setup.chart)
+                .ok()
+                .and_then(|v| v.as_str().map(str::to_string))
+                .unwrap_or_default()
         )));
     }
     let ideal_d65 = ideal_d65_patch_means(camera, &scene)?;

@@ -1,11 +1,12 @@
 //! ΔE2000 evaluations: simulate the chart through a table's sensor, render it, compare with the
-//! ideal XYZ; the report is persisted and listed.
+//! ideal XYZ; or, with a frame as the body, a ColorChecker capture ([`super::colorchecker`]).
+//! The report is persisted and listed.
 
 use axum::Json;
 use axum::body::Bytes;
 use axum::extract::rejection::BytesRejection;
 use axum::extract::{Path as UrlPath, State};
-use axum::http::{HeaderMap, HeaderValue, StatusCode, header};
+use axum::http::{HeaderMap, HeaderValue, StatusCode, Uri, header};
 use axum::response::{IntoResponse, Response};
 use serde::Deserialize;
 use serde_json::{Value, json};
@@ -145,6 +146,11 @@ impl EvaluationRequest {
     fn check(&self) -> Result<Checked, ServiceError> {
         // an unknown chart is a 400 naming the charts
         let chart = EvaluationChart::parse(&self.chart)?;
+        if chart == EvaluationChart::ColorChecker {
+            return Err(ServiceError::BadRequest(
+                "a ColorChecker evaluation takes the frame as the body (a mosaic Content-Type, as POST /v1/render takes it) with chart=colorchecker and corners in the query".into(),
+            ));
+        }
         if !(8..=64).contains(&self.patch_px) {
             return Err(ServiceError::BadRequest(format!(
                 "patch_px {}: 8 to 64",
@@ -253,12 +259,43 @@ fn evaluate(
     Ok(report)
 }
 
-/// `POST /v1/evaluations`: runs the evaluation (on rayon) and answers 201 with the ΔE JSON.
+/// An evaluation slot, or 503 when evaluations already run at capacity.
+fn evaluation_slot(state: &AppState) -> Result<tokio::sync::OwnedSemaphorePermit, ServiceError> {
+    state
+        .eval_slots
+        .clone()
+        .try_acquire_owned()
+        .map_err(|_| ServiceError::Overloaded {
+            msg: "evaluations are already running at capacity; retry shortly".into(),
+            retry_after_s: 2,
+        })
+}
+
+/// Stores the evaluation and answers 201 with it and its Location.
+async fn store_and_answer(state: &AppState, row: EvaluationRow) -> Result<Response, ServiceError> {
+    state.store.insert_evaluation(&row).await?;
+    let mut resp = (StatusCode::CREATED, Json(evaluation_json(&row)?)).into_response();
+    if let Ok(v) = HeaderValue::from_str(&format!("/v1/evaluations/{}", row.id)) {
+        resp.headers_mut().insert(header::LOCATION, v);
+    }
+    Ok(resp)
+}
+
+/// `POST /v1/evaluations`: runs the evaluation (on rayon) and answers 201 with the ΔE JSON. A
+/// mosaic body is a ColorChecker capture ([`super::colorchecker::evaluate`]).
 pub async fn create(
     State(state): State<AppState>,
     headers: HeaderMap,
+    uri: Uri,
     body: Result<Bytes, BytesRejection>,
 ) -> Result<Response, ServiceError> {
+    if super::render::is_mosaic(&headers) {
+        let body = super::render::body_bytes(body, state.config.server.max_body_bytes)?;
+        let q = super::colorchecker::query(&uri)?;
+        let slot = evaluation_slot(&state)?;
+        let row = super::colorchecker::evaluate(&state, &headers, q, body, slot).await?;
+        return store_and_answer(&state, row).await;
+    }
     super::render::require_json(&headers)?;
     let body = super::render::body_bytes(body, state.config.server.max_body_bytes)?;
     let req = parse_request(&body)?;
@@ -268,15 +305,7 @@ pub async fn create(
         EvaluationMethod::L3 => Some(table_to_evaluate(&state, req.table_id.as_ref()).await?),
         EvaluationMethod::Baseline => None,
     };
-    let slot =
-        state
-            .eval_slots
-            .clone()
-            .try_acquire_owned()
-            .map_err(|_| ServiceError::Overloaded {
-                msg: "evaluations are already running at capacity; retry shortly".into(),
-                retry_after_s: 2,
-            })?;
+    let slot = evaluation_slot(&state)?;
     let table_id = table.as_ref().map(|t| t.id.clone());
     let (iset, acquisition) = (state.iset.clone(), req.acquisition_illuminant.clone());
     let report = super::cpu::run(&state.pools.background, "the evaluation", move || {
@@ -291,11 +320,10 @@ pub async fn create(
         report
     })
     .await??;
-    let id = new_id("eval");
     let report_json = serde_json::to_string(&report)
         .map_err(|e| ServiceError::Internal(format!("report: {e}")))?;
     let row = EvaluationRow {
-        id: id.clone(),
+        id: new_id("eval"),
         table_id,
         method: checked.method,
         chart: checked.chart,
@@ -305,12 +333,7 @@ pub async fn create(
         report_json,
         created_at: now_ms(),
     };
-    state.store.insert_evaluation(&row).await?;
-    let mut resp = (StatusCode::CREATED, Json(evaluation_json(&row)?)).into_response();
-    if let Ok(v) = HeaderValue::from_str(&format!("/v1/evaluations/{id}")) {
-        resp.headers_mut().insert(header::LOCATION, v);
-    }
-    Ok(resp)
+    store_and_answer(&state, row).await
 }
 
 /// `GET /v1/evaluations`
@@ -375,13 +398,7 @@ pub async fn get(
     let row = state.store.evaluation(&id).await?;
     let mut resp = match format {
         EvaluationFormat::Json => Json(evaluation_json(&row)?).into_response(),
-        EvaluationFormat::Svg => {
-            let report: crate::eval::DeltaEReport = serde_json::from_str(&row.report_json)
-                .map_err(|e| ServiceError::Internal(format!("stored report {id}: {e}")))?;
-            let svg = crate::eval::report_svg(&report)
-                .map_err(|e| ServiceError::Internal(format!("figure of evaluation {id}: {e}")))?;
-            svg.into_response()
-        }
+        EvaluationFormat::Svg => figure(&row)?.into_response(),
     };
     let h = resp.headers_mut();
     h.insert(
@@ -390,6 +407,24 @@ pub async fn get(
     );
     h.insert(header::VARY, HeaderValue::from_static("Accept"));
     Ok(resp)
+}
+
+/// The figure of a stored evaluation: the ΔE report's, or the ColorChecker report's.
+fn figure(row: &EvaluationRow) -> Result<String, ServiceError> {
+    let id = &row.id;
+    let stored = |e: serde_json::Error| ServiceError::Internal(format!("stored report {id}: {e}"));
+    let drawn = |e: EvalError| ServiceError::Internal(format!("figure of evaluation {id}: {e}"));
+    match row.chart {
+        EvaluationChart::Natural100 => {
+            let report: DeltaEReport = serde_json::from_str(&row.report_json).map_err(stored)?;
+            crate::eval::report_svg(&report).map_err(drawn)
+        }
+        EvaluationChart::ColorChecker => {
+            let report: crate::eval::ColorCheckerReport =
+                serde_json::from_str(&row.report_json).map_err(stored)?;
+            crate::eval::colorchecker_svg(&report).map_err(drawn)
+        }
+    }
 }
 
 #[cfg(test)]

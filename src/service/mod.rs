@@ -4,6 +4,7 @@
 
 mod accept;
 mod admission;
+mod colorchecker;
 mod config;
 mod cpu;
 mod error;

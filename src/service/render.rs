@@ -198,10 +198,10 @@ pub async fn admit(State(state): State<AppState>, req: Request, next: Next) -> R
 /// A render against the chosen table (the active one unless the request or its DNG's camera
 /// chose another: [`super::table_choice`]): lights from the service's registry (no files
 /// over HTTP), prepared renderers from its cache while the table is held.
-struct ServiceRender {
-    state: AppState,
-    active: Arc<ActiveTable>,
-    keep_renderers: bool,
+pub(super) struct ServiceRender {
+    pub(super) state: AppState,
+    pub(super) active: Arc<ActiveTable>,
+    pub(super) keep_renderers: bool,
 }
 
 impl RenderContext for ServiceRender {
@@ -223,6 +223,12 @@ impl RenderContext for ServiceRender {
         self.state
             .renderer_for(&self.active, choice, self.keep_renderers)
     }
+}
+
+/// Whether the request's Content-Type is one of a mosaic (raw or an image file).
+pub(super) fn is_mosaic(headers: &HeaderMap) -> bool {
+    content_type(headers)
+        .is_some_and(|t| t == "application/octet-stream" || IMAGE_TYPES.contains(&t.as_str()))
 }
 
 /// Whether a body of the request's Content-Type is a raw mosaic (else an image file).
@@ -278,7 +284,7 @@ fn output_of(
 /// The render a request asks for, its parts checked in this order: the Content-Type, a
 /// body, the output ([`output_of`]), `correction`, the size of a raw body. `format` is the
 /// negotiated one.
-fn render_request(
+pub(super) fn render_request(
     q: RenderQuery,
     headers: &HeaderMap,
     body: Bytes,

@@ -9,6 +9,7 @@
 
 mod axes;
 mod chromaticity;
+mod colorchecker;
 mod histogram;
 mod lightness;
 mod svg;
@@ -36,6 +37,18 @@ pub fn report_svg(report: &DeltaEReport) -> Result<String, EvalError> {
     let mut s = String::with_capacity(64 * 1024);
     draw(&mut s, report)
         .map_err(|_| EvalError::Invalid("could not format the ΔE figure".into()))?;
+    Ok(s)
+}
+
+/// The figure of a ColorChecker report (1200 × 660): the chart with each patch split into
+/// reference and rendering, and the ΔE2000 per patch as bars beside the references' own
+/// difference.
+pub fn colorchecker_svg(
+    report: &crate::eval::colorchecker::ColorCheckerReport,
+) -> Result<String, EvalError> {
+    let mut s = String::with_capacity(48 * 1024);
+    colorchecker::draw_colorchecker(&mut s, report)
+        .map_err(|_| EvalError::Invalid("could not format the ColorChecker figure".into()))?;
     Ok(s)
 }
 
