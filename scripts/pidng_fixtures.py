@@ -5,6 +5,7 @@ JSON sidecar `l3` reads). tests/io/pidng_fixtures.rs checks that each DNG decode
 and that `l3 render` gives the same PNG bytes for both.
 
     python3 -m pip install 'pidng>=4,<5' numpy
+    cargo build --bin l3
     python3 scripts/pidng_fixtures.py          # rewrites tests/fixtures/pidng/
 
 What PiDNG writes and other writers often do not (the reader's leniencies, docs/dng.md):
@@ -20,10 +21,17 @@ Files:
                                4096, WhiteLevel 65535, AsShotNeutral R G B W, illuminant A
   bayer_sony.dng/.raw/.json    32x24, 14 bits stored in 16, RGGB, Make "SONY", Model
                                "ILCE-9", UniqueCameraModel "Sony ILCE-9", illuminant D65
+  sony_macbeth.dng/.raw/.json  192x128: `l3 simulate --sensor bayer-sony-ilce-9 --scene
+                               macbeth --illuminant D65 --seed 1` (the binary in $L3, default
+                               target/debug/l3), its codes taken to 14 bits (black 512, white
+                               16383), AsShotNeutral the white patch's response; the
+                               names as bayer_sony.dng's
 """
 
 import json
 import os
+import subprocess
+import tempfile
 
 import numpy as np
 import pidng
@@ -125,11 +133,46 @@ def bayer():
     write("bayer_sony", t, data, "RG/GB", black, white, "Bayer with Make, Model, UniqueCameraModel")
 
 
+def sony_macbeth():
+    """A simulated frame of the Sony ILCE-9 (the catalogue sensor) as the camera would name it."""
+    l3 = os.environ.get("L3", os.path.join(ROOT, "target", "debug", "l3"))
+    with tempfile.TemporaryDirectory() as tmp:
+        subprocess.run(
+            [l3, "simulate", "--sensor", "bayer-sony-ilce-9", "--scene", "macbeth",
+             "--illuminant", "D65", "--seed", "1", "--out", tmp],
+            check=True, stdout=subprocess.DEVNULL,
+        )
+        with open(os.path.join(tmp, "mosaic.json")) as f:
+            meta = json.load(f)
+        w, h = meta["width"], meta["height"]
+        codes = np.fromfile(os.path.join(tmp, "mosaic.raw"), dtype="<u2").reshape(h, w)
+    black, white = 512, 16383
+    span = meta["white_level"] - meta["black_level"]
+    v = black + (codes.astype(np.float64) - meta["black_level"]) * (white - black) / span
+    data = np.clip(np.round(v), black, white).astype(np.uint16)
+    # AsShotNeutral: the camera's response to the white patch (19: row 4, column 1 of 32-px
+    # patches), the middle half of it, per CFA colour, relative to green
+    p = w // 6
+    patch = data[3 * p + p // 4: 4 * p - p // 4, p // 4: p - p // 4].astype(np.float64) - black
+    y0, x0 = 3 * p + p // 4, p // 4
+    yy, xx = np.mgrid[0:patch.shape[0], 0:patch.shape[1]]
+    site = ((yy + y0) % 2) * 2 + (xx + x0) % 2  # 0 R, 1 G, 2 G, 3 B
+    r, g, b = patch[site == 0].mean(), patch[(site == 1) | (site == 2)].mean(), patch[site == 3].mean()
+    neutral = [[int(round(r / g * 10000)), 10000], [1, 1], [int(round(b / g * 10000)), 10000]]
+    t = tags(w, h, 16, [0, 1, 1, 2], black, white, neutral, CalibrationIlluminant.D65)
+    t.set(Tag.Make, "SONY")
+    t.set(Tag.Model, "ILCE-9")
+    t.set(Tag.UniqueCameraModel, "Sony ILCE-9")
+    write("sony_macbeth", t, data, "RG/GB", black, white,
+          "l3 simulate --sensor bayer-sony-ilce-9 --scene macbeth --illuminant D65 --seed 1, in 14 bits")
+
+
 def main():
     os.makedirs(OUT, exist_ok=True)
     rgbw()
     bayer()
-    print(f"wrote rgbw_pidng and bayer_sony (DNG, raw, json) in {OUT} with PiDNG {pidng_version()}")
+    sony_macbeth()
+    print(f"wrote rgbw_pidng, bayer_sony and sony_macbeth (DNG, raw, json) in {OUT} with PiDNG {pidng_version()}")
 
 
 if __name__ == "__main__":

@@ -1,6 +1,7 @@
 //! DNGs written by PiDNG 4.0.9 the way its README uses it (`scripts/pidng_fixtures.py`,
 //! tests/fixtures/pidng/): an RGBW file without CFAPlaneColor, with DNGVersion written twice
-//! and no UniqueCameraModel, and a Bayer file with Make, Model and UniqueCameraModel. Each
+//! and no UniqueCameraModel, and two Bayer files with Make, Model and UniqueCameraModel (one a
+//! simulated frame of the Sony ILCE-9). Each
 //! decodes to its raw twin, and `l3 render` gives the same PNG bytes for the DNG and the twin.
 
 use std::path::{Path, PathBuf};
@@ -35,6 +36,7 @@ fn pidng_dngs_decode_to_their_raw_twins() {
     for (stem, cfa, planes, size) in [
         ("rgbw_pidng", "RG/WB", "RGBW", (64, 48)),
         ("bayer_sony", "RG/GB", "RGB", (32, 24)),
+        ("sony_macbeth", "RG/GB", "RGB", (192, 128)),
     ] {
         let dng = read_mosaic(&dir().join(format!("{stem}.dng")), &limits).unwrap();
         let twin = read_mosaic(&dir().join(format!("{stem}.raw")), &limits).unwrap();

@@ -144,6 +144,36 @@ async fn a_dng_renders_with_the_table_trained_for_its_camera_without_activating_
     assert_eq!(header(&r, "x-l3-table-choice"), "camera");
     assert_eq!(header(&r, "x-l3-sensor"), "bayer-sony-ilce-9");
     let by_camera = r.bytes().await.unwrap();
+    // a simulated frame of the camera written by PiDNG (no table, no light named): the
+    // camera's table, and the same bytes as its raw twin rendered with that table by name
+    let fixtures = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/fixtures/pidng");
+    let pidng = std::fs::read(fixtures.join("sony_macbeth.dng")).unwrap();
+    let r = c
+        .post(url(&server, "/v1/render"))
+        .header("content-type", "image/x-adobe-dng")
+        .body(pidng)
+        .send()
+        .await
+        .unwrap();
+    assert_eq!(r.status(), 200);
+    assert_eq!(header(&r, "x-l3-table"), sony_id);
+    assert_eq!(header(&r, "x-l3-table-choice"), "camera");
+    let light = header(&r, "x-l3-illuminant");
+    let from_dng = r.bytes().await.unwrap();
+    let twin = std::fs::read(fixtures.join("sony_macbeth.raw")).unwrap();
+    let q = format!(
+        "/v1/render?width=192&height=128&cfa=RG/GB&black_level=512&white_level=16383&illuminant={light}&table={sony_id}"
+    );
+    let r = c
+        .post(url(&server, &q))
+        .header("content-type", "application/octet-stream")
+        .body(twin)
+        .send()
+        .await
+        .unwrap();
+    assert_eq!(r.status(), 200);
+    assert_eq!(header(&r, "x-l3-table-choice"), "query");
+    assert!(r.bytes().await.unwrap() == from_dng, "the DNG and its raw twin render apart");
     let v = json(c.get(url(&server, "/readyz")).send().await.unwrap()).await;
     assert_eq!(v["table_id"], active_id.as_str());
     let t = json(
