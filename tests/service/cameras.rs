@@ -173,7 +173,10 @@ async fn a_dng_renders_with_the_table_trained_for_its_camera_without_activating_
         .unwrap();
     assert_eq!(r.status(), 200);
     assert_eq!(header(&r, "x-l3-table-choice"), "query");
-    assert!(r.bytes().await.unwrap() == from_dng, "the DNG and its raw twin render apart");
+    assert!(
+        r.bytes().await.unwrap() == from_dng,
+        "the DNG and its raw twin render apart"
+    );
     let v = json(c.get(url(&server, "/readyz")).send().await.unwrap()).await;
     assert_eq!(v["table_id"], active_id.as_str());
     let t = json(
