@@ -237,7 +237,7 @@ mod tests {
         assert_eq!(texts(&ShardStage::ALL), "survey|accumulate");
         assert_eq!(texts(&TableStatus::ALL), "ok|corrupt|missing");
         assert_eq!(texts(&EvaluationMethod::ALL), "l3|baseline");
-        assert_eq!(texts(&EvaluationChart::ALL), "natural100, colorchecker");
+        assert_eq!(texts(&EvaluationChart::ALL), "natural100|colorchecker");
         // a job queued or ended records its state's name as its stage (`stage = status`)
         for s in JobStatus::ALL {
             let stage = JobStage::parse(s.as_str());
