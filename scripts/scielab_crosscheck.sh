@@ -124,8 +124,12 @@ for i, name in enumerate(names):
         write_tiff_rgb32f(f"{work}/p{i}_{tag}.tiff", img32)
         img32.tofile(f"{work}/p{i}_{tag}.f32")
 
+# (ISETCam filters, l3 filters, ΔE). 'paper-sigma' is ISETCam's own filter code (sumGauss) fed
+# the paper's spreads read as the paper defines them, exp(-r²/σ²), i.e. a half-width at half
+# maximum of σ·√ln 2, where ISETCam's 'original' takes the printed σ as that half-width.
 configs = [("distribution", "distribution", "2000"), ("distribution", "distribution", "1976"),
-           ("original", "paper", "2000"), ("original", "paper", "1976")]
+           ("original", "paper", "2000"), ("original", "paper", "1976"),
+           ("paper-sigma", "paper", "2000")]
 driver = f"{work}/run_isetcam.m"
 with open(driver, "w") as f:
     f.write(f"pkg load image\naddpath(genpath('{isetcam}'));\nW={W}; H={H};\n")
@@ -138,6 +142,12 @@ fid = fopen('{work}/p{i}_rendered.f32'); b = fread(fid, inf, 'single=>double'); 
 a = permute(reshape(a, [3 W H]), [3 2 1]); b = permute(reshape(b, [3 W H]), [3 2 1]);
 params = struct('sampPerDeg', {SPD}, 'filterSize', {SPD}, 'filters', [], 'filterversion', '{iset_v}', ...
                 'deltaEversion', '{de}', 'imageFormat', 'xyz2');
+if strcmp(params.filterversion, 'paper-sigma')
+  params.filterversion = 'original';
+  [x1, x2, x3] = scGaussianParameters({SPD}, params);
+  k = sqrt(log(2)); x1([1 3 5]) = x1([1 3 5]) * k; x2([1 3]) = x2([1 3]) * k; x3([1 3]) = x3([1 3]) * k;
+  params.filters = {{sumGauss([{SPD} x1], 2), sumGauss([{SPD} x2], 2), sumGauss([{SPD} x3], 2)}};
+end
 dE = scielab(a, b, wp, params);
 fid = fopen('{work}/iset_c{ci}_p{i}.f64', 'w'); fwrite(fid, size(dE), 'double'); fwrite(fid, dE.', 'double'); fclose(fid);
 """)
