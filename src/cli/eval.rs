@@ -5,8 +5,9 @@ use clap::Args;
 use super::{Cli, CliError, iset, load_sensor, write_file};
 use crate::camera::Camera;
 use crate::eval::{
-    ChartSetup, DeltaEReport, LightLevel, Method, MethodOnChart, PaperOptions, SweepOptions,
-    catalogue_sweep, fit_baseline_matrix, noise_split, paper_summary, run_paper_table,
+    Border, ChartSetup, DeltaEFormula, DeltaEReport, FilterSet, LightLevel, Method, MethodOnChart,
+    PaperOptions, SweepOptions, catalogue_sweep, fit_baseline_matrix, noise_split, paper_summary,
+    run_paper_table,
 };
 use crate::l3::L3Table;
 use crate::l3::correct::IlluminantRegistry;
@@ -142,15 +143,15 @@ pub struct EvalArgs {
     pub samples_per_degree: Option<f64>,
     /// With --scielab: the ΔE formula, `2000` (CIEDE2000) or `1976`.
     #[arg(long, default_value = "2000")]
-    pub delta_e: String,
+    pub delta_e: DeltaEFormula,
     /// With --scielab: the channel filters, `paper` (Zhang & Wandell's published weights and
     /// spreads) or `distribution` (their released code's, ISETCam's default).
     #[arg(long, default_value = "paper")]
-    pub scielab_filters: String,
+    pub scielab_filters: FilterSet,
     /// With --scielab: how the image is extended past its edges, `symmetric` (mirrored) or
     /// `periodic` (wrapped, as ISETCam's FFT convolution does).
     #[arg(long, default_value = "symmetric")]
-    pub border: String,
+    pub border: Border,
     /// With --scielab: also write the per-pixel ΔE map here, as a 32-bit float grey TIFF.
     #[arg(long, requires = "scielab")]
     pub map: Option<PathBuf>,
@@ -194,9 +195,9 @@ pub fn run(cli: &Cli, a: &EvalArgs) -> Result<(), CliError> {
             ideal,
             rendered,
             samples_per_degree: a.samples_per_degree,
-            delta_e: &a.delta_e,
-            filters: &a.scielab_filters,
-            border: &a.border,
+            delta_e: a.delta_e,
+            filters: a.scielab_filters,
+            border: a.border,
             map: a.map.as_ref(),
             out: &a.out,
         });

@@ -4,7 +4,7 @@
 use std::path::{Path, PathBuf};
 
 use super::{CliError, write_file};
-use crate::eval::{ScielabOptions, ViewingCondition, scielab};
+use crate::eval::{Border, DeltaEFormula, FilterSet, ScielabOptions, ViewingCondition, scielab};
 use crate::io::{Limits, read_tiff_f32_rgb, write_tiff_gray_f32};
 
 /// What `l3 eval --scielab` was asked (its flags).
@@ -12,19 +12,19 @@ pub struct ScielabArgs<'a> {
     pub ideal: &'a Path,
     pub rendered: &'a Path,
     pub samples_per_degree: Option<f64>,
-    pub delta_e: &'a str,
-    pub filters: &'a str,
-    pub border: &'a str,
+    pub delta_e: DeltaEFormula,
+    pub filters: FilterSet,
+    pub border: Border,
     pub map: Option<&'a PathBuf>,
     pub out: &'a Path,
 }
 
 impl ScielabArgs<'_> {
-    fn options(&self) -> Result<ScielabOptions, CliError> {
+    fn options(&self) -> ScielabOptions {
         let mut o = ScielabOptions {
-            formula: self.delta_e.parse().map_err(CliError::Usage)?,
-            filters: self.filters.parse().map_err(CliError::Usage)?,
-            border: self.border.parse().map_err(CliError::Usage)?,
+            formula: self.delta_e,
+            filters: self.filters,
+            border: self.border,
             ..ScielabOptions::default()
         };
         if let Some(spd) = self.samples_per_degree {
@@ -32,12 +32,12 @@ impl ScielabArgs<'_> {
                 samples_per_degree: spd,
             };
         }
-        Ok(o)
+        o
     }
 }
 
 pub fn run(a: &ScielabArgs) -> Result<(), CliError> {
-    let opts = a.options()?;
+    let opts = a.options();
     let limits = Limits::default();
     let (w, h, ideal) = read_tiff_f32_rgb(a.ideal, &limits)?;
     let (w2, h2, rendered) = read_tiff_f32_rgb(a.rendered, &limits)?;

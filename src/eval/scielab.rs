@@ -246,7 +246,7 @@ pub fn channel_filters(opts: &ScielabOptions) -> Result<[ChannelFilter; 3], Eval
         )));
     }
     let mut taps = (spd * opts.support_deg).ceil().max(1.0) as usize;
-    if taps % 2 == 0 {
+    if taps.is_multiple_of(2) {
         taps -= 1;
     }
     let half = (taps / 2) as f64;
