@@ -348,7 +348,8 @@ fn evaluate_frame(
         &corr.name,
         iset,
         chart,
-    )?;
+    )?
+    .with_ideal_image(&camera)?;
     let name = format!(
         "L3 {} ({})",
         table.meta.kind,
@@ -377,6 +378,9 @@ fn print_and_write(a: &EvalArgs, report: &DeltaEReport) -> Result<(), CliError> 
         s.max,
         report.per_pixel.mean
     );
+    if let Some(s) = report.s_cielab_mean {
+        println!("S-CIELAB of the render against the ideal image: mean ΔE2000 {s:.2}");
+    }
     let out = if a.out.extension().is_some() {
         a.out.clone()
     } else {
@@ -573,7 +577,7 @@ fn evaluate_and_explain(
     chart: &ChartSetup,
 ) -> Result<DeltaEReport, CliError> {
     let (camera, acq, corr, iset) = (m.camera, m.acquisition, m.correction, m.iset);
-    let mut report = m.evaluate(chart)?;
+    let mut report = m.evaluate_with_s_cielab(chart)?;
     if let Some(n) = a.captures {
         let split = noise_split(m, chart, n.into())?;
         println!(
