@@ -5,8 +5,9 @@ use clap::Args;
 use super::{Cli, CliError, iset, load_sensor, write_file};
 use crate::camera::Camera;
 use crate::eval::{
-    ChartSetup, DeltaEReport, LightLevel, Method, MethodOnChart, PaperOptions, SweepOptions,
-    catalogue_sweep, fit_baseline_matrix, noise_split, paper_summary, run_paper_table,
+    Border, ChartSetup, DeltaEFormula, DeltaEReport, FilterSet, LightLevel, Method, MethodOnChart,
+    PaperOptions, SweepOptions, catalogue_sweep, fit_baseline_matrix, noise_split, paper_summary,
+    run_paper_table,
 };
 use crate::l3::L3Table;
 use crate::l3::correct::IlluminantRegistry;
@@ -131,6 +132,29 @@ pub struct EvalArgs {
     /// ColorChecker Classic's; 0 for `l3 simulate --scene macbeth`'s chart, drawn edge to edge).
     #[arg(long, default_value_t = crate::eval::colorchecker::CLASSIC_GAP, requires = "colorchecker")]
     pub chart_gap: f64,
+    /// S-CIELAB (Zhang & Wandell 1996) between two 32-bit float XYZ TIFFs (D65, white Y = 1,
+    /// same size): `--scielab IDEAL RENDERED`. Prints the per-pixel ΔE's mean, p90 and max as
+    /// JSON and writes it to --out. See docs/accuracy.md.
+    #[arg(long, num_args = 2, value_names = ["IDEAL", "RENDERED"], conflicts_with_all = ["paper_table", "catalogue", "frame", "captures", "estimate_illuminant", "colour_classes", "colorchecker", "table"])]
+    pub scielab: Vec<PathBuf>,
+    /// With --scielab: image samples per degree of visual angle (default 41.2: a 120-ppi
+    /// display seen from 50 cm).
+    #[arg(long, requires = "scielab")]
+    pub samples_per_degree: Option<f64>,
+    /// With --scielab: the ΔE formula, `2000` (CIEDE2000) or `1976`.
+    #[arg(long, default_value = "2000")]
+    pub delta_e: DeltaEFormula,
+    /// With --scielab: the channel filters, `paper` (Zhang & Wandell's published weights and
+    /// spreads) or `distribution` (their released code's, ISETCam's default).
+    #[arg(long, default_value = "paper")]
+    pub scielab_filters: FilterSet,
+    /// With --scielab: how the image is extended past its edges, `symmetric` (mirrored) or
+    /// `periodic` (wrapped, as ISETCam's FFT convolution does).
+    #[arg(long, default_value = "symmetric")]
+    pub border: Border,
+    /// With --scielab: also write the per-pixel ΔE map here, as a 32-bit float grey TIFF.
+    #[arg(long, requires = "scielab")]
+    pub map: Option<PathBuf>,
     /// Training scenes per table (with --paper-table or --catalogue).
     #[arg(long, default_value_t = 48)]
     pub scenes: usize,
@@ -166,6 +190,18 @@ fn chart_setup(a: &EvalArgs) -> Result<ChartSetup, CliError> {
 }
 
 pub fn run(cli: &Cli, a: &EvalArgs) -> Result<(), CliError> {
+    if let [ideal, rendered] = a.scielab.as_slice() {
+        return super::scielab::run(&super::scielab::ScielabArgs {
+            ideal,
+            rendered,
+            samples_per_degree: a.samples_per_degree,
+            delta_e: a.delta_e,
+            filters: a.scielab_filters,
+            border: a.border,
+            map: a.map.as_ref(),
+            out: &a.out,
+        });
+    }
     let iset = iset(&cli.iset_dir)?;
     let chart = chart_setup(a)?;
     if a.paper_table {
@@ -312,7 +348,8 @@ fn evaluate_frame(
         &corr.name,
         iset,
         chart,
-    )?;
+    )?
+    .with_ideal_image(&camera)?;
     let name = format!(
         "L3 {} ({})",
         table.meta.kind,
@@ -341,6 +378,9 @@ fn print_and_write(a: &EvalArgs, report: &DeltaEReport) -> Result<(), CliError> 
         s.max,
         report.per_pixel.mean
     );
+    if let Some(s) = report.s_cielab_mean {
+        println!("S-CIELAB of the render against the ideal image: mean ΔE2000 {s:.2}");
+    }
     let out = if a.out.extension().is_some() {
         a.out.clone()
     } else {
@@ -537,7 +577,7 @@ fn evaluate_and_explain(
     chart: &ChartSetup,
 ) -> Result<DeltaEReport, CliError> {
     let (camera, acq, corr, iset) = (m.camera, m.acquisition, m.correction, m.iset);
-    let mut report = m.evaluate(chart)?;
+    let mut report = m.evaluate_with_s_cielab(chart)?;
     if let Some(n) = a.captures {
         let split = noise_split(m, chart, n.into())?;
         println!(

@@ -4,6 +4,7 @@ mod bench;
 mod colorchecker;
 mod eval;
 mod render;
+mod scielab;
 mod sensors;
 mod serve;
 mod sfr;

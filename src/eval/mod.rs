@@ -11,6 +11,7 @@ mod illuminant_estimation;
 mod noise_split;
 mod paper_table;
 mod report;
+mod scielab;
 mod sfr;
 mod workflow;
 
@@ -40,6 +41,10 @@ pub use paper_table::{
 pub use report::{
     ChartTruth, DeltaEReport, ErrorStats, PatchResult, PixelStats, REPORT_SCHEMA, evaluate_chart,
     interior, patch_means, summarize, white_patch_index,
+};
+pub use scielab::{
+    Border, ChannelFilter, DeltaEFormula, FilterSet, Scielab, ScielabOptions, ViewingCondition,
+    XYZ_TO_OPP, channel_filters, scielab,
 };
 pub use sfr::{EdgeOrientation, Sfr, SfrError, slanted_edge_sfr};
 pub use workflow::{

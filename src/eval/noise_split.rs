@@ -12,7 +12,7 @@
 
 use serde::{Deserialize, Serialize};
 
-use super::workflow::{ChartSetup, Method, evaluate_method};
+use super::workflow::{ChartSetup, Method, evaluate_capture, evaluate_method, simulate_chart};
 use super::{DeltaEReport, ErrorStats, EvalError, summarize};
 use crate::camera::Camera;
 use crate::colour::{D65_WHITE_XYZ, Xyz, ciede2000, xyz_to_lab};
@@ -72,6 +72,21 @@ impl MethodOnChart<'_> {
             self.acquisition,
             self.correction,
             self.iset,
+            setup,
+        )
+    }
+
+    /// [`Self::evaluate`] with the S-CIELAB of the whole render against the chart's ideal
+    /// image (`DeltaEReport::s_cielab_mean`).
+    pub fn evaluate_with_s_cielab(&self, setup: &ChartSetup) -> Result<DeltaEReport, EvalError> {
+        let cap = simulate_chart(self.camera, self.acquisition, self.iset, setup)?
+            .with_ideal_image(self.camera)?;
+        evaluate_capture(
+            self.camera,
+            &cap,
+            self.method,
+            self.method_name,
+            self.correction,
             setup,
         )
     }
@@ -170,6 +185,7 @@ mod tests {
             per_category: Default::default(),
             white_patch: "w".into(),
             patches: vec![patch("a", "Food", est), patch("w", "grey", [1.0; 3])],
+            s_cielab_mean: None,
             context: serde_json::Value::Null,
         }
     }
@@ -185,6 +201,50 @@ mod tests {
         let b =
             averaged_patch_means(&[report([0.33, 0.3, 0.3]), report([0.33, 0.3, 0.3])]).unwrap();
         assert!(b.mean > 1.0, "{}", b.mean);
+    }
+
+    #[test]
+    fn s_cielab_is_reported_against_the_ideal_image_when_asked() {
+        use crate::eval::{fit_baseline_matrix, simulate_chart};
+        let camera = crate::test_support::paper_camera();
+        let matrix = fit_baseline_matrix(&camera, &["D65".to_string()], None).unwrap();
+        let correction =
+            crate::l3::correct::IlluminantRegistry::with_defaults(*camera.grid(), None)
+                .unwrap()
+                .resolve("Tungsten", None)
+                .unwrap();
+        let method = Method::Baseline(&matrix);
+        let m = MethodOnChart {
+            camera: &camera,
+            method: &method,
+            method_name: "Baseline+T",
+            acquisition: "Tungsten",
+            correction: &correction,
+            iset: None,
+        };
+        let setup = ChartSetup {
+            patch_px: 8,
+            noise: false,
+            ..ChartSetup::default()
+        };
+        assert_eq!(m.evaluate(&setup).unwrap().s_cielab_mean, None);
+        let s = m
+            .evaluate_with_s_cielab(&setup)
+            .unwrap()
+            .s_cielab_mean
+            .unwrap();
+        assert!(s.is_finite() && s > 0.0, "{s}");
+        // the ideal image scored against itself, at another scale: no error
+        let cap = simulate_chart(&camera, "Tungsten", None, &setup)
+            .unwrap()
+            .with_ideal_image(&camera)
+            .unwrap();
+        let ideal: Vec<f32> = cap.ideal_image.clone().unwrap();
+        let scaled: Vec<f32> = ideal.iter().map(|v| v * 2.0).collect();
+        let r = cap
+            .score(&scaled, "ideal", serde_json::Value::Null)
+            .unwrap();
+        assert!(r.s_cielab_mean.unwrap() < 1e-9, "{:?}", r.s_cielab_mean);
     }
 
     #[test]

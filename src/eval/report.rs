@@ -60,6 +60,11 @@ pub struct DeltaEReport {
     pub per_category: BTreeMap<String, ErrorStats>,
     pub white_patch: String,
     pub patches: Vec<PatchResult>,
+    /// S-CIELAB ([`crate::eval::scielab`], CIEDE2000, default viewing condition and filters)
+    /// of the whole rendered image against the chart's ideal image, both normalised by their
+    /// white patch; absent where the ideal image was not computed.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub s_cielab_mean: Option<f64>,
     /// Free-form context: exposure, table id, seeds, timings.
     pub context: serde_json::Value,
 }
@@ -231,6 +236,7 @@ pub fn evaluate_chart(
         per_category: cats.into_iter().map(|(k, v)| (k, summarize(&v))).collect(),
         white_patch: truth.patches[wi].name.clone(),
         patches: results,
+        s_cielab_mean: None,
         context,
     })
 }

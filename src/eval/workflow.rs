@@ -197,9 +197,40 @@ pub struct ChartCapture {
     /// behind this lens would record. The lens's flare is not the
     /// pipeline's error.
     pub ideal_d65: Vec<crate::colour::Xyz>,
+    /// The ideal image itself (interleaved XYZ, `width × height × 3`, the units of
+    /// `ideal_d65`), when asked for ([`ChartCapture::with_ideal_image`]): scoring then adds
+    /// the render's S-CIELAB against it.
+    pub ideal_image: Option<Vec<f32>>,
 }
 
 impl ChartCapture {
+    /// This capture with its ideal image, so that [`ChartCapture::score`] adds S-CIELAB.
+    pub fn with_ideal_image(mut self, camera: &Camera) -> Result<Self, EvalError> {
+        self.ideal_image = Some(ideal_d65_image(camera, &self.scene)?);
+        Ok(self)
+    }
+
+    /// S-CIELAB of a rendered XYZ image against the ideal image, both normalised by their
+    /// white patch as the chart evaluation normalises them; `None` without the ideal image or
+    /// when its size is not the render's.
+    fn s_cielab_mean(&self, xyz: &[f32]) -> Result<Option<f64>, EvalError> {
+        let Some(ideal) = self.ideal_image.as_ref().filter(|i| i.len() == xyz.len()) else {
+            return Ok(None);
+        };
+        let patches = &self.scene.patches;
+        let wi = super::white_patch_index(patches, &self.ideal_d65);
+        let y_true = self.ideal_d65.get(wi).map_or(0.0, |v| v[1]);
+        let y_est = super::patch_means(&patches[wi..=wi], xyz, self.width)[0][1];
+        if !(y_true > 0.0 && y_est > 0.0) {
+            return Ok(None);
+        }
+        let a: Vec<f64> = ideal.iter().map(|&v| f64::from(v) / y_true).collect();
+        let b: Vec<f64> = xyz.iter().map(|&v| f64::from(v) / y_est).collect();
+        let opts = super::ScielabOptions::default();
+        let s = super::scielab(&a, &b, self.width, self.height, &opts, false)?;
+        Ok(Some(s.stats.mean))
+    }
+
     /// Score a rendered XYZ image of this capture.
     pub fn score(
         &self,
@@ -212,7 +243,7 @@ impl ChartCapture {
             patches: &self.scene.patches,
             ideal_d65: &self.ideal_d65,
         };
-        evaluate_chart(
+        let mut report = evaluate_chart(
             &truth,
             xyz,
             self.width,
@@ -220,7 +251,9 @@ impl ChartCapture {
             &self.acquisition,
             method_name,
             context,
-        )
+        )?;
+        report.s_cielab_mean = self.s_cielab_mean(xyz)?;
+        Ok(report)
     }
 }
 
@@ -244,6 +277,7 @@ pub fn simulate_chart(
         height,
         exposure_s: cap.exposure_s,
         ideal_d65,
+        ideal_image: None,
     })
 }
 
@@ -278,17 +312,26 @@ pub fn ideal_d65_patch_means(
     camera: &Camera,
     scene: &Scene,
 ) -> Result<Vec<crate::colour::Xyz>, EvalError> {
+    Ok(super::report::patch_means(
+        &scene.patches,
+        &ideal_d65_image(camera, scene)?,
+        scene.cols(),
+    ))
+}
+
+/// The noise-free XYZ image of `scene`'s optical image relit by D65 (interleaved, `cols ×
+/// rows × 3`), whose patch means [`ideal_d65_patch_means`] takes.
+pub fn ideal_d65_image(camera: &Camera, scene: &Scene) -> Result<Vec<f32>, EvalError> {
     let invalid = |e: crate::camera::CameraError| EvalError::Invalid(e.to_string());
     let d65 = cie_illuminant("D65")
         .ok_or_else(|| EvalError::Invalid("D65 missing".into()))?
         .resample(camera.grid(), Extrapolation::Zero);
     let optical = camera.optical_image(scene).map_err(invalid)?;
     let ideal_img = camera.xyz_rates(&optical, &d65).map_err(invalid)?;
-    Ok(super::report::patch_means(
-        &scene.patches,
-        ideal_img.as_slice().unwrap_or(&[]),
-        scene.cols(),
-    ))
+    Ok(ideal_img
+        .as_slice()
+        .map(<[f32]>::to_vec)
+        .unwrap_or_default())
 }
 
 /// A captured frame of the evaluation chart (e.g. `l3 simulate --scene natural100`'s mosaic,
@@ -331,6 +374,7 @@ pub fn frame_chart_capture(
         height,
         exposure_s: f64::NAN,
         ideal_d65,
+        ideal_image: None,
     })
 }
 

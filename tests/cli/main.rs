@@ -2,14 +2,15 @@
 //! `l3 serve` (`cli`), `l3 bench --quick` (`bench`), `l3 eval --catalogue` (`catalogue`),
 //! `l3 eval --colorchecker` on simulated captures (`colorchecker`),
 //! `l3 sensors` and `l3 render --data-dir`'s choice of table by the DNG's camera (`cameras`),
-//! sensors by catalogue name or by a TOML beside its curves (`sensors`), and `l3 sfr` on image
-//! files (`sfr`).
+//! sensors by catalogue name or by a TOML beside its curves (`sensors`), `l3 sfr` on image
+//! files (`sfr`) and `l3 eval --scielab` on float XYZ TIFFs (`scielab`).
 
 mod bench;
 mod cameras;
 mod catalogue;
 mod cli;
 mod colorchecker;
+mod scielab;
 mod sensors;
 mod sfr;
 mod support;

@@ -39,6 +39,7 @@ fn report(patches: Vec<PatchResult>) -> DeltaEReport {
         per_category: Default::default(),
         white_patch: "grey_95".into(),
         patches,
+        s_cielab_mean: None,
         context: serde_json::Value::Null,
     }
 }
