@@ -351,9 +351,9 @@ fn deflate_band(band: Band, last: bool, out: Vec<u8>) -> (Vec<u8>, u32) {
         len: [0; LITLEN_SYMBOLS],
         pairs: Vec::new(),
     };
-    for s in 0..LITLEN_SYMBOLS {
-        coder.code[s] = codes[s];
-        coder.len[s] = u32::from(lengths[s]);
+    for (s, (&c, &l)) in codes.iter().zip(&lengths).enumerate() {
+        coder.code[s] = c;
+        coder.len[s] = u32::from(l);
     }
     coder.fill_pairs();
     let mut adler = simd_adler32::Adler32::new();
