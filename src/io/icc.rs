@@ -104,7 +104,7 @@ fn build_srgb_profile() -> Vec<u8> {
         }
         body.extend_from_slice(bytes);
         offset += bytes.len();
-        while offset % 4 != 0 {
+        while !offset.is_multiple_of(4) {
             body.push(0);
             offset += 1;
         }
@@ -159,7 +159,7 @@ mod tests {
         for i in 0..n {
             let e = 132 + 12 * i;
             let (off, len) = (u32_at(p, e + 4), u32_at(p, e + 8));
-            assert!(off % 4 == 0 && off + len <= p.len());
+            assert!(off.is_multiple_of(4) && off + len <= p.len());
             sigs.push(std::str::from_utf8(&p[e..e + 4]).unwrap().to_string());
         }
         for want in [
