@@ -496,6 +496,52 @@ fn canonical_codes(lengths: &[u8]) -> Vec<u32> {
 mod tests {
     use super::*;
 
+    /// An image of several bands (the last one partial) with noise, constant rows and rows
+    /// equal to the one above (zero runs longer than a match), decoded by the `png` crate and
+    /// by `image`: the same pixels, and the same bytes on one thread as on many.
+    #[test]
+    fn bands_decode_to_the_image_on_any_thread_count() {
+        let (w, h) = (300usize, 2 * (BAND_BYTES / (300 * 3 + 1)) + 17);
+        let mut state = 12345u32;
+        let data: Vec<u8> = (0..w * h * 3)
+            .map(|i| {
+                let y = i / (w * 3);
+                state = state.wrapping_mul(1_103_515_245).wrapping_add(12345);
+                match y % 7 {
+                    0..=2 => (state >> 24) as u8,
+                    3 => 200,
+                    _ => ((i % (w * 3)) / 3 % 256) as u8,
+                }
+            })
+            .collect();
+        let png = encode_rgb8(w as u32, h as u32, &data);
+        let limits = crate::io::Limits::default();
+        let (dw, dh, px) = crate::io::decode_png_rgb8(&png, &limits).unwrap();
+        assert_eq!((dw, dh), (w, h));
+        assert!(px == data, "png crate: pixels differ");
+        let img = image::load_from_memory_with_format(&png, image::ImageFormat::Png)
+            .unwrap()
+            .to_rgb8();
+        assert!(img.as_raw() == &data, "image: pixels differ");
+        let one = rayon::ThreadPoolBuilder::new()
+            .num_threads(1)
+            .build()
+            .unwrap()
+            .install(|| encode_rgb8(w as u32, h as u32, &data));
+        assert!(one == png, "bytes depend on the thread count");
+        // one band and a one-pixel image
+        let small = encode_rgb8(2, 3, &data[..18]);
+        assert_eq!(
+            crate::io::decode_png_rgb8(&small, &limits).unwrap().2,
+            &data[..18]
+        );
+        let dot = encode_rgb8(1, 1, &[0, 0, 0]);
+        assert_eq!(
+            crate::io::decode_png_rgb8(&dot, &limits).unwrap().2,
+            [0, 0, 0]
+        );
+    }
+
     #[test]
     fn adler_of_parts_is_adler_of_whole() {
         let a: Vec<u8> = (0..70_000u32).map(|i| (i * 7 % 251) as u8).collect();
