@@ -6,7 +6,10 @@ use serde::{Deserialize, Serialize};
 
 use super::BenchError;
 use super::stats::time_median;
-use crate::io::{PngCompression, encode_png_rgb8, encode_ppm_rgb8, encode_tiff_f32_rgb};
+use crate::io::{
+    JpegOptions, PngCompression, encode_jpeg_rgb8, encode_png_rgb8, encode_ppm_rgb8,
+    encode_tiff_f32_rgb,
+};
 use crate::l3::L3Table;
 use crate::l3::correct::{IDENTITY, Mat3};
 use crate::l3::render::{
@@ -357,7 +360,7 @@ fn encoders(
     let xyz = on.render_xyz(frame, w, h, None)?.0;
     let mut enc = Vec::new();
     for (name, c) in [
-        ("PNG fast (fdeflate)", PngCompression::Fast),
+        ("PNG fast (bands on all cores)", PngCompression::Fast),
         ("PNG default", PngCompression::Default),
     ] {
         let (ms, bytes) = time_median(runs, || {
@@ -369,6 +372,15 @@ fn encoders(
             bytes: bytes.len(),
         });
     }
+    let (ms, bytes) = time_median(runs, || {
+        encode_jpeg_rgb8(w, h, rgb, JpegOptions::default())
+            .map_err(|e| BenchError::Invalid(e.to_string()))
+    })?;
+    enc.push(EncoderResult {
+        encoding: "JPEG quality 90, 4:2:0".into(),
+        median_ms: ms,
+        bytes: bytes.len(),
+    });
     // (the service sends a PPM's header and then the rendered frame itself, without this copy)
     let (ms, bytes) = time_median(runs, || {
         encode_ppm_rgb8(w, h, rgb).map_err(|e| BenchError::Invalid(e.to_string()))

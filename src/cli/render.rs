@@ -9,7 +9,9 @@ use clap::Args;
 
 use super::sensors::{block_on, data_config};
 use super::{Cli, CliError, iset, write_file};
-use crate::io::{Limits, LoadedMosaic, PngCompression, read_mosaic};
+use crate::io::{
+    JpegOptions, JpegQuality, Limits, LoadedMosaic, PngCompression, Subsampling, read_mosaic,
+};
 use crate::l3::L3Table;
 use crate::l3::correct::{IlluminantEntry, IlluminantRegistry};
 use crate::l3::render::WhiteLevel;
@@ -46,7 +48,8 @@ pub struct RenderArgs {
     /// Input mosaic: .raw (+ .json sidecar), DNG, 16-bit PNG, TIFF or PGM.
     #[arg(long = "in")]
     pub input: PathBuf,
-    /// Output: .png (sRGB 8-bit), .ppm (sRGB 8-bit, uncompressed), .tiff (float XYZ), .raw (f32 XYZ).
+    /// Output: .png (sRGB 8-bit), .jpg/.jpeg (sRGB 8-bit, ICC-tagged), .ppm (sRGB 8-bit,
+    /// uncompressed), .tiff (float XYZ), .raw (f32 XYZ).
     #[arg(long)]
     pub out: PathBuf,
     /// `auto` or the Y that maps to white.
@@ -69,6 +72,13 @@ pub struct RenderArgs {
     /// `png_compression`) is the same, so both write the same PNG bytes.
     #[arg(long, default_value_t = RenderOptions::default().png)]
     pub png_compression: PngCompression,
+    /// JPEG quality, 1–100 (for .jpg; the service's `quality` has the same default).
+    #[arg(long, default_value_t = JpegQuality::default())]
+    pub quality: JpegQuality,
+    /// JPEG chroma subsampling: `420`, `422` or `444` (for .jpg; as the service's
+    /// `subsampling`).
+    #[arg(long, default_value_t = Subsampling::default())]
+    pub subsampling: Subsampling,
     /// How an SI table's output is taken to D65: `camera` (C, fitted on the table's
     /// colour map and sensor under the light; the service's default too) or
     /// `colorimetric` (the paper's T).
@@ -182,7 +192,7 @@ fn render_request(
         Some(format) => format,
         None => {
             return Err(CliError::Usage(format!(
-                "--out {}: use .png, .ppm, .tiff or .raw",
+                "--out {}: use .png, .jpg, .ppm, .tiff or .raw",
                 a.out.display()
             )));
         }
@@ -198,6 +208,10 @@ fn render_request(
             .map_err(usage)?,
         preview: check_preview(a.preview).map_err(usage)?,
         png: a.png_compression,
+        jpeg: JpegOptions {
+            quality: a.quality,
+            subsampling: a.subsampling,
+        },
     };
     let renderer = match a.renderer.as_str() {
         "fast" => Renderer::Fast,

@@ -10,10 +10,13 @@
 mod atomic;
 mod dng;
 mod error;
+mod icc;
+mod jpeg_format;
 mod limits;
 mod luminance;
 mod mosaic;
 mod pgm;
+mod png_bands;
 mod png_format;
 mod ppm;
 mod raw;
@@ -25,6 +28,11 @@ pub use dng::{
     read_camera, write_dng,
 };
 pub use error::{IoError, IoResult};
+pub use icc::{SRGB_PROFILE_DESCRIPTION, srgb_profile};
+pub use jpeg_format::{
+    DEFAULT_JPEG_QUALITY, InvalidJpegQuality, JpegOptions, JpegQuality, Subsampling,
+    UnknownSubsampling, encode_jpeg_rgb8,
+};
 pub use limits::Limits;
 pub use luminance::{Transfer, decode_luminance};
 pub use mosaic::{

@@ -42,7 +42,9 @@ pub use kernels::{
 pub use options::{
     MAX_PREVIEW, RenderOptions, check_preview, downscale, output_size, parse_region,
 };
-pub use output::{Encoded, Image, OutputFormat, Pixels, TiffKind, UnknownTiffKind, encode};
+pub use output::{
+    Encoded, Encoding, Image, OutputFormat, Pixels, TiffKind, UnknownTiffKind, encode,
+};
 pub use render::{RenderPipeline, Rendered, render_reference};
 
 use crate::io::Limits;

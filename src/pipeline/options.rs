@@ -1,8 +1,9 @@
 //! How to render: output white, region (`x,y,width,height`), preview downscale (1–16), PNG
-//! compression; the output size they give, and the box-average downscale.
+//! compression and JPEG options; the output size they give, and the box-average downscale.
 
 use super::error::PipelineError;
-use crate::io::PngCompression;
+use super::output::Encoding;
+use crate::io::{JpegOptions, PngCompression};
 use crate::l3::render::{Region, WhiteLevel};
 
 /// Largest preview downscale factor.
@@ -19,6 +20,8 @@ pub struct RenderOptions {
     pub preview: usize,
     /// PNG compression.
     pub png: PngCompression,
+    /// JPEG quality and chroma subsampling.
+    pub jpeg: JpegOptions,
 }
 
 impl Default for RenderOptions {
@@ -28,6 +31,7 @@ impl Default for RenderOptions {
             region: None,
             preview: 1,
             png: PngCompression::Fast,
+            jpeg: JpegOptions::default(),
         }
     }
 }
@@ -36,6 +40,14 @@ impl RenderOptions {
     /// Whether the whole frame is rendered at full size (no region, no preview).
     pub fn whole_frame(&self) -> bool {
         self.region.is_none() && self.preview == 1
+    }
+
+    /// How the compressed outputs are encoded.
+    pub fn encoding(&self) -> Encoding {
+        Encoding {
+            png: self.png,
+            jpeg: self.jpeg,
+        }
     }
 }
 

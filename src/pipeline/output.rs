@@ -1,12 +1,13 @@
 //! The output formats and their one encoder. The service maps `Accept` (and `tiff=`) onto an
 //! [`OutputFormat`] by its media type, `l3 render` maps the output file's extension (and
-//! `--tiff`); both renderers' pixels are encoded by [`encode`].
+//! `--tiff`); both renderers' pixels are encoded by [`encode`], with the PNG compression and
+//! JPEG options of [`Encoding`].
 
 use std::str::FromStr;
 
 use crate::io::{
-    IoError, PngCompression, encode_png_rgb8, encode_ppm_rgb8, encode_tiff_f32_rgb,
-    encode_tiff_rgb16, ppm_header,
+    IoError, JpegOptions, PngCompression, encode_jpeg_rgb8, encode_png_rgb8, encode_ppm_rgb8,
+    encode_tiff_f32_rgb, encode_tiff_rgb16, ppm_header,
 };
 use crate::l3::render::{Frame, xyz_to_srgb8, xyz_to_srgb16};
 
@@ -44,6 +45,8 @@ impl FromStr for TiffKind {
 pub enum OutputFormat {
     /// 8-bit sRGB PNG.
     Png,
+    /// 8-bit sRGB JPEG with an sRGB ICC profile.
+    Jpeg,
     /// 8-bit sRGB binary PPM (a header and the pixels).
     Ppm,
     /// A TIFF: float XYZ or 16-bit sRGB.
@@ -54,8 +57,9 @@ pub enum OutputFormat {
 
 impl OutputFormat {
     /// One format per media type, PNG (the default) first.
-    pub const BY_MEDIA_TYPE: [OutputFormat; 4] = [
+    pub const BY_MEDIA_TYPE: [OutputFormat; 5] = [
         OutputFormat::Png,
+        OutputFormat::Jpeg,
         OutputFormat::Ppm,
         OutputFormat::Tiff(TiffKind::Xyz),
         OutputFormat::F32,
@@ -65,6 +69,7 @@ impl OutputFormat {
     pub fn media_type(self) -> &'static str {
         match self {
             OutputFormat::Png => "image/png",
+            OutputFormat::Jpeg => "image/jpeg",
             OutputFormat::Ppm => "image/x-portable-pixmap",
             OutputFormat::Tiff(_) => "image/tiff",
             OutputFormat::F32 => "application/octet-stream",
@@ -78,11 +83,12 @@ impl OutputFormat {
             .find(|f| f.media_type() == media)
     }
 
-    /// The format of a file extension (any case): `png`, `ppm`, `tif`/`tiff` (float XYZ),
-    /// `raw`/`bin`/`f32`.
+    /// The format of a file extension (any case): `png`, `jpg`/`jpeg`, `ppm`, `tif`/`tiff`
+    /// (float XYZ), `raw`/`bin`/`f32`.
     pub fn from_extension(ext: &str) -> Option<Self> {
         match ext.to_ascii_lowercase().as_str() {
             "png" => Some(OutputFormat::Png),
+            "jpg" | "jpeg" => Some(OutputFormat::Jpeg),
             "ppm" => Some(OutputFormat::Ppm),
             "tif" | "tiff" => Some(OutputFormat::Tiff(TiffKind::Xyz)),
             "raw" | "bin" | "f32" => Some(OutputFormat::F32),
@@ -106,13 +112,16 @@ impl OutputFormat {
     /// Whether the output is 8-bit sRGB, which the fast renderer writes straight from its
     /// kernels.
     pub fn is_srgb8(self) -> bool {
-        matches!(self, OutputFormat::Png | OutputFormat::Ppm)
+        matches!(
+            self,
+            OutputFormat::Png | OutputFormat::Jpeg | OutputFormat::Ppm
+        )
     }
 }
 
 /// What a renderer produced, before encoding.
 pub enum Pixels {
-    /// 8-bit sRGB (for PNG and PPM only).
+    /// 8-bit sRGB (for PNG, JPEG and PPM only).
     Srgb8(Frame),
     /// Interleaved XYZ.
     Xyz(Vec<f32>),
@@ -158,9 +167,17 @@ impl Encoded {
     }
 }
 
-/// `image` encoded as `format` (PNGs with `png` compression).
-pub fn encode(format: OutputFormat, image: Image, png: PngCompression) -> Result<Encoded, IoError> {
+/// How the compressed formats are encoded.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct Encoding {
+    pub png: PngCompression,
+    pub jpeg: JpegOptions,
+}
+
+/// `image` encoded as `format` (PNG and JPEG as `how` says).
+pub fn encode(format: OutputFormat, image: Image, how: Encoding) -> Result<Encoded, IoError> {
     use OutputFormat::*;
+    let png = how.png;
     let Image {
         pixels,
         width: w,
@@ -168,14 +185,18 @@ pub fn encode(format: OutputFormat, image: Image, png: PngCompression) -> Result
         white_y: wy,
     } = image;
     Ok(match pixels {
-        // 8-bit pixels are rendered for PNG and PPM only
+        // 8-bit pixels are rendered for PNG, JPEG and PPM only
         Pixels::Srgb8(frame) if format == Ppm => Encoded::Framed {
             header: ppm_header(w, h)?,
             frame,
         },
+        Pixels::Srgb8(rgb) if format == Jpeg => {
+            Encoded::Whole(encode_jpeg_rgb8(w, h, &rgb, how.jpeg)?)
+        }
         Pixels::Srgb8(rgb) => Encoded::Whole(encode_png_rgb8(w, h, &rgb, png)?),
         Pixels::Xyz(xyz) => Encoded::Whole(match format {
             Png => encode_png_rgb8(w, h, &xyz_to_srgb8(&xyz, wy), png)?,
+            Jpeg => encode_jpeg_rgb8(w, h, &xyz_to_srgb8(&xyz, wy), how.jpeg)?,
             Ppm => encode_ppm_rgb8(w, h, &xyz_to_srgb8(&xyz, wy))?,
             Tiff(TiffKind::Srgb16) => encode_tiff_rgb16(w, h, &xyz_to_srgb16(&xyz, wy))?,
             Tiff(TiffKind::Xyz) => encode_tiff_f32_rgb(w, h, &xyz)?,
@@ -207,7 +228,12 @@ mod tests {
             Some(OutputFormat::Tiff(TiffKind::Srgb16))
         );
         assert_eq!(OutputFormat::from_extension("bin"), Some(OutputFormat::F32));
-        assert_eq!(OutputFormat::from_extension("jpg"), None);
+        assert_eq!(
+            OutputFormat::from_extension("JPEG"),
+            Some(OutputFormat::Jpeg)
+        );
+        assert_eq!(OutputFormat::from_extension("webp"), None);
+        assert!(OutputFormat::Jpeg.is_srgb8() && OutputFormat::Jpeg.needs_white());
         assert_eq!(
             OutputFormat::Png.with_tiff(TiffKind::Srgb16),
             OutputFormat::Png
@@ -234,7 +260,10 @@ mod tests {
                 height: 1,
                 white_y: 1.0,
             },
-            PngCompression::Fast,
+            Encoding {
+                png: PngCompression::Fast,
+                jpeg: JpegOptions::default(),
+            },
         )
         .unwrap()
         .into_vec();

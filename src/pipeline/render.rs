@@ -114,7 +114,7 @@ impl RenderPipeline {
             height: oh,
             white_y: wy,
         };
-        let output = encode(format, image, opts.png).map_err(PipelineError::Encode)?;
+        let output = encode(format, image, opts.encoding()).map_err(PipelineError::Encode)?;
         Ok(Rendered {
             output,
             width: ow,
@@ -161,7 +161,7 @@ pub fn render_reference(
         height,
         white_y: wy,
     };
-    let output = encode(format, image, opts.png).map_err(PipelineError::Encode)?;
+    let output = encode(format, image, opts.encoding()).map_err(PipelineError::Encode)?;
     Ok(Rendered {
         output,
         width,

@@ -63,6 +63,10 @@ mod tests {
         assert_eq!(negotiate(Some("*/*")).unwrap(), OutputFormat::Png);
         assert_eq!(negotiate(Some("image/tiff")).unwrap(), tiff);
         assert_eq!(
+            negotiate(Some("image/webp, image/jpeg;q=0.8, image/png;q=0.5")).unwrap(),
+            OutputFormat::Jpeg
+        );
+        assert_eq!(
             negotiate(Some("image/x-portable-pixmap, image/png;q=0.9")).unwrap(),
             OutputFormat::Ppm
         );
@@ -78,7 +82,7 @@ mod tests {
         assert_eq!(e.status(), 406);
         assert_eq!(
             e.to_string(),
-            "Accept 'text/html' allows none of image/png, image/x-portable-pixmap, image/tiff, application/octet-stream"
+            "Accept 'text/html' allows none of image/png, image/jpeg, image/x-portable-pixmap, image/tiff, application/octet-stream"
         );
     }
 }

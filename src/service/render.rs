@@ -1,4 +1,5 @@
-//! `POST /v1/render`: a raw mosaic in, an sRGB PNG, a TIFF or f32 XYZ out (by `Accept`).
+//! `POST /v1/render`: a raw mosaic in, an sRGB PNG or JPEG, a PPM, a TIFF or f32 XYZ out (by
+//! `Accept`).
 //! The handler parses the request into the core's render request ([`crate::pipeline`]), which
 //! decodes, renders and encodes on rayon; the answer carries timings and class statistics in
 //! headers. The result equals `l3 render` on the same input bit for bit.
@@ -28,7 +29,9 @@ use super::accept::negotiate;
 use super::config::ServerConfig;
 use super::state::{ActiveTable, AppState};
 use super::table_choice::table_for;
-use crate::io::{Limits, UnknownPngCompression};
+use crate::io::{
+    InvalidJpegQuality, JpegOptions, Limits, UnknownPngCompression, UnknownSubsampling,
+};
 use crate::l3::L3Table;
 use crate::l3::correct::IlluminantEntry;
 use crate::l3::render::WhiteLevel;
@@ -63,6 +66,10 @@ pub struct RenderQuery {
     pub preview: Option<usize>,
     /// PNG compression (`fast`, `default`, `best`; default: the config's).
     pub png_compression: Option<String>,
+    /// JPEG quality, 1–100 (default 90).
+    pub quality: Option<String>,
+    /// JPEG chroma subsampling: `420` (default), `422` or `444`.
+    pub subsampling: Option<String>,
     /// `camera` or `colorimetric` (default: the config's `correction`).
     pub correction: Option<String>,
     /// A stored table to render with instead of the active one (or the DNG camera's).
@@ -248,7 +255,8 @@ fn is_raw(headers: &HeaderMap) -> Result<bool, ServiceError> {
 }
 
 /// The output the query asks for, checked in this order: `white`, `tiff` (over the
-/// negotiated `format`), `region`, `preview`, `png_compression`.
+/// negotiated `format`), `region`, `preview`, `png_compression`, `quality`, `subsampling`
+/// (each checked whatever the format).
 fn output_of(
     q: &RenderQuery,
     format: OutputFormat,
@@ -276,6 +284,22 @@ fn output_of(
             Some(s) => s
                 .parse()
                 .map_err(|e: UnknownPngCompression| ServiceError::BadRequest(e.to_string()))?,
+        },
+        jpeg: JpegOptions {
+            quality: q
+                .quality
+                .as_deref()
+                .map(str::parse)
+                .transpose()
+                .map_err(|e: InvalidJpegQuality| ServiceError::BadRequest(e.to_string()))?
+                .unwrap_or_default(),
+            subsampling: q
+                .subsampling
+                .as_deref()
+                .map(str::parse)
+                .transpose()
+                .map_err(|e: UnknownSubsampling| ServiceError::BadRequest(e.to_string()))?
+                .unwrap_or_default(),
         },
     };
     Ok((format, options))

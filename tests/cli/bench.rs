@@ -99,7 +99,7 @@ fn quick_bench_writes_json_markdown_and_plot() {
             k.max_diff
         );
     }
-    assert_eq!(report.encoders.len(), 5);
+    assert_eq!(report.encoders.len(), 6);
     // the PPM is its header and the 8-bit pixels, uncompressed
     let ppm = report
         .encoders
@@ -112,6 +112,12 @@ fn quick_bench_writes_json_markdown_and_plot() {
         .find(|e| e.encoding.starts_with("PNG fast"))
         .expect("PNG encoder timed");
     assert!(ppm.bytes > png.bytes && ppm.median_ms.is_finite());
+    let jpeg = report
+        .encoders
+        .iter()
+        .find(|e| e.encoding.starts_with("JPEG"))
+        .expect("JPEG encoder timed");
+    assert!(jpeg.bytes < png.bytes, "{} vs {}", jpeg.bytes, png.bytes);
     assert!(!report.pareto.is_empty() && report.pareto.iter().all(|f| !f.names.is_empty()));
 
     let md = std::fs::read_to_string(out_dir.join("bench.md")).unwrap();

@@ -3,13 +3,15 @@
 //! `l3 eval --colorchecker` on simulated captures (`colorchecker`),
 //! `l3 sensors` and `l3 render --data-dir`'s choice of table by the DNG's camera (`cameras`),
 //! sensors by catalogue name or by a TOML beside its curves (`sensors`), `l3 sfr` on image
-//! files (`sfr`) and `l3 eval --scielab` on float XYZ TIFFs (`scielab`).
+//! files (`sfr`), `l3 eval --scielab` on float XYZ TIFFs (`scielab`) and `l3 render` to JPEG
+//! (`jpeg`).
 
 mod bench;
 mod cameras;
 mod catalogue;
 mod cli;
 mod colorchecker;
+mod jpeg;
 mod scielab;
 mod sensors;
 mod sfr;

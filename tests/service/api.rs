@@ -57,7 +57,7 @@ async fn render_of_a_tungsten_frame_equals_l3_render_bit_for_bit() {
     );
     let table_path = d.join("table.safetensors");
     tiny_table().save(&table_path).unwrap();
-    for out in ["cli.tiff", "cli.raw", "cli.png", "cli.ppm"] {
+    for out in ["cli.tiff", "cli.raw", "cli.png", "cli.ppm", "cli.jpg"] {
         l3_cli(
             &[
                 "render",
@@ -91,6 +91,7 @@ async fn render_of_a_tungsten_frame_equals_l3_render_bit_for_bit() {
         ("image/tiff", "cli.tiff"),
         ("application/octet-stream", "cli.raw"),
         ("image/x-portable-pixmap", "cli.ppm"),
+        ("image/jpeg", "cli.jpg"),
     ] {
         let r = c
             .post(url(&server, &q))
@@ -192,11 +193,54 @@ async fn render_of_a_tungsten_frame_equals_l3_render_bit_for_bit() {
         assert!(decode_png(&body) == ours, "{level}: PNG pixels differ");
         sizes.push(body.len());
     }
-    // the setting reaches the encoder (fdeflate's fast PNGs are not always larger)
+    // the setting reaches the encoder (fast PNGs are not always larger)
     assert_ne!(sizes[0], sizes[1], "fast and default PNGs: {sizes:?}");
     let r = post_png(format!("{q}&png_compression=tiny")).await.unwrap();
     let detail = problem(r, 400, "bad_request").await;
     assert!(detail.contains("fast, default or best"), "{detail}");
+    // JPEG quality and subsampling: the CLI's bytes for the same options; bad ones are 400
+    l3_cli(
+        &[
+            "render",
+            "--table",
+            "table.safetensors",
+            "--in",
+            "sim/mosaic.raw",
+            "--illuminant",
+            "Tungsten",
+            "--quality",
+            "60",
+            "--subsampling",
+            "444",
+            "--out",
+            "cli-q60.jpg",
+        ],
+        d,
+    );
+    let post_jpeg = |q: String| {
+        c.post(url(&server, &q))
+            .header("content-type", "application/octet-stream")
+            .header("accept", "image/jpeg")
+            .body(raw.clone())
+            .send()
+    };
+    let r = post_jpeg(format!("{q}&quality=60&subsampling=444"))
+        .await
+        .unwrap();
+    assert_eq!(r.status(), 200);
+    assert_eq!(r.headers()["content-type"], "image/jpeg");
+    let body = r.bytes().await.unwrap();
+    assert!(body[..] == std::fs::read(d.join("cli-q60.jpg")).unwrap()[..]);
+    assert!(body.len() != std::fs::read(d.join("cli.jpg")).unwrap().len());
+    for (bad, says) in [
+        ("quality=0", "expected an integer from 1 to 100"),
+        ("quality=high", "expected an integer from 1 to 100"),
+        ("subsampling=411", "expected 420, 422 or 444"),
+    ] {
+        let r = post_jpeg(format!("{q}&{bad}")).await.unwrap();
+        let detail = problem(r, 400, "bad_request").await;
+        assert!(detail.contains(says), "{bad}: {detail}");
+    }
     // the correction: camera-aware C by default, the paper's T on request, on both sides
     let r = post_png(q.clone()).await.unwrap();
     assert_eq!(r.headers()["x-l3-correction"], "camera");
@@ -951,12 +995,13 @@ async fn hostile_input_gets_a_clear_4xx() {
     let r = c
         .post(url(&server, "/v1/render?width=32&height=32"))
         .header("content-type", raw)
-        .header("accept", "text/html")
+        .header("accept", "image/webp, text/html")
         .body(vec![0u8; 2048])
         .send()
         .await
         .unwrap();
-    problem(r, 406, "not_acceptable").await;
+    let detail = problem(r, 406, "not_acceptable").await;
+    assert!(detail.contains("image/jpeg"), "{detail}");
     // malformed job JSON
     let job = |body: &'static str, ctype: &'static str| {
         c.post(url(&server, "/v1/training-jobs"))
