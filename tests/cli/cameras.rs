@@ -3,7 +3,8 @@
 
 use std::path::Path;
 
-use crate::cli::{l3, with_service};
+use crate::cli::with_service;
+use crate::support::l3;
 
 /// `l3 simulate` through the catalogue sensor `sensor` into `out`, and its DNG written again
 /// (the crate's writer) naming the camera `unique_model`; returns that DNG's path.

@@ -2,18 +2,9 @@
 //! rows are finite and consistent, the markdown has a row per sensor (sorted by name) and the
 //! summary line; an unknown sensor and a clashing mode are refused before any training.
 
-use std::process::Command;
-
+/// `l3 args` in the working directory.
 fn l3(args: &[&str]) -> (bool, String, String) {
-    let out = Command::new(env!("CARGO_BIN_EXE_l3"))
-        .args(args)
-        .output()
-        .expect("run l3");
-    (
-        out.status.success(),
-        String::from_utf8_lossy(&out.stdout).into_owned(),
-        String::from_utf8_lossy(&out.stderr).into_owned(),
-    )
+    crate::support::l3(args, std::path::Path::new("."))
 }
 
 #[test]

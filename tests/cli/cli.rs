@@ -5,6 +5,8 @@
 use std::path::Path;
 use std::process::Command;
 
+use crate::support::{l3, train_small_si};
+
 /// Runs `f` on the state of a service started on `data` (no listener in use beyond a free
 /// local port, no default training), then stops the service.
 pub(crate) fn with_service<F, Fut, T>(data: &Path, f: F) -> T
@@ -23,19 +25,6 @@ where
         server.shutdown().await.unwrap();
         out
     })
-}
-
-pub(crate) fn l3(args: &[&str], dir: &Path) -> (bool, String, String) {
-    let out = Command::new(env!("CARGO_BIN_EXE_l3"))
-        .args(args)
-        .current_dir(dir)
-        .output()
-        .expect("run l3");
-    (
-        out.status.success(),
-        String::from_utf8_lossy(&out.stdout).into_owned(),
-        String::from_utf8_lossy(&out.stderr).into_owned(),
-    )
 }
 
 /// `l3 simulate` of the Macbeth chart under tungsten (seed 3) into `out`.
@@ -108,25 +97,7 @@ fn simulate_train_render_eval() {
     );
 
     let table = d.join("t.safetensors");
-    let (ok, out, err) = l3(
-        &[
-            "train",
-            "--kind",
-            "si",
-            "--illuminants",
-            "D65,Tungsten",
-            "--scenes",
-            "4",
-            "--scene-size",
-            "48",
-            "--levels",
-            "10",
-            "--out",
-            table.to_str().unwrap(),
-        ],
-        d,
-    );
-    assert!(ok, "train failed: {out}{err}");
+    let out = train_small_si(d, &table);
     assert!(out.contains("trained si table"), "{out}");
 
     for (name, extra) in [

@@ -6,18 +6,7 @@
 use std::path::Path;
 use std::process::Command;
 
-fn l3(args: &[&str], dir: &Path) -> (bool, String, String) {
-    let out = Command::new(env!("CARGO_BIN_EXE_l3"))
-        .args(args)
-        .current_dir(dir)
-        .output()
-        .expect("run l3");
-    (
-        out.status.success(),
-        String::from_utf8_lossy(&out.stdout).into_owned(),
-        String::from_utf8_lossy(&out.stderr).into_owned(),
-    )
-}
+use crate::support::{l3, train_small_si};
 
 fn read_json(p: &Path) -> serde_json::Value {
     serde_json::from_slice(&std::fs::read(p).unwrap()).unwrap()
@@ -82,25 +71,7 @@ fn colorchecker_agrees_with_the_chart_evaluation() {
     let tmp = tempfile::tempdir().unwrap();
     let d = tmp.path();
     let table = d.join("t.safetensors");
-    let (ok, out, err) = l3(
-        &[
-            "train",
-            "--kind",
-            "si",
-            "--illuminants",
-            "D65,Tungsten",
-            "--scenes",
-            "4",
-            "--scene-size",
-            "48",
-            "--levels",
-            "10",
-            "--out",
-            table.to_str().unwrap(),
-        ],
-        d,
-    );
-    assert!(ok, "train failed: {out}{err}");
+    train_small_si(d, &table);
     let table = table.to_str().unwrap();
     for light in ["D65", "Tungsten"] {
         let sim = d.join(format!("sim-{light}"));

@@ -18,3 +18,43 @@ pub fn run_l3(args: &[&str], dir: &Path) -> (bool, String) {
     );
     (out.status.success(), text)
 }
+
+/// Runs the `l3` executable with `args` in `dir`: whether it succeeded, its standard output
+/// and its standard error.
+pub fn l3(args: &[&str], dir: &Path) -> (bool, String, String) {
+    let out = Command::new(env!("CARGO_BIN_EXE_l3"))
+        .args(args)
+        .current_dir(dir)
+        .output()
+        .expect("run l3");
+    (
+        out.status.success(),
+        String::from_utf8_lossy(&out.stdout).into_owned(),
+        String::from_utf8_lossy(&out.stderr).into_owned(),
+    )
+}
+
+/// `l3 train` of a small SI table (D65 and tungsten, 4 scenes of 48 px, 10 levels) in `dir`
+/// to `table`; its standard output.
+pub fn train_small_si(dir: &Path, table: &Path) -> String {
+    let (ok, out, err) = l3(
+        &[
+            "train",
+            "--kind",
+            "si",
+            "--illuminants",
+            "D65,Tungsten",
+            "--scenes",
+            "4",
+            "--scene-size",
+            "48",
+            "--levels",
+            "10",
+            "--out",
+            table.to_str().unwrap(),
+        ],
+        dir,
+    );
+    assert!(ok, "train failed: {out}{err}");
+    out
+}
