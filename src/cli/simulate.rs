@@ -110,7 +110,7 @@ pub fn run(cli: &Cli, a: &SimulateArgs) -> Result<(), CliError> {
     // --reference truth.csv`
     let truth_note = if matches!(kind, SceneKind::Macbeth) {
         let ideal = crate::eval::ideal_d65_patch_means(&camera, &scene)?;
-        let csv = crate::eval::colorchecker::simulated_truth_csv(&ideal, iset.as_ref())?;
+        let csv = crate::eval::colorchecker::simulated_truth_csv(&ideal)?;
         write_file(&a.out.join("truth.csv"), csv.as_bytes())?;
         "truth.csv, "
     } else {

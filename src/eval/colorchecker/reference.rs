@@ -156,24 +156,23 @@ pub fn xrite2014() -> Result<Vec<ReferencePatch>, EvalError> {
 
 /// A reference CSV ([`Measured::from_csv`], XYZ under D65) of a simulated chart's truth:
 /// `ideal` is the XYZ per patch as the chart evaluation takes it (the optical image relit by
-/// D65, so the lens's blur and flare are in it), scaled so that the white patch has the Y of
-/// ISET's white reflectance under D65. Scoring a capture against it is scoring it as the
-/// chart evaluation does; against `iset`, as a real capture is scored (docs/accuracy.md).
-pub fn simulated_truth_csv(ideal: &[Xyz], iset: Option<&IsetData>) -> Result<String, EvalError> {
+/// D65, so the lens's blur and flare are in it), scaled as the chart evaluation scales it:
+/// the white patch at Y = 1. Scoring a capture against it is scoring it as the chart
+/// evaluation does; against `iset`, as a real capture is scored (docs/accuracy.md).
+pub fn simulated_truth_csv(ideal: &[Xyz]) -> Result<String, EvalError> {
     if ideal.len() != 24 {
         return Err(EvalError::Invalid(format!(
             "{} patches, a ColorChecker has 24",
             ideal.len()
         )));
     }
-    let white = iset_macbeth(iset)?[super::WHITE_PATCH].xyz[1];
-    let scale = white / ideal[super::WHITE_PATCH][1];
+    let scale = 1.0 / ideal[super::WHITE_PATCH][1];
     if !(scale.is_finite() && scale > 0.0) {
         return Err(EvalError::Invalid("the white patch has no signal".into()));
     }
     let mut csv = String::from(
         "# the simulated chart's truth: its optical image relit by D65 (lens blur and flare \
-         included), per patch interior, white patch at ISET's white Y; XYZ under D65\n\
+         included), per patch interior, white patch at Y = 1 as the chart evaluation scales it; XYZ under D65\n\
          index,patch_name,X,Y,Z\n",
     );
     for (k, v) in ideal.iter().enumerate() {
