@@ -39,16 +39,17 @@ fn one() -> usize {
 }
 
 impl L3Config {
-    /// The default: patch 5, 20 levels, contrast and saturation classes, SI ensemble + T.
+    /// The default: patch 5, 20 levels, contrast and saturation classes,
+    /// [`crate::l3::learn::DEFAULT_CHROMA_CLASSES`] chroma classes, SI ensemble + T.
     pub fn default_config() -> Self {
         Self {
-            name: "default (5×5, 20 lv, SI+T)".into(),
+            name: "default (5×5, 20 lv, 8 chroma, SI+T)".into(),
             patch_size: 5,
             levels: 20,
             contrast_classes: true,
             saturation_classes: true,
             tables: TableChoice::SiEnsemble,
-            chroma_classes: 1,
+            chroma_classes: crate::l3::learn::DEFAULT_CHROMA_CLASSES,
         }
     }
 
@@ -71,21 +72,21 @@ pub fn default_sweep() -> Vec<L3Config> {
         L3Config::with("no contrast classes", |c| c.contrast_classes = false),
         L3Config::with("no saturation classes", |c| c.saturation_classes = false),
         L3Config::with("I tables", |c| c.tables = TableChoice::CrossPerIlluminant),
+        L3Config::with("one chroma class", |c| c.chroma_classes = 1),
         L3Config::with("4 chroma classes", |c| c.chroma_classes = 4),
-        L3Config::with("8 chroma classes", |c| c.chroma_classes = 8),
     ]
 }
 
 /// The configurations of the sensor sweep: the default and the I tables,
-/// each with one and with 8 chroma classes.
+/// each with the default chroma classes and with one.
 pub(super) fn sensor_sweep_configs() -> Vec<L3Config> {
     vec![
         L3Config::default_config(),
         L3Config::with("I tables", |c| c.tables = TableChoice::CrossPerIlluminant),
-        L3Config::with("8 chroma classes", |c| c.chroma_classes = 8),
-        L3Config::with("I tables, 8 chroma classes", |c| {
+        L3Config::with("one chroma class", |c| c.chroma_classes = 1),
+        L3Config::with("I tables, one chroma class", |c| {
             c.tables = TableChoice::CrossPerIlluminant;
-            c.chroma_classes = 8;
+            c.chroma_classes = 1;
         }),
     ]
 }

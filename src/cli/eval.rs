@@ -162,7 +162,7 @@ pub struct EvalArgs {
     pub scene_size: usize,
     /// Chroma classes of every table trained (with --paper-table; 1: none):
     /// see `l3 train --chroma-classes`.
-    #[arg(long, default_value_t = 1)]
+    #[arg(long, default_value_t = crate::l3::learn::DEFAULT_CHROMA_CLASSES)]
     pub chroma_classes: usize,
     /// Output: the ΔE JSON (or, with --paper-table, a folder for JSON + markdown).
     #[arg(long, default_value = "out/eval")]

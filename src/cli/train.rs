@@ -76,7 +76,7 @@ pub struct TrainArgs {
     /// channel chromaticities; 1: no split). Classes with too few surfaces are dropped.
     /// A same-illuminant table also keeps each level's map over every class, which its
     /// kernels take under a light it was not trained on through T.
-    #[arg(long, default_value_t = 1)]
+    #[arg(long, default_value_t = crate::l3::learn::DEFAULT_CHROMA_CLASSES)]
     pub chroma_classes: usize,
     #[arg(long, default_value = "table.safetensors")]
     pub out: PathBuf,

@@ -121,7 +121,7 @@ fn begin_shutdown(state: &AppState) {
 
 /// The default table's training spec: the config's `[training.default_spec]` fields over the
 /// TrainingSpec defaults, with the SI ensemble D65 + Tungsten + Fluorescent when no illuminants
-/// are given.
+/// are given and [`crate::l3::learn::DEFAULT_CHROMA_CLASSES`] when no chroma classes are.
 pub fn default_training_spec(cfg: &ServiceConfig) -> Result<TrainingSpec, ServiceError> {
     let mut t = cfg.training.default_spec.clone();
     if !t.contains_key("illuminants") {
@@ -130,6 +130,10 @@ pub fn default_training_spec(cfg: &ServiceConfig) -> Result<TrainingSpec, Servic
             .map(|s| toml::Value::String(s.to_string()))
             .collect();
         t.insert("illuminants".into(), toml::Value::Array(ills));
+    }
+    if !t.contains_key("chroma_classes") {
+        let n = crate::l3::learn::DEFAULT_CHROMA_CLASSES as i64;
+        t.insert("chroma_classes".into(), toml::Value::Integer(n));
     }
     let spec: TrainingSpec = toml::Value::Table(t)
         .try_into()

@@ -1,9 +1,9 @@
 //! The paper's Table 1 on the paper's sensor (`rgbw-iset`: ISETCam's
 //! default RGBW filters), on a small training set so it runs in CI:
-//! - the rows in the paper's order under tungsten (I_Tun ≤ SI_Tun+T <
-//!   SI_Ens+T < SI_D65+T: 2.67, 2.67, 3.08 and 4.07 here; over 16 captures
-//!   one capture's mean is 2.77 for both I_Tun and SI_Tun+T, which aimed
-//!   through T is the cross table's estimator);
+//! - with the default flags (8 chroma classes, seed 7), the paper's Table 1 beaten: I_Tun
+//!   ≤ 2.4 and SI_Ens+T ≤ 2.8 on the first capture and over 4 (1.96 and 2.52 here; 2.02 and
+//!   2.58 over the 4), in the paper's order (I_Tun ≤ SI_Tun+T ≤ SI_Ens+T ≤ SI_D65+T, ties
+//!   within 0.02 held: 1.96, 1.98, 2.52, 4.08);
 //! - every L3 row within 0.4 ΔE of its matching linear map (the same
 //!   least-squares channel → XYZ map in every class, evaluated on the same
 //!   noisy frame), or better, on the first capture and on the mean over 4
@@ -20,7 +20,8 @@
 //! - the camera-aware correction: a D65 table under the fluorescent lamp
 //!   with C against T, and with one C per level against the brightest
 //!   level's C alone at a tenth of the exposure (on rgbw-ar0132at);
-//! - with chroma classes, the targets on I_Tun and SI_Tun+T.
+//! - with chroma classes trained on tungsten alone at seed 1, I_Tun and SI_Tun+T under 2.7
+//!   and 2.95 with bounded kernels.
 //!
 //! `l3 eval --paper-table --sensor config/sensors/rgbw-iset.toml` runs the
 //! full version, under fluorescent too.
@@ -36,7 +37,8 @@ fn table1_on_the_papers_sensor() {
         acquisitions: vec!["Tungsten".into()],
         scenes: 48,
         scene_size: 96,
-        seed: 1,
+        // `l3 eval --paper-table`'s default seed: the tables and the chart's first capture
+        seed: 7,
         chart: ChartSetup::default(),
         captures: 4,
         ..PaperOptions::default()
@@ -49,20 +51,33 @@ fn table1_on_the_papers_sensor() {
             .clone()
     };
     let (si_t, si_e, si_d) = (row("SI_Tun+T"), row("SI_Ens+T"), row("SI_D65+T"));
+    // the default flags beat the paper's Table 1 on its sensor (2.5 and 2.9), on the first
+    // capture and over the captures
+    for (m, bound) in [("I_Tun", 2.4), ("SI_Ens+T", 2.8)] {
+        let r = row(m);
+        let over = r.captures.as_ref().map_or(f64::NAN, |c| c.mean);
+        assert!(
+            r.mean <= bound && over <= bound,
+            "{m}: {:.2}, over the captures {over:.2}; the bound is {bound}",
+            r.mean
+        );
+    }
+    // the paper's order, ties within 0.02 held
     assert!(
-        si_t.mean < si_e.mean && si_e.mean < si_d.mean,
+        si_t.mean <= si_e.mean + 0.02 && si_e.mean <= si_d.mean + 0.02,
         "SI order: Tun {} Ens {} D65 {}",
         si_t.mean,
         si_e.mean,
         si_d.mean
     );
-    // an SI_Tun table aimed through T, with the cross table's averaging, is
-    // the cross table followed by T⁻¹ (least squares commutes with T): the
-    // paper's I_Tun ≤ SI_Tun+T holds as an equality, to rounding
+    // an SI_Tun table aimed through T, with the cross table's averaging, is the cross table
+    // followed by T⁻¹ (least squares commutes with T); their chroma classes differ (the SI
+    // table's are balanced by the light's neutral), so the paper's I_Tun ≤ SI_Tun+T holds to
+    // a few hundredths (1.96 and 1.98 here)
     let i_tun = row("I_Tun");
     assert!(
-        (i_tun.mean - si_t.mean).abs() <= 1e-3,
-        "I_Tun {} and SI_Tun+T {} differ",
+        i_tun.mean <= si_t.mean + 0.02 && (i_tun.mean - si_t.mean).abs() <= 0.05,
+        "I_Tun {} and SI_Tun+T {}",
         i_tun.mean,
         si_t.mean
     );
@@ -257,7 +272,7 @@ fn camera_aware_correction_serves_a_d65_table_under_fluorescent() {
 #[test]
 fn per_level_camera_correction_serves_a_d65_table_in_dim_light() {
     let d = D65TableUnderTheLamp::train("rgbw-ar0132at");
-    assert_eq!(d.c.level_corrections.len(), d.table.n_levels());
+    assert_eq!(d.c.level_corrections.len(), d.table.n_bands());
     let brightest_only = l3::l3::correct::IlluminantEntry {
         level_corrections: Vec::new(),
         ..d.c.clone()

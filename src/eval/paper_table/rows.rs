@@ -26,7 +26,8 @@ pub struct PaperOptions {
     /// evaluated; the smallest is the low-light column.
     #[serde(default = "default_exposures")]
     pub exposures: Vec<f64>,
-    /// Chroma classes of every table (1: none; see `src/l3/chroma.rs`).
+    /// Chroma classes of every table (1: none; see `src/l3/classify/chroma.rs`); absent in a
+    /// stored run: 1, the only choice when it was written.
     #[serde(default = "one")]
     pub chroma_classes: usize,
     /// Noisy captures of the chart every row is evaluated on at full
@@ -55,7 +56,7 @@ impl Default for PaperOptions {
             seed: 1,
             chart: ChartSetup::default(),
             exposures: default_exposures(),
-            chroma_classes: 1,
+            chroma_classes: crate::l3::learn::DEFAULT_CHROMA_CLASSES,
             captures: 1,
         }
     }

@@ -35,7 +35,7 @@ pub use shards::{
     merge_partials, merge_surveys, plan_shards,
 };
 pub use solve::{package, solve_learned};
-pub use spec::TrainingSpec;
+pub use spec::{DEFAULT_CHROMA_CLASSES, TrainingSpec};
 pub use trainer::{accumulate_batches, classes_from_survey, learn, survey_batches};
 pub use transfer_fit::{
     HELD_OUT_LIGHTS, HeldOutLight, TransferCandidate, TransferChoice, TransferFit,
