@@ -97,7 +97,7 @@ fn simulate_train_render_eval() {
     );
 
     let table = d.join("t.safetensors");
-    let out = train_small_si(d, &table);
+    let out = train_small_si(d, &table, &[]);
     assert!(out.contains("trained si table"), "{out}");
 
     for (name, extra) in [
@@ -490,9 +490,12 @@ fn simulate_train_render_eval() {
         "Tungsten (from the frame's metadata)",
     );
     assert_eq!(sidecar, named);
+    // the light read from AsShotNeutral is a CCT near tungsten, not ISET's tungsten: its T and
+    // its neutral (which balances the table's chroma classes) are a little off. With one chroma
+    // class this cost under 0.5; with the default 8 classes it is 0.71 here (1.54 against 0.83).
     let neutral = frame_eval(&chart.join("mosaic.dng"), &[], "cct:");
     assert!(
-        (neutral - named).abs() < 0.5,
+        (neutral - named).abs() < 0.8,
         "AsShotNeutral {neutral} vs {named}"
     );
     let estimated = frame_eval(

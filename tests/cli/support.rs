@@ -36,25 +36,24 @@ pub fn l3(args: &[&str], dir: &Path) -> (bool, String, String) {
 
 /// `l3 train` of a small SI table (D65 and tungsten, 4 scenes of 48 px, 10 levels) in `dir`
 /// to `table`; its standard output.
-pub fn train_small_si(dir: &Path, table: &Path) -> String {
-    let (ok, out, err) = l3(
-        &[
-            "train",
-            "--kind",
-            "si",
-            "--illuminants",
-            "D65,Tungsten",
-            "--scenes",
-            "4",
-            "--scene-size",
-            "48",
-            "--levels",
-            "10",
-            "--out",
-            table.to_str().unwrap(),
-        ],
-        dir,
-    );
+pub fn train_small_si(dir: &Path, table: &Path, extra: &[&str]) -> String {
+    let mut args = vec![
+        "train",
+        "--kind",
+        "si",
+        "--illuminants",
+        "D65,Tungsten",
+        "--scenes",
+        "4",
+        "--scene-size",
+        "48",
+        "--levels",
+        "10",
+        "--out",
+        table.to_str().unwrap(),
+    ];
+    args.extend_from_slice(extra);
+    let (ok, out, err) = l3(&args, dir);
     assert!(ok, "train failed: {out}{err}");
     out
 }
