@@ -6,6 +6,7 @@ mod captured_floor;
 mod catalogue_sweep;
 pub mod colorchecker;
 mod colour_classes;
+mod edge_panel;
 mod figure;
 mod illuminant_estimation;
 mod noise_split;
@@ -27,6 +28,7 @@ pub use colorchecker::{
 pub use colour_classes::{
     ColourClassRow, ColourClassStudy, colour_class_markdown, colour_class_study,
 };
+pub use edge_panel::{CROP_SIDE, EdgeCrop, EdgeCurve, EdgePanel};
 pub use figure::{colorchecker_svg, report_svg};
 pub use illuminant_estimation::{
     EstimateResult, EstimationRow, STUDY_LIGHTS, estimation_markdown, illuminant_estimation_study,

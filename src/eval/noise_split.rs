@@ -186,6 +186,7 @@ mod tests {
             white_patch: "w".into(),
             patches: vec![patch("a", "Food", est), patch("w", "grey", [1.0; 3])],
             s_cielab_mean: None,
+            edge_panel: None,
             context: serde_json::Value::Null,
         }
     }

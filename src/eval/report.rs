@@ -65,6 +65,10 @@ pub struct DeltaEReport {
     /// white patch; absent where the ideal image was not computed.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub s_cielab_mean: Option<f64>,
+    /// The slanted edge rendered by this method and by its conventional rival, beside the
+    /// edge's ideal image: the figure's sharpness panel.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub edge_panel: Option<crate::eval::EdgePanel>,
     /// Free-form context: exposure, table id, seeds, timings.
     pub context: serde_json::Value,
 }
@@ -237,6 +241,7 @@ pub fn evaluate_chart(
         white_patch: truth.patches[wi].name.clone(),
         patches: results,
         s_cielab_mean: None,
+        edge_panel: None,
         context,
     })
 }

@@ -12,6 +12,7 @@ mod chromaticity;
 mod colorchecker;
 mod histogram;
 mod lightness;
+mod sharpness;
 mod svg;
 mod swatches;
 #[cfg(test)]
@@ -29,7 +30,8 @@ use svg::{FONT, GRID, HEIGHT, INK, N, WIDTH, clip_chars, de, esc, text};
 use swatches::swatches;
 
 /// The report as an SVG document (1200 × 800 px): histogram, chromaticity, lightness and the
-/// swatches of the worst patches. The chart samples are the patches the report's summary is
+/// swatches of the worst patches; with an edge panel ([`DeltaEReport::edge_panel`]), 1200 ×
+/// 1180 with the SFR curves and the edge crops below. The chart samples are the patches the report's summary is
 /// over (every patch but the grey strip, or all patches when there are only greys). An empty
 /// report gives a valid figure with empty panels; non-finite values are left out of the plots
 /// and shown as "n/a".
@@ -72,25 +74,33 @@ fn draw(s: &mut String, report: &DeltaEReport) -> fmt::Result {
         "ΔE2000 evaluation of {} on {} under {}",
         report.method, report.chart, report.acquisition_illuminant
     );
+    let height = HEIGHT
+        + report
+            .edge_panel
+            .as_ref()
+            .map_or(0.0, |_| sharpness::PANEL_HEIGHT);
     writeln!(s, r#"<?xml version="1.0" encoding="UTF-8"?>"#)?;
     writeln!(
         s,
         r#"<svg xmlns="http://www.w3.org/2000/svg" width="{w}" height="{h}" viewBox="0 0 {w} {h}" font-family="{FONT}" fill="{INK}">"#,
         w = N(WIDTH),
-        h = N(HEIGHT),
+        h = N(height),
     )?;
     writeln!(s, "<title>{}</title>", esc(&summary_title))?;
     writeln!(
         s,
         r##"<rect x="0" y="0" width="{}" height="{}" fill="#ffffff"/>"##,
         N(WIDTH),
-        N(HEIGHT)
+        N(height)
     )?;
     header(s, report, samples.len())?;
     histogram(s, &samples)?;
     chromaticity(s, &report.patches)?;
     lightness(s, &report.patches)?;
     swatches(s, &samples)?;
+    if let Some(panel) = &report.edge_panel {
+        sharpness::sharpness(s, panel, HEIGHT)?;
+    }
     writeln!(s, "</svg>")
 }
 

@@ -17,6 +17,8 @@ pub(super) const TITLE_A: &str = "a. ΔE2000 distribution";
 pub(super) const TITLE_B: &str = "b. Chromaticity (CIE 1931 xy)";
 pub(super) const TITLE_C: &str = "c. Lightness L*: estimated vs true";
 pub(super) const TITLE_D: &str = "d. Worst patches: true | estimated (sRGB)";
+pub(super) const TITLE_E: &str = "e. Sharpness: SFR of the slanted edge";
+pub(super) const TITLE_F: &str = "f. The edge: ideal image and renders (×4)";
 
 pub(super) const FONT: &str = "DejaVu Sans, Helvetica, Arial, sans-serif";
 pub(super) const INK: &str = "#222222";

@@ -40,6 +40,7 @@ fn report(patches: Vec<PatchResult>) -> DeltaEReport {
         white_patch: "grey_95".into(),
         patches,
         s_cielab_mean: None,
+        edge_panel: None,
         context: serde_json::Value::Null,
     }
 }
@@ -217,4 +218,58 @@ fn colours_ticks_and_numbers() {
     assert_eq!(N(-3.25).to_string(), "-3.3");
     assert_eq!(clip_chars("abcdef", 4), "abc…");
     assert_eq!(de(f64::INFINITY), "n/a");
+}
+
+#[test]
+fn an_edge_panel_adds_the_sfr_curves_and_the_crops() {
+    use crate::eval::{EdgeCurve, EdgePanel};
+    let (w, h) = (48, 48);
+    let xyz: Vec<f32> = (0..w * h)
+        .flat_map(|i| {
+            let y = if i % w < w / 2 { 0.1 } else { 0.6 };
+            [0.95 * y, y, 1.09 * y]
+        })
+        .collect();
+    let sfr = crate::eval::Sfr {
+        mtf50_cycles_per_pixel: 0.31,
+        mtf_at_half_nyquist: 0.62,
+        mtf_at_nyquist: 0.2,
+        orientation: crate::eval::EdgeOrientation::Vertical,
+        slant_degrees: 5.0,
+        falling: false,
+        lines_used: 44,
+        frequencies: (0..=8).map(|k| k as f64 / 8.0).collect(),
+        sfr: (0..=8).map(|k| (-(k as f64) / 3.0).exp()).collect(),
+    };
+    let curve = |name: &str, sfr: Option<&crate::eval::Sfr>| {
+        EdgeCurve::new(name, &xyz, w, h, sfr, Some(0.5)).unwrap()
+    };
+    let mut rep = sample_report();
+    rep.edge_panel = Some(EdgePanel {
+        ideal: curve("ideal <lens>", Some(&sfr)),
+        methods: vec![curve("L3", Some(&sfr)), curve("ISP_Tun", None)],
+    });
+    let svg = report_svg(&rep).unwrap();
+    assert_well_formed(&svg);
+    assert!(svg.contains(r#"height="1180""#), "the figure grows");
+    assert!(svg.contains(super::svg::TITLE_E) && svg.contains(super::svg::TITLE_F));
+    // a curve per edge with an SFR, a crop per edge, names escaped
+    assert_eq!(svg.matches(r#"class="sfr-curve""#).count(), 2);
+    assert_eq!(svg.matches(r#"class="edge-crop""#).count(), 3);
+    assert!(svg.contains("ideal &lt;lens&gt;: MTF50 0.310"));
+    assert!(svg.contains("ISP_Tun: MTF50 n/a"));
+    // a crop that is not base64 is not drawn
+    if let Some(p) = rep.edge_panel.as_mut() {
+        p.methods[0].crop.png_base64 = r#""/><script>x</script>"#.into();
+    }
+    let svg = report_svg(&rep).unwrap();
+    assert_well_formed(&svg);
+    assert_eq!(svg.matches(r#"class="edge-crop""#).count(), 2);
+    assert!(!svg.contains("<script"));
+    // without the panel the figure keeps its size
+    assert!(
+        report_svg(&sample_report())
+            .unwrap()
+            .contains(r#"height="800""#)
+    );
 }
