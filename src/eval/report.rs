@@ -65,6 +65,11 @@ pub struct DeltaEReport {
     /// white patch; absent where the ideal image was not computed.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub s_cielab_mean: Option<f64>,
+    /// Sharpness, false colour and texture S-CIELAB of the same method
+    /// ([`crate::eval::spatial_score`]; flattened: `mtf50`, `mtf_at_half_nyquist`,
+    /// `ideal_mtf50`, `false_colour`, `s_cielab_texture`), each absent where not measured.
+    #[serde(flatten, default)]
+    pub spatial: crate::eval::SpatialScore,
     /// Free-form context: exposure, table id, seeds, timings.
     pub context: serde_json::Value,
 }
@@ -237,6 +242,7 @@ pub fn evaluate_chart(
         white_patch: truth.patches[wi].name.clone(),
         patches: results,
         s_cielab_mean: None,
+        spatial: Default::default(),
         context,
     })
 }

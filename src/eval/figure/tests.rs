@@ -40,6 +40,7 @@ fn report(patches: Vec<PatchResult>) -> DeltaEReport {
         white_patch: "grey_95".into(),
         patches,
         s_cielab_mean: None,
+        spatial: Default::default(),
         context: serde_json::Value::Null,
     }
 }
