@@ -30,6 +30,10 @@ pub use colorchecker::{
 pub use colour_classes::{
     ColourClassRow, ColourClassStudy, colour_class_markdown, colour_class_study,
 };
+pub use edge::{
+    BAND_PX, EdgeCapture, EdgeScore, FLAT_FAR_PX, FLAT_NEAR_PX, ROI_MARGIN, false_colour,
+    simulate_edge,
+};
 pub use figure::{colorchecker_svg, report_svg};
 pub use illuminant_estimation::{
     EstimateResult, EstimationRow, STUDY_LIGHTS, estimation_markdown, illuminant_estimation_study,
@@ -48,10 +52,6 @@ pub use report::{
 pub use scielab::{
     Border, ChannelFilter, DeltaEFormula, FilterSet, Scielab, ScielabOptions, ViewingCondition,
     XYZ_TO_OPP, channel_filters, scielab,
-};
-pub use edge::{
-    BAND_PX, EdgeCapture, EdgeScore, FLAT_FAR_PX, FLAT_NEAR_PX, ROI_MARGIN, false_colour,
-    simulate_edge,
 };
 pub use sfr::{EdgeOrientation, Sfr, SfrError, slanted_edge_sfr};
 pub use spatial::{SPATIAL_SIZE, SpatialCaptures, SpatialScore, simulate_spatial, spatial_score};

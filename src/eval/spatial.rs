@@ -6,10 +6,10 @@
 
 use serde::{Deserialize, Serialize};
 
+use super::EvalError;
 use super::edge::{EdgeCapture, simulate_edge};
 use super::texture::{TextureCapture, simulate_texture};
 use super::workflow::{ChartSetup, Method, method_correction, render_method};
-use super::EvalError;
 use crate::camera::Camera;
 use crate::l3::correct::IlluminantEntry;
 use crate::scene::SlantedEdgeParams;
@@ -77,7 +77,8 @@ impl SpatialCaptures {
         correction: &IlluminantEntry,
     ) -> Result<SpatialScore, EvalError> {
         let correction = method_correction(camera, method, correction)?;
-        let render = |volts: &[f32], w, h| render_method(method, &correction, volts, w, h, camera.cfa());
+        let render =
+            |volts: &[f32], w, h| render_method(method, &correction, volts, w, h, camera.cfa());
         let e = &self.edge;
         let edge_xyz = render(&e.volts, e.width, e.height)?;
         let mut out = SpatialScore {
@@ -111,11 +112,8 @@ pub fn spatial_score(
     iset: Option<&IsetData>,
     setup: &ChartSetup,
 ) -> Result<SpatialScore, EvalError> {
-    simulate_spatial(camera, acquisition, iset, setup, SPATIAL_SIZE)?.score(
-        camera,
-        method,
-        correction,
-    )
+    simulate_spatial(camera, acquisition, iset, setup, SPATIAL_SIZE)?
+        .score(camera, method, correction)
 }
 
 #[cfg(test)]

@@ -100,7 +100,9 @@ impl TextureCapture {
         let y_ideal = self.white_y(&self.ideal_image)?;
         let y_render = self.white_y(rendered_xyz)?;
         let first = (self.white_rows + super::edge::ROI_MARGIN) * self.width * 3;
-        let rows = self.height.saturating_sub(self.white_rows + super::edge::ROI_MARGIN);
+        let rows = self
+            .height
+            .saturating_sub(self.white_rows + super::edge::ROI_MARGIN);
         let a: Vec<f64> = self.ideal_image[first..]
             .iter()
             .map(|&v| f64::from(v) / y_ideal)

@@ -232,7 +232,8 @@ fn evaluate(
             ),
         ),
         None => {
-            baseline = fit_baseline_matrix(&camera, &["D65".to_string()], iset).map_err(eval_err)?;
+            baseline =
+                fit_baseline_matrix(&camera, &["D65".to_string()], iset).map_err(eval_err)?;
             (Method::Baseline(&baseline), "Baseline+T".to_string())
         }
     };
