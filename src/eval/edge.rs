@@ -15,17 +15,20 @@
 //!    mean of the light side's flat region is the D65 white at Y = 1. A global colour cast of
 //!    the render (any 3×3 applied to a neutral scene) is thereby removed: every neutral level
 //!    has the same chromaticity, so it lands on the neutral axis.
-//! 2. Every pixel's CIELAB chroma C*ab (D65 white) is taken.
-//! 3. False colour = the mean C*ab over the **band** (pixels whose centre lies within
-//!    [`BAND_PX`] pixels of the edge line, horizontally) minus the mean of the mean C*ab of the
-//!    two **flat strips** (pixels [`FLAT_NEAR_PX`]–[`FLAT_FAR_PX`] pixels from the line, each
-//!    side). The flat strips carry the same noise chroma the band does, so the difference is
-//!    the chroma the edge itself gains: demosaicking fringes, colour zippers, chromatic
-//!    blur. A neutral render scores 0, a uniform cast 0, a one-pixel red–cyan fringe clearly
-//!    more.
+//! 2. Every pixel's CIELAB chroma C*ab (D65 white) is taken, and squared.
+//! 3. False colour = √(max(0, B − F)): B the mean C*ab² over the **band** (pixels whose centre
+//!    lies within [`BAND_PX`] pixels of the edge line, horizontally), F the mean of the mean
+//!    C*ab² of the two **flat strips** (pixels [`FLAT_NEAR_PX`]–[`FLAT_FAR_PX`] from the line,
+//!    each side). It is the RMS chroma the edge itself gains (demosaicking fringes, colour
+//!    zippers, chromatic blur), in C*ab units. A neutral render scores 0, a uniform cast 0,
+//!    a one-pixel red–cyan fringe clearly more.
 //!
-//! Per pixel rather than averaged along the edge: a demosaicking fringe on a slanted edge
-//! changes hue with the CFA phase along the edge, and averaging a*, b* along the edge first
+//! Squares, not magnitudes: pixel noise adds chroma too, and the band's noise is the flat
+//! strips' (half of the band lies on each side). A fringe `f` and zero-mean noise `n` give
+//! E|f + n|² = |f|² + E|n|², so subtracting the flat strips' mean square leaves the fringe's
+//! whatever the noise; magnitudes would add in quadrature and a fringe would vanish under low
+//! light's noise. Per pixel rather than averaged along the edge: a demosaicking fringe on a
+//! slanted edge changes hue with the CFA phase along the edge, and averaging a*, b* first
 //! would cancel it.
 
 use ndarray::Array2;
@@ -73,7 +76,7 @@ pub struct EdgeScore {
     pub mtf_at_half_nyquist: f64,
     /// The ideal image's MTF50 on the same region (the lens's), cycles per pixel.
     pub ideal_mtf50: f64,
-    /// Mean C*ab at the edge beyond the flat sides' (see the module doc).
+    /// RMS C*ab at the edge beyond the flat sides' (see the module doc).
     pub false_colour: f64,
     /// The rendered SFR (frequencies and values, for plotting).
     pub sfr: Sfr,
@@ -208,8 +211,8 @@ fn mean_where(
     (s.map(|v| v / n.max(1) as f64), n)
 }
 
-/// Mean C*ab (after `scale`, per XYZ channel, and the D65 white) of the pixels `keep` selects.
-fn mean_chroma(
+/// Mean C*ab² (after `scale`, per XYZ channel, and the D65 white) of the pixels `keep` selects.
+fn mean_square_chroma(
     p: &SlantedEdgeParams,
     xyz: &[f32],
     width: usize,
@@ -225,7 +228,7 @@ fn mean_chroma(
                 let i = (r * width + c) * 3;
                 let v = [0, 1, 2].map(|k| (f64::from(xyz[i + k]) * scale[k]).max(0.0));
                 let lab = xyz_to_lab(v, D65_WHITE_XYZ);
-                sum += lab[1].hypot(lab[2]);
+                sum += lab[1] * lab[1] + lab[2] * lab[2];
                 n += 1;
             }
         }
@@ -256,10 +259,10 @@ pub fn false_colour(p: &SlantedEdgeParams, xyz: &[f32], width: usize) -> Result<
         )));
     }
     let scale = [0, 1, 2].map(|k| D65_WHITE_XYZ[k] / bright[k]);
-    let band = mean_chroma(p, xyz, width, scale, |d| d.abs() <= BAND_PX)?;
-    let light = mean_chroma(p, xyz, width, scale, flat)?;
-    let dark = mean_chroma(p, xyz, width, scale, |d| flat(-d))?;
-    let fc = band - 0.5 * (light + dark);
+    let band = mean_square_chroma(p, xyz, width, scale, |d| d.abs() <= BAND_PX)?;
+    let light = mean_square_chroma(p, xyz, width, scale, flat)?;
+    let dark = mean_square_chroma(p, xyz, width, scale, |d| flat(-d))?;
+    let fc = (band - 0.5 * (light + dark)).max(0.0).sqrt();
     if !fc.is_finite() {
         return Err(EvalError::Invalid("the false colour is not finite".into()));
     }
@@ -297,10 +300,10 @@ mod tests {
     fn a_neutral_render_and_a_colour_cast_score_no_false_colour() {
         let p = SlantedEdgeParams::new(64, 64);
         let fc = false_colour(&p, &neutral(&p, [1.0; 3]), p.cols).unwrap();
-        // (f32 rounding)
-        assert!(fc.abs() < 1e-4, "{fc}");
+        // (f32 rounding, under the square root)
+        assert!(fc.abs() < 1e-2, "{fc}");
         let cast = false_colour(&p, &neutral(&p, [1.1, 1.0, 0.7]), p.cols).unwrap();
-        assert!(cast.abs() < 1e-4, "{cast}");
+        assert!(cast.abs() < 1e-2, "{cast}");
     }
 
     #[test]
@@ -317,8 +320,8 @@ mod tests {
             }
         }
         let fc = false_colour(&p, &img, p.cols).unwrap();
-        // two of the band's ~9 pixels per row carry ~15 C*ab
-        assert!(fc > 2.0, "{fc}");
+        // two of the band's ~9 pixels per row carry ~15 C*ab: RMS ~7
+        assert!(fc > 4.0, "{fc}");
         // and the same fringe under a cast still scores
         let cast: Vec<f32> = img
             .chunks(3)
@@ -326,6 +329,37 @@ mod tests {
             .collect();
         let fc_cast = false_colour(&p, &cast, p.cols).unwrap();
         assert!((fc_cast - fc).abs() < 0.2 * fc, "{fc_cast} vs {fc}");
+    }
+
+    #[test]
+    fn noise_alone_scores_little_and_does_not_hide_a_fringe() {
+        use rand::SeedableRng;
+        use rand_distr::{Distribution, Normal};
+        let p = SlantedEdgeParams::new(96, 96);
+        let clean = neutral(&p, [1.0; 3]);
+        let mut fringed = clean.clone();
+        for r in p.white_rows..p.rows {
+            let x = p.edge_x(r as f64 + 0.5).floor() as usize;
+            for (c, f) in [(x - 1, [1.25, 1.0, 0.8]), (x + 1, [0.8, 1.0, 1.25])] {
+                for k in 0..3 {
+                    fringed[(r * p.cols + c) * 3 + k] *= f[k] as f32;
+                }
+            }
+        }
+        let noisy = |img: &[f32], seed| {
+            let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(seed);
+            let n = Normal::new(1.0, 0.03).unwrap();
+            img.iter()
+                .map(|v| v * n.sample(&mut rng) as f32)
+                .collect::<Vec<f32>>()
+        };
+        let fc = |img: &[f32]| false_colour(&p, img, p.cols).unwrap();
+        let (fringe, noise) = (fc(&fringed), fc(&noisy(&clean, 1)));
+        // 3 % channel noise is ~5 C*ab per pixel: its excess at the edge is small
+        assert!(noise < 0.3 * fringe, "{noise} vs {fringe}");
+        // and the fringe under that noise keeps most of its score
+        let both = fc(&noisy(&fringed, 2));
+        assert!((both - fringe).abs() < 0.25 * fringe, "{both} vs {fringe}");
     }
 
     #[test]

@@ -31,7 +31,7 @@ pub struct SpatialScore {
     /// MTF50 of the edge's ideal image (the lens and the pixel aperture), cycles per pixel.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub ideal_mtf50: Option<f64>,
-    /// Mean C*ab the render puts at the neutral edge beyond the flat sides'.
+    /// RMS C*ab the render puts at the neutral edge beyond the flat sides'.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub false_colour: Option<f64>,
     /// Mean S-CIELAB ΔE2000 of the rendered texture against its ideal image.

@@ -98,7 +98,7 @@ pub struct Spatial {
     /// MTF50 of the rendered slanted edge, cycles per pixel.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub mtf50: Option<f64>,
-    /// Mean C*ab at the rendered neutral edge beyond its flat sides'.
+    /// RMS C*ab at the rendered neutral edge beyond its flat sides'.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub false_colour: Option<f64>,
 }
