@@ -155,6 +155,10 @@ pub struct EvalArgs {
     /// With --scielab: also write the per-pixel ΔE map here, as a 32-bit float grey TIFF.
     #[arg(long, requires = "scielab")]
     pub map: Option<PathBuf>,
+    /// On a simulated chart, skip the spatial metrics (sharpness and false colour on a
+    /// slanted edge, S-CIELAB on a texture; docs/accuracy.md) the report carries by default.
+    #[arg(long)]
+    pub no_spatial: bool,
     /// Training scenes per table (with --paper-table or --catalogue).
     #[arg(long, default_value_t = 48)]
     pub scenes: usize,
@@ -381,6 +385,18 @@ fn print_and_write(a: &EvalArgs, report: &DeltaEReport) -> Result<(), CliError> 
     if let Some(s) = report.s_cielab_mean {
         println!("S-CIELAB of the render against the ideal image: mean ΔE2000 {s:.2}");
     }
+    let sp = &report.spatial;
+    let f = |v: Option<f64>, d: usize| v.map_or("—".to_string(), |v| format!("{v:.d$}"));
+    if sp.mtf50.is_some() || sp.false_colour.is_some() || sp.s_cielab_texture.is_some() {
+        println!(
+            "slanted edge: MTF50 {} cycles/pixel (the lens's own {}), SFR at half Nyquist {}, false colour {} C*ab; texture S-CIELAB mean ΔE2000 {}",
+            f(sp.mtf50, 3),
+            f(sp.ideal_mtf50, 3),
+            f(sp.mtf_at_half_nyquist, 3),
+            f(sp.false_colour, 2),
+            f(sp.s_cielab_texture, 2)
+        );
+    }
     let out = if a.out.extension().is_some() {
         a.out.clone()
     } else {
@@ -577,7 +593,11 @@ fn evaluate_and_explain(
     chart: &ChartSetup,
 ) -> Result<DeltaEReport, CliError> {
     let (camera, acq, corr, iset) = (m.camera, m.acquisition, m.correction, m.iset);
-    let mut report = m.evaluate_with_s_cielab(chart)?;
+    let mut report = if a.no_spatial {
+        m.evaluate_with_s_cielab(chart)?
+    } else {
+        m.evaluate_with_spatial(chart)?
+    };
     if let Some(n) = a.captures {
         let split = noise_split(m, chart, n.into())?;
         println!(

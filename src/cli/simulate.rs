@@ -14,7 +14,7 @@ use crate::spectral::{IlluminantSpec, IsetData, NamedSpd, WavelengthGrid};
 
 #[derive(Args, Debug)]
 pub struct SimulateArgs {
-    /// macbeth | natural100 | dead-leaves | uniform | grey-ramp | image:PATH
+    /// macbeth | natural100 | dead-leaves | uniform | grey-ramp | edge (a slanted edge) | image:PATH
     #[arg(long, default_value = "macbeth")]
     pub scene: String,
     /// D65 | A | F11 | Tungsten | cct:3200 | csv:PATH[:COLUMN]

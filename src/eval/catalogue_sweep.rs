@@ -68,6 +68,8 @@ impl SweepOptions {
                 patch_px: self.patch_px,
                 ..ChartSetup::default()
             },
+            // the sweep reads colour only: no spatial metrics
+            spatial_px: 0,
             ..PaperOptions::default()
         }
     }

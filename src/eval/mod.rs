@@ -6,6 +6,7 @@ mod captured_floor;
 mod catalogue_sweep;
 pub mod colorchecker;
 mod colour_classes;
+mod edge;
 mod edge_panel;
 mod figure;
 mod illuminant_estimation;
@@ -14,6 +15,8 @@ mod paper_table;
 mod report;
 mod scielab;
 mod sfr;
+mod spatial;
+mod texture;
 mod workflow;
 
 pub use budget::{ErrorBudget, error_budget};
@@ -28,6 +31,10 @@ pub use colorchecker::{
 pub use colour_classes::{
     ColourClassRow, ColourClassStudy, colour_class_markdown, colour_class_study,
 };
+pub use edge::{
+    BAND_PX, EdgeCapture, EdgeScore, FLAT_FAR_PX, FLAT_NEAR_PX, ROI_MARGIN, false_colour,
+    simulate_edge,
+};
 pub use edge_panel::{CROP_SIDE, EdgeCrop, EdgeCurve, EdgePanel};
 pub use figure::{colorchecker_svg, report_svg};
 pub use illuminant_estimation::{
@@ -38,7 +45,7 @@ pub use noise_split::{
 };
 pub use paper_table::{
     BaselineComparison, BaselineFamily, ExposurePoint, PAPER_TABLE1, PaperOptions, PaperRow,
-    PaperTable, StorageComparison, paper_summary, run_paper_table,
+    PaperTable, Spatial, StorageComparison, paper_summary, run_paper_table,
 };
 pub use report::{
     ChartTruth, DeltaEReport, ErrorStats, PatchResult, PixelStats, REPORT_SCHEMA, evaluate_chart,
@@ -49,11 +56,13 @@ pub use scielab::{
     XYZ_TO_OPP, channel_filters, scielab,
 };
 pub use sfr::{EdgeOrientation, Sfr, SfrError, slanted_edge_sfr};
+pub use spatial::{SPATIAL_SIZE, SpatialCaptures, SpatialScore, simulate_spatial, spatial_score};
+pub use texture::{MIN_TEXTURE_SIZE, TEXTURE_LAYOUT_SEED, TextureCapture, simulate_texture};
 pub use workflow::{
     ChannelSet, ChartCapture, ChartSetup, ColourFit, EvalChart, LightLevel, Method,
     REFERENCE_LUMINANCE, capture_scene, chart_scene, evaluate_capture, evaluate_method,
     fit_baseline_matrix, fit_colour_matrix, frame_chart_capture, ideal_d65_patch_means,
-    linear_table, matching_linear_map, render_method, simulate_chart,
+    linear_table, matching_linear_map, method_correction, render_method, simulate_chart,
 };
 
 /// Errors of the evaluation layer.
@@ -81,4 +90,6 @@ pub enum EvalError {
     Scene(#[from] crate::scene::SceneError),
     #[error(transparent)]
     Learn(#[from] crate::l3::learn::LearnError),
+    #[error(transparent)]
+    Sfr(#[from] SfrError),
 }

@@ -90,6 +90,22 @@ impl MethodOnChart<'_> {
             setup,
         )
     }
+
+    /// [`Self::evaluate_with_s_cielab`] with the spatial metrics of the same method under the
+    /// same set-up ([`super::spatial_score`]: sharpness and false colour on a slanted edge,
+    /// S-CIELAB on a texture; `DeltaEReport::spatial`).
+    pub fn evaluate_with_spatial(&self, setup: &ChartSetup) -> Result<DeltaEReport, EvalError> {
+        let mut report = self.evaluate_with_s_cielab(setup)?;
+        report.spatial = super::spatial_score(
+            self.camera,
+            self.method,
+            self.correction,
+            self.acquisition,
+            self.iset,
+            setup,
+        )?;
+        Ok(report)
+    }
 }
 
 /// Evaluate `m` on `captures` noisy captures of the chart (seeds
@@ -187,6 +203,7 @@ mod tests {
             patches: vec![patch("a", "Food", est), patch("w", "grey", [1.0; 3])],
             s_cielab_mean: None,
             edge_panel: None,
+            spatial: Default::default(),
             context: serde_json::Value::Null,
         }
     }

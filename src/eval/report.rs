@@ -69,6 +69,11 @@ pub struct DeltaEReport {
     /// edge's ideal image: the figure's sharpness panel.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub edge_panel: Option<crate::eval::EdgePanel>,
+    /// Sharpness, false colour and texture S-CIELAB of the same method
+    /// ([`crate::eval::spatial_score`]; flattened: `mtf50`, `mtf_at_half_nyquist`,
+    /// `ideal_mtf50`, `false_colour`, `s_cielab_texture`), each absent where not measured.
+    #[serde(flatten, default)]
+    pub spatial: crate::eval::SpatialScore,
     /// Free-form context: exposure, table id, seeds, timings.
     pub context: serde_json::Value,
 }
@@ -242,6 +247,7 @@ pub fn evaluate_chart(
         patches: results,
         s_cielab_mean: None,
         edge_panel: None,
+        spatial: Default::default(),
         context,
     })
 }

@@ -399,6 +399,22 @@ pub fn render_method(
     })
 }
 
+/// The correction `method` renders an evaluation capture with: `correction`, except that a
+/// table whose chroma classes balance by the light gets `camera`'s neutral under the
+/// correction's light, as a renderer told that light would.
+pub fn method_correction<'c>(
+    camera: &Camera,
+    method: &Method,
+    correction: &'c IlluminantEntry,
+) -> Result<std::borrow::Cow<'c, IlluminantEntry>, EvalError> {
+    Ok(match method {
+        Method::Table(t) if t.chroma_balances() && correction.neutral.is_none() => {
+            std::borrow::Cow::Owned(crate::l3::correct::with_neutral(camera, correction)?)
+        }
+        _ => std::borrow::Cow::Borrowed(correction),
+    })
+}
+
 /// Evaluate `method` on the chart acquired under `acquisition`, correcting
 /// with `correction` (ignored for cross-illuminant tables).
 pub fn evaluate_method(
@@ -414,9 +430,8 @@ pub fn evaluate_method(
     evaluate_capture(camera, &cap, method, method_name, correction, setup)
 }
 
-/// Evaluate `method` on an already simulated chart. A table whose chroma
-/// classes balance by the light gets `camera`'s neutral under the
-/// correction's light, as a renderer told that light would.
+/// Evaluate `method` on an already simulated chart, with the correction
+/// [`method_correction`] gives it.
 pub fn evaluate_capture(
     camera: &Camera,
     cap: &ChartCapture,
@@ -425,14 +440,7 @@ pub fn evaluate_capture(
     correction: &IlluminantEntry,
     setup: &ChartSetup,
 ) -> Result<DeltaEReport, EvalError> {
-    let balanced;
-    let correction = match method {
-        Method::Table(t) if t.chroma_balances() && correction.neutral.is_none() => {
-            balanced = crate::l3::correct::with_neutral(camera, correction)?;
-            &balanced
-        }
-        _ => correction,
-    };
+    let correction = &method_correction(camera, method, correction)?;
     let started = std::time::Instant::now();
     let xyz = render_method(
         method,

@@ -11,9 +11,10 @@ use super::dead_leaves::{DeadLeavesParams, dead_leaves};
 use super::image_lift::from_srgb_file;
 use super::natural100::{NATURAL100_PATCH_PX, ces_samples, natural100_chart};
 use super::simple::{grey_ramp, uniform};
+use super::slanted_edge::{EDGE_SIZE, SlantedEdgeParams, slanted_edge};
 use super::{Scene, SceneError, SceneOptions};
 
-/// A scene kind: `macbeth | natural100 | dead-leaves | uniform | grey-ramp |
+/// A scene kind: `macbeth | natural100 | dead-leaves | uniform | grey-ramp | edge |
 /// image:PATH` (case-insensitive; `_` may replace `-`, `gray` `grey`).
 #[derive(Clone, Debug, PartialEq, Eq)]
 pub enum SceneKind {
@@ -22,6 +23,8 @@ pub enum SceneKind {
     DeadLeaves,
     Uniform,
     GreyRamp,
+    /// A grey-on-grey edge 5° from vertical under a white strip ([`slanted_edge`]).
+    SlantedEdge,
     Image(PathBuf),
 }
 
@@ -54,9 +57,10 @@ impl FromStr for SceneKind {
             "dead-leaves" | "deadleaves" => Self::DeadLeaves,
             "uniform" => Self::Uniform,
             "grey-ramp" | "ramp" => Self::GreyRamp,
+            "edge" | "slanted-edge" => Self::SlantedEdge,
             _ => {
                 return Err(SceneError::Invalid(format!(
-                    "unknown scene '{s}' (expected macbeth, natural100, dead-leaves, uniform, grey-ramp or image:PATH)"
+                    "unknown scene '{s}' (expected macbeth, natural100, dead-leaves, uniform, grey-ramp, edge or image:PATH)"
                 )));
             }
         })
@@ -71,6 +75,7 @@ impl fmt::Display for SceneKind {
             Self::DeadLeaves => f.write_str("dead-leaves"),
             Self::Uniform => f.write_str("uniform"),
             Self::GreyRamp => f.write_str("grey-ramp"),
+            Self::SlantedEdge => f.write_str("edge"),
             Self::Image(p) => write!(f, "image:{}", p.display()),
         }
     }
@@ -81,7 +86,7 @@ impl SceneKind {
     /// spectral data): Macbeth with 32 px patches; Natural-100 with 24 px
     /// patches; 256 × 256 dead leaves of the 99 CES reflectances
     /// with `seed`; a 256 × 256 uniform 50 % grey; a 256 × 256 ramp of 16
-    /// steps; an sRGB image file.
+    /// steps; a 128 × 128 slanted edge; an sRGB image file.
     pub fn build(
         &self,
         iset: Option<&IsetData>,
@@ -103,6 +108,7 @@ impl SceneKind {
             }
             Self::Uniform => uniform(opts, &Spectrum::constant(opts.grid, 0.5), rows, cols),
             Self::GreyRamp => grey_ramp(opts, rows, cols, 16),
+            Self::SlantedEdge => slanted_edge(opts, &SlantedEdgeParams::new(EDGE_SIZE, EDGE_SIZE)),
             Self::Image(p) => from_srgb_file(opts, p),
         }
     }
@@ -120,6 +126,8 @@ mod tests {
             ("dead_leaves", SceneKind::DeadLeaves),
             ("uniform", SceneKind::Uniform),
             ("gray-ramp", SceneKind::GreyRamp),
+            ("slanted_edge", SceneKind::SlantedEdge),
+            ("edge", SceneKind::SlantedEdge),
             ("image:a/b.png", SceneKind::Image("a/b.png".into())),
         ] {
             let got: SceneKind = s.parse().unwrap();

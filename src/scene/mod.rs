@@ -12,6 +12,7 @@ mod options;
 mod pca;
 mod sets;
 mod simple;
+mod slanted_edge;
 
 pub use chart::{
     CHART_SURROUND, GREY_CATEGORY, GREY_STRIP_STEPS, MACBETH_CSV, grey_strip_levels, macbeth,
@@ -28,6 +29,10 @@ pub use natural100::{
 pub use options::{DEFAULT_FOV_DEG, DEFAULT_MEAN_LUMINANCE, MAX_SCENE_VALUES, SceneOptions};
 pub use sets::{natural_reflectances, training_reflectances};
 pub use simple::{grey_ramp, uniform};
+pub use slanted_edge::{
+    BRIGHT_PATCH, DARK_PATCH, EDGE_ANGLE_DEG, EDGE_BRIGHT, EDGE_DARK, EDGE_SIZE, MIN_EDGE_SIZE,
+    SlantedEdgeParams, WHITE_PATCH, WHITE_REFERENCE, add_white_strip, slanted_edge,
+};
 
 use ndarray::Array3;
 use serde::{Deserialize, Serialize};

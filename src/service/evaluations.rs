@@ -18,7 +18,7 @@ use super::state::{ActiveTable, AppState, new_id, now_ms};
 use super::store::{EvaluationChart, EvaluationMethod, EvaluationRow};
 use crate::camera::{Camera, SensorDesign};
 use crate::eval::{
-    ChartSetup, DeltaEReport, EvalError, LightLevel, Method, evaluate_method, fit_baseline_matrix,
+    ChartSetup, DeltaEReport, EvalError, LightLevel, Method, MethodOnChart, fit_baseline_matrix,
 };
 use crate::spectral::{IsetData, WavelengthGrid};
 
@@ -200,7 +200,9 @@ async fn table_to_evaluate(
 
 /// Simulates the chart under `acquisition` through the camera of `table`'s sensor (the
 /// paper's default sensor for the baseline, `table` `None`), renders it with the table (or the
-/// baseline matrix fitted under D65), corrects with `correction` and scores it (blocking).
+/// baseline matrix fitted under D65), corrects with `correction` and scores it, with the
+/// render's S-CIELAB and the method's spatial metrics (a slanted edge and a texture under the
+/// same set-up) (blocking).
 fn evaluate(
     table: Option<&ActiveTable>,
     acquisition: &str,
@@ -219,40 +221,31 @@ fn evaluate(
     let camera = Camera::new(&design, grid, iset)
         .map_err(|e| ServiceError::from_camera(e, ServiceError::Unprocessable))?;
     let eval_err = |e: EvalError| ServiceError::from_eval(e, ServiceError::Unprocessable);
-    let mut report = match table {
-        Some(t) => {
-            let name = format!(
+    let baseline;
+    let (method, name) = match table {
+        Some(t) => (
+            Method::Table(&t.table),
+            format!(
                 "L3 {} ({})",
                 t.table.meta.kind,
                 t.table.meta.train_illuminants.join("+")
-            );
-            let method = Method::Table(&t.table);
-            evaluate_method(
-                &camera,
-                &method,
-                &name,
-                acquisition,
-                correction,
-                iset,
-                setup,
-            )
-            .map_err(eval_err)?
-        }
+            ),
+        ),
         None => {
-            let m = fit_baseline_matrix(&camera, &["D65".to_string()], iset).map_err(eval_err)?;
-            let method = Method::Baseline(&m);
-            evaluate_method(
-                &camera,
-                &method,
-                "Baseline+T",
-                acquisition,
-                correction,
-                iset,
-                setup,
-            )
-            .map_err(eval_err)?
+            baseline =
+                fit_baseline_matrix(&camera, &["D65".to_string()], iset).map_err(eval_err)?;
+            (Method::Baseline(&baseline), "Baseline+T".to_string())
         }
     };
+    let on_chart = MethodOnChart {
+        camera: &camera,
+        method: &method,
+        method_name: &name,
+        acquisition,
+        correction,
+        iset,
+    };
+    let mut report = on_chart.evaluate_with_spatial(setup).map_err(eval_err)?;
     if let Value::Object(m) = &mut report.context {
         m.insert("table_id".into(), json!(table.map(|t| t.id.clone())));
     }

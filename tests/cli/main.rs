@@ -3,8 +3,8 @@
 //! `l3 eval --colorchecker` on simulated captures (`colorchecker`),
 //! `l3 sensors` and `l3 render --data-dir`'s choice of table by the DNG's camera (`cameras`),
 //! sensors by catalogue name or by a TOML beside its curves (`sensors`), `l3 sfr` on image
-//! files (`sfr`), `l3 eval --scielab` on float XYZ TIFFs (`scielab`) and `l3 render` to JPEG
-//! (`jpeg`).
+//! files (`sfr`), `l3 eval --scielab` on float XYZ TIFFs (`scielab`), `l3 render` to JPEG
+//! (`jpeg`), and the spatial metrics of `l3 eval` on a simulated chart (`spatial`).
 
 mod bench;
 mod cameras;
@@ -15,4 +15,5 @@ mod jpeg;
 mod scielab;
 mod sensors;
 mod sfr;
+mod spatial;
 mod support;

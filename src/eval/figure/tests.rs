@@ -41,6 +41,7 @@ fn report(patches: Vec<PatchResult>) -> DeltaEReport {
         patches,
         s_cielab_mean: None,
         edge_panel: None,
+        spatial: Default::default(),
         context: serde_json::Value::Null,
     }
 }

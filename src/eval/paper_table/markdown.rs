@@ -30,6 +30,48 @@ impl PaperTable {
         s
     }
 
+    /// Every row's S-CIELAB on the chart and the texture, MTF50 and false colour at full
+    /// exposure and at the lowest; nothing when the run left them out.
+    fn spatial_markdown(&self) -> String {
+        let has = |s: &super::rows::Spatial| s.s_cielab_mean.is_some() || s.mtf50.is_some();
+        if !self.rows.iter().any(|r| has(&r.spatial)) {
+            return String::new();
+        }
+        let px = self.options.spatial_px;
+        let low = self
+            .rows
+            .first()
+            .and_then(Self::low_light)
+            .map(|p| format!("{}×", p.factor))
+            .unwrap_or_else(|| "low light".into());
+        let mut s = format!(
+            "\nSpatial metrics (docs/accuracy.md, \"Sharpness and false colour\"): S-CIELAB mean ΔE2000 of the chart's and of a {px} px dead-leaves texture's render against their ideal images; MTF50 (cycles per pixel) of a {px} px slanted edge's rendered luminance and the C*ab the render adds at the neutral edge (false colour), at full exposure and at {low}.\n\n\
+             | acquisition | method | S-CIELAB chart | S-CIELAB texture | MTF50 | false colour | S-CIELAB chart {low} | S-CIELAB texture {low} | MTF50 {low} | false colour {low} |\n\
+             |---|---|---|---|---|---|---|---|---|---|\n"
+        );
+        let f = |v: Option<f64>, d: usize| v.map_or("—".to_string(), |v| format!("{v:.d$}"));
+        let cells = |sp: Option<&super::rows::Spatial>| {
+            let sp = sp.cloned().unwrap_or_default();
+            format!(
+                "{} | {} | {} | {}",
+                f(sp.s_cielab_mean, 2),
+                f(sp.s_cielab_texture, 2),
+                f(sp.mtf50, 3),
+                f(sp.false_colour, 2)
+            )
+        };
+        for r in &self.rows {
+            s.push_str(&format!(
+                "| {} | {} | {} | {} |\n",
+                r.acquisition,
+                r.method,
+                cells(Some(&r.spatial)),
+                cells(Self::low_light(r).map(|p| &p.spatial))
+            ));
+        }
+        s
+    }
+
     /// A markdown rendering beside the paper's figures.
     pub fn markdown(&self) -> String {
         let mut s = format!(
@@ -72,6 +114,7 @@ impl PaperTable {
             ));
         }
         s.push_str(&self.captures_markdown());
+        s.push_str(&self.spatial_markdown());
         if !self.comparisons.is_empty() {
             s.push_str("\nEach L3 row against its conventional baseline (of RGB and all channels, the one with the lower mean patch-mean ΔE over this sensor's baseline rows at full exposure): patch-mean difference, and per-pixel ΔE as a ratio L3 / baseline at each exposure factor.\n\n");
             let several = self.n_captures() > 1;

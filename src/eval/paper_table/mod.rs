@@ -15,7 +15,7 @@ pub(crate) use baselines::short;
 pub use markdown::paper_summary;
 pub use rows::{
     BaselineComparison, BaselineFamily, ExposurePoint, PAPER_TABLE1, PaperOptions, PaperRow,
-    PaperTable, StorageComparison,
+    PaperTable, Spatial, StorageComparison,
 };
 pub use run::run_paper_table;
 pub(crate) use run::{linear_counterpart, table_spec};

@@ -37,10 +37,19 @@ pub struct PaperOptions {
     /// matching linear map's ([`CaptureSpread`]).
     #[serde(default = "one")]
     pub captures: usize,
+    /// The side of the slanted edge and the texture every row's spatial metrics are measured
+    /// on ([`crate::eval::simulate_spatial`]), pixels; 0 leaves the spatial metrics and the
+    /// chart's S-CIELAB out (the sensor sweep does, for speed).
+    #[serde(default = "spatial_size")]
+    pub spatial_px: usize,
 }
 
 fn one() -> usize {
     1
+}
+
+fn spatial_size() -> usize {
+    crate::eval::SPATIAL_SIZE
 }
 
 fn default_exposures() -> Vec<f64> {
@@ -58,6 +67,7 @@ impl Default for PaperOptions {
             exposures: default_exposures(),
             chroma_classes: crate::l3::learn::DEFAULT_CHROMA_CLASSES,
             captures: 1,
+            spatial_px: spatial_size(),
         }
     }
 }
@@ -71,6 +81,38 @@ pub struct ExposurePoint {
     pub mean: f64,
     /// Mean per-pixel ΔE2000 over patch interiors.
     pub pixel_mean: f64,
+    /// The row's spatial metrics at this exposure ([`Spatial`]).
+    #[serde(flatten, default)]
+    pub spatial: Spatial,
+}
+
+/// A row's S-CIELAB on the chart and its spatial metrics ([`crate::eval::SpatialScore`]) at one
+/// exposure; absent with [`PaperOptions::spatial_px`] 0.
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
+pub struct Spatial {
+    /// S-CIELAB mean of the chart's render against its ideal image.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub s_cielab_mean: Option<f64>,
+    /// S-CIELAB mean of the texture's render against its ideal image.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub s_cielab_texture: Option<f64>,
+    /// MTF50 of the rendered slanted edge, cycles per pixel.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub mtf50: Option<f64>,
+    /// RMS C*ab at the rendered neutral edge beyond its flat sides'.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub false_colour: Option<f64>,
+}
+
+impl Spatial {
+    pub(super) fn new(s_cielab_mean: Option<f64>, s: Option<&crate::eval::SpatialScore>) -> Self {
+        Self {
+            s_cielab_mean,
+            s_cielab_texture: s.and_then(|s| s.s_cielab_texture),
+            mtf50: s.and_then(|s| s.mtf50),
+            false_colour: s.and_then(|s| s.false_colour),
+        }
+    }
 }
 
 /// One row of the table.
@@ -101,6 +143,9 @@ pub struct PaperRow {
     /// With [`PaperOptions::captures`] > 1: the row over every capture.
     #[serde(default)]
     pub captures: Option<CaptureSpread>,
+    /// The row's S-CIELAB on the chart and its spatial metrics at full exposure.
+    #[serde(flatten, default)]
+    pub spatial: Spatial,
 }
 
 /// A row's patch-mean ΔE2000 over several noisy captures of the chart

@@ -6,14 +6,15 @@ use std::sync::atomic::AtomicBool;
 use super::baselines::short;
 use super::rows::{
     BaselineFamily, CaptureSpread, ExposurePoint, PAPER_TABLE1, PaperOptions, PaperRow, PaperTable,
-    StorageComparison,
+    Spatial, StorageComparison,
 };
 use crate::baseline::ColourMatrix;
 use crate::camera::{Camera, SensorDesign};
 use crate::eval::noise_split::check_captures;
 use crate::eval::{
     ChannelSet, ChartCapture, ChartSetup, ColourFit, DeltaEReport, EvalError, LightLevel, Method,
-    evaluate_capture, fit_colour_matrix, linear_table, matching_linear_map, simulate_chart,
+    SpatialCaptures, evaluate_capture, fit_colour_matrix, linear_table, matching_linear_map,
+    simulate_chart, simulate_spatial,
 };
 use crate::l3::L3Table;
 use crate::l3::correct::{IDENTITY, IlluminantEntry, IlluminantRegistry, LevelMap};
@@ -192,6 +193,10 @@ struct Acquisition<'a> {
     /// The further captures of a run over several (chart seeds after the first).
     extra: Vec<ChartCapture>,
     lower: Vec<LowerCapture>,
+    /// The slanted edge and the texture at full exposure and at each lower one (none with
+    /// `spatial_px` 0), shared by every row.
+    spatial: Option<SpatialCaptures>,
+    lower_spatial: Vec<Option<SpatialCaptures>>,
 }
 
 /// The chart at a lower exposure: the exposure factor, the capture and its set-up.
@@ -290,6 +295,11 @@ impl Run<'_> {
         baseline_methods(&mut methods, shared, &tag, &acq_rgb, &acq_all);
         let acq_names = [format!("Baseline_{tag}"), format!("Baseline_{tag} all")];
         let (cap, extra, lower) = self.captures(acq)?;
+        let spatial = self.spatial_captures(acq, &self.opts.chart)?;
+        let lower_spatial = lower
+            .iter()
+            .map(|(_, _, setup)| self.spatial_captures(acq, setup))
+            .collect::<Result<Vec<_>, EvalError>>()?;
         let a = Acquisition {
             name: acq,
             tag,
@@ -299,6 +309,8 @@ impl Run<'_> {
             cap,
             extra,
             lower,
+            spatial,
+            lower_spatial,
         };
         for (name, method, secs) in methods {
             (self.progress)(&format!("evaluating {name} under {acq}"));
@@ -317,7 +329,7 @@ impl Run<'_> {
         acq: &str,
     ) -> Result<(ChartCapture, Vec<ChartCapture>, Vec<LowerCapture>), EvalError> {
         let (camera, iset, opts) = (&self.camera, self.iset, self.opts);
-        let cap = simulate_chart(camera, acq, iset, &opts.chart)?;
+        let cap = self.chart_with_ideal(acq, &opts.chart)?;
         // the further captures of a run over several (chart seeds after the first)
         let extra = (1..opts.captures as u64)
             .map(|k| {
@@ -333,10 +345,46 @@ impl Run<'_> {
             .iter()
             .map(|&f| {
                 let setup = LightLevel::ExposureFactor(f).apply(&opts.chart)?;
-                Ok((f, simulate_chart(camera, acq, iset, &setup)?, setup))
+                Ok((f, self.chart_with_ideal(acq, &setup)?, setup))
             })
             .collect::<Result<Vec<_>, EvalError>>()?;
         Ok((cap, extra, lower))
+    }
+
+    /// The chart under `acq` with `setup`, with its ideal image (for the S-CIELAB) unless the
+    /// run leaves the spatial metrics out.
+    fn chart_with_ideal(&self, acq: &str, setup: &ChartSetup) -> Result<ChartCapture, EvalError> {
+        let cap = simulate_chart(&self.camera, acq, self.iset, setup)?;
+        if self.opts.spatial_px == 0 {
+            return Ok(cap);
+        }
+        cap.with_ideal_image(&self.camera)
+    }
+
+    /// The slanted edge and the texture under `acq` with `setup` (none with `spatial_px` 0).
+    fn spatial_captures(
+        &self,
+        acq: &str,
+        setup: &ChartSetup,
+    ) -> Result<Option<SpatialCaptures>, EvalError> {
+        match self.opts.spatial_px {
+            0 => Ok(None),
+            px => simulate_spatial(&self.camera, acq, self.iset, setup, px).map(Some),
+        }
+    }
+
+    /// A row's spatial figures on `spatial` with its chart report's S-CIELAB.
+    fn spatial_row(
+        &self,
+        rep: &DeltaEReport,
+        spatial: Option<&SpatialCaptures>,
+        method: &Method,
+        correction: &IlluminantEntry,
+    ) -> Result<Spatial, EvalError> {
+        let score = spatial
+            .map(|s| s.score(&self.camera, method, correction))
+            .transpose()?;
+        Ok(Spatial::new(rep.s_cielab_mean, score.as_ref()))
     }
 
     /// One row: the method on the first capture, over the further captures, its matching
@@ -374,15 +422,18 @@ impl Run<'_> {
         let exposures = a
             .lower
             .iter()
-            .map(|(f, lc, ls)| {
+            .zip(&a.lower_spatial)
+            .map(|((f, lc, ls), lsp)| {
                 let r = evaluate_capture(&self.camera, lc, &method, &name, c, ls)?;
                 Ok(ExposurePoint {
                     factor: *f,
                     mean: r.summary.mean,
                     pixel_mean: r.per_pixel.mean,
+                    spatial: self.spatial_row(&r, lsp.as_ref(), &method, c)?,
                 })
             })
             .collect::<Result<Vec<_>, EvalError>>()?;
+        let spatial = self.spatial_row(&rep, a.spatial.as_ref(), &method, c)?;
         let is_tungsten = a.tag == "Tun";
         let row = PaperRow {
             acquisition: rep.acquisition_illuminant.clone(),
@@ -404,6 +455,7 @@ impl Run<'_> {
             training_seconds: secs,
             captures: (self.opts.captures > 1)
                 .then(|| CaptureSpread::new(row_means, linear_means.as_deref())),
+            spatial,
         };
         Ok((row, rep))
     }

@@ -22,6 +22,7 @@ fn row(acq: &str, method: &str, mean: f64, baseline: Option<BaselineFamily>) -> 
         paper: None,
         training_seconds: None,
         captures: None,
+        spatial: Default::default(),
     }
 }
 
