@@ -11,10 +11,10 @@ mod skips;
 mod stats;
 mod sweep;
 
-pub use plot::{PlotError, pareto_front, svg_plot};
+pub use plot::{PlotError, pareto_front, svg_plot, svg_plot_metric};
 pub use records::{
-    BenchReport, ColourResult, ConfigKind, ConfigResult, FrameInfo, ParetoFront, SensorSweep,
-    Throughput,
+    BenchReport, ColourResult, ConfigKind, ConfigResult, FrameInfo, FrontMetric, ParetoFront,
+    SensorSweep, Throughput,
 };
 pub use render::{
     BENCH_WHITE_Y, RENDERER, render_baseline_srgb8, render_baseline_xyz, render_srgb8, render_xyz,

@@ -5,7 +5,7 @@
 use plotters::coord::types::RangedCoordf64;
 use plotters::prelude::*;
 
-use super::records::BenchReport;
+use super::records::{BenchReport, FrontMetric};
 
 /// Errors of drawing the plot.
 #[derive(Debug, thiserror::Error)]
@@ -72,9 +72,14 @@ type PlotRow<'a> = (&'a str, f64, Vec<Option<f64>>);
 /// The chart the plot draws on: log ms/Mpix against mean ΔE.
 type Chart<'a, 'b> = ChartContext<'a, SVGBackend<'b>, Cartesian2d<LogCoord<f64>, RangedCoordf64>>;
 
-/// Draw the report as an SVG document.
+/// Draw the report as an SVG document: run time against mean ΔE.
 pub fn svg_plot(report: &BenchReport) -> Result<String, PlotError> {
-    let rows = plot_rows(report);
+    svg_plot_metric(report, FrontMetric::DeltaE)
+}
+
+/// Draw the report as an SVG document: run time against `metric`, with its Pareto fronts.
+pub fn svg_plot_metric(report: &BenchReport, metric: FrontMetric) -> Result<String, PlotError> {
+    let rows = plot_rows(report, metric);
     if rows.is_empty() {
         return Err(PlotError::Empty(
             "no configuration has colour results".into(),
@@ -99,8 +104,13 @@ pub fn svg_plot(report: &BenchReport) -> Result<String, PlotError> {
     {
         let root = SVGBackend::with_string(&mut svg, (1000, 640)).into_drawing_area();
         root.fill(&WHITE).map_err(draw_err)?;
+        let what = match metric {
+            FrontMetric::DeltaE => "colour error",
+            FrontMetric::SCielab => "S-CIELAB",
+            FrontMetric::Mtf50 => "sharpness",
+        };
         let caption = format!(
-            "L3 run time against colour error ({} renderer, {}×{} frame, {} threads)",
+            "L3 run time against {what} ({} renderer, {}×{} frame, {} threads)",
             report.renderer, report.frame.width, report.frame.height, report.threads
         );
         let mut chart = ChartBuilder::on(&root)
@@ -113,7 +123,7 @@ pub fn svg_plot(report: &BenchReport) -> Result<String, PlotError> {
         chart
             .configure_mesh()
             .x_desc("milliseconds per megapixel, all threads (log scale)")
-            .y_desc("mean ΔE2000, Natural-100 chart")
+            .y_desc(metric.label())
             .label_style(("sans-serif", 15))
             .axis_desc_style(("sans-serif", 17))
             .light_line_style(WHITE.mix(0.0))
@@ -123,7 +133,7 @@ pub fn svg_plot(report: &BenchReport) -> Result<String, PlotError> {
             copy_line(&mut chart, cx, y_hi)?;
         }
         for (k, ill) in report.acquisitions.iter().enumerate() {
-            acquisition_series(&mut chart, &rows, k, ill)?;
+            acquisition_series(&mut chart, &rows, k, ill, metric)?;
         }
         chart
             .configure_series_labels()
@@ -138,8 +148,8 @@ pub fn svg_plot(report: &BenchReport) -> Result<String, PlotError> {
     Ok(tag_front_lines(&svg))
 }
 
-/// The configurations with colour results and a positive finite time.
-fn plot_rows(report: &BenchReport) -> Vec<PlotRow<'_>> {
+/// The configurations with colour results and a positive finite time, with `metric`.
+fn plot_rows(report: &BenchReport, metric: FrontMetric) -> Vec<PlotRow<'_>> {
     report
         .configs
         .iter()
@@ -151,7 +161,7 @@ fn plot_rows(report: &BenchReport) -> Vec<PlotRow<'_>> {
                 report
                     .acquisitions
                     .iter()
-                    .map(|a| r.colour_under(a).map(|c| c.mean))
+                    .map(|a| r.colour_under(a).and_then(|c| metric.value(c)))
                     .collect(),
             )
         })
@@ -189,6 +199,7 @@ fn acquisition_series(
     rows: &[PlotRow<'_>],
     k: usize,
     ill: &str,
+    metric: FrontMetric,
 ) -> Result<(), PlotError> {
     let colour = SERIES[k % SERIES.len()];
     let pts: Vec<(usize, (f64, f64))> = rows
@@ -198,7 +209,14 @@ fn acquisition_series(
         .filter(|(_, p)| p.1.is_finite())
         .collect();
     let xy: Vec<(f64, f64)> = pts.iter().map(|p| p.1).collect();
-    let front: Vec<(f64, f64)> = pareto_front(&xy).into_iter().map(|i| xy[i]).collect();
+    // the front minimises the metric's cost (MTF50 is maximised)
+    let sign = if metric == FrontMetric::Mtf50 {
+        -1.0
+    } else {
+        1.0
+    };
+    let cost: Vec<(f64, f64)> = xy.iter().map(|p| (p.0, sign * p.1)).collect();
+    let front: Vec<(f64, f64)> = pareto_front(&cost).into_iter().map(|i| xy[i]).collect();
     // the front: a step line and a ring round each of its points
     chart
         .draw_series(LineSeries::new(
@@ -221,7 +239,7 @@ fn acquisition_series(
         )
         .map_err(draw_err)?;
     // the points
-    let label = format!("mean ΔE under {ill}");
+    let label = format!("{} under {ill}", metric.name());
     if k.is_multiple_of(2) {
         chart
             .draw_series(xy.iter().map(|&p| Circle::new(p, 5, colour.filled())))

@@ -59,6 +59,18 @@ pub struct ColourResult {
     /// The same at [`BenchOptions::low_light_factor`] of the exposure.
     #[serde(default)]
     pub low_light_pixel_mean: Option<f64>,
+    /// S-CIELAB of the whole chart render against its ideal image, at full exposure and at
+    /// the low-light exposure.
+    #[serde(default)]
+    pub s_cielab_mean: Option<f64>,
+    #[serde(default)]
+    pub low_light_s_cielab_mean: Option<f64>,
+    /// Sharpness, false colour and texture S-CIELAB at full exposure
+    /// ([`crate::eval::SpatialScore`]) and at the low-light exposure.
+    #[serde(default)]
+    pub spatial: crate::eval::SpatialScore,
+    #[serde(default)]
+    pub low_light_spatial: crate::eval::SpatialScore,
 }
 
 /// One row of the benchmark.
@@ -124,11 +136,71 @@ pub struct BenchReport {
     pub encoders: Vec<EncoderResult>,
 }
 
-/// The non-dominated configurations under one illuminant.
+/// The non-dominated configurations under one illuminant, by run time against one metric.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct ParetoFront {
     pub illuminant: String,
+    /// The metric ([`FrontMetric`]); absent in reports written before there were several:
+    /// mean ΔE2000.
+    #[serde(default)]
+    pub metric: FrontMetric,
     pub names: Vec<String>,
+}
+
+/// What a Pareto front weighs run time against: a configuration that wins on ΔE by blurring
+/// shows on the other two.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum FrontMetric {
+    /// Mean patch-mean ΔE2000 (lower is better).
+    #[default]
+    DeltaE,
+    /// S-CIELAB of the chart render (lower is better).
+    SCielab,
+    /// MTF50 of the slanted edge (higher is better).
+    Mtf50,
+}
+
+impl FrontMetric {
+    pub const ALL: [FrontMetric; 3] = [
+        FrontMetric::DeltaE,
+        FrontMetric::SCielab,
+        FrontMetric::Mtf50,
+    ];
+
+    /// The metric of a colour result, as a value to minimise (MTF50 negated), when measured.
+    pub fn cost(self, c: &ColourResult) -> Option<f64> {
+        match self {
+            FrontMetric::DeltaE => Some(c.mean),
+            FrontMetric::SCielab => c.s_cielab_mean,
+            FrontMetric::Mtf50 => c.spatial.mtf50.map(|m| -m),
+        }
+        .filter(|v| v.is_finite())
+    }
+
+    /// The metric as plotted (MTF50 as measured).
+    pub fn value(self, c: &ColourResult) -> Option<f64> {
+        self.cost(c)
+            .map(|v| if self == FrontMetric::Mtf50 { -v } else { v })
+    }
+
+    /// The axis title.
+    pub fn label(self) -> &'static str {
+        match self {
+            FrontMetric::DeltaE => "mean ΔE2000, Natural-100 chart",
+            FrontMetric::SCielab => "S-CIELAB mean, Natural-100 chart",
+            FrontMetric::Mtf50 => "MTF50 of the slanted edge, cycles/pixel (higher is sharper)",
+        }
+    }
+
+    /// Its name in file names and tables: `delta_e`, `s_cielab`, `mtf50`.
+    pub fn name(self) -> &'static str {
+        match self {
+            FrontMetric::DeltaE => "delta_e",
+            FrontMetric::SCielab => "s_cielab",
+            FrontMetric::Mtf50 => "mtf50",
+        }
+    }
 }
 
 impl BenchReport {

@@ -1,7 +1,7 @@
 //! The benchmark's markdown table (the JSON is the serde form of
 //! [`BenchReport`], schema [`BENCH_SCHEMA`]).
 
-use super::records::{BenchReport, ConfigKind, ConfigResult, SensorSweep};
+use super::records::{BenchReport, ConfigKind, ConfigResult, FrontMetric, SensorSweep};
 
 /// Identifier of the benchmark JSON's schema.
 pub const BENCH_SCHEMA: &str = "l3.bench.v1";
@@ -24,6 +24,7 @@ pub fn markdown_table(r: &BenchReport) -> String {
          Throughput frame: {}. Whole run: {:.0} s.\n",
         r.options.scenes, r.options.scene_size, r.options.scene_size, r.frame.source, r.total_seconds
     ));
+    s.push_str(&spatial_markdown(r));
     s.push_str(&skips_markdown(r));
     if !r.encoders.is_empty() {
         s.push_str(
@@ -89,11 +90,14 @@ fn config_row(r: &BenchReport, c: &ConfigResult) -> String {
             opt(col.and_then(|x| x.low_light_pixel_mean), 2)
         ));
     }
-    let fronts: Vec<&str> = r
+    let fronts: Vec<String> = r
         .pareto
         .iter()
         .filter(|f| f.names.contains(&c.name))
-        .map(|f| f.illuminant.as_str())
+        .map(|f| match f.metric {
+            FrontMetric::DeltaE => f.illuminant.clone(),
+            m => format!("{} ({})", f.illuminant, m.name()),
+        })
         .collect();
     s.push_str(&format!(
         " {} | {} | {} | {} | {} |\n",
@@ -107,6 +111,45 @@ fn config_row(r: &BenchReport, c: &ConfigResult) -> String {
             fronts.join(", ")
         }
     ));
+    s
+}
+
+/// Beside ΔE: per configuration and light, the chart's S-CIELAB, the texture's, the edge's
+/// MTF50 and the false colour at it, at full and at the low-light exposure.
+fn spatial_markdown(r: &BenchReport) -> String {
+    let low = r.options.low_light_factor;
+    let mut s = format!(
+        "\nSpace as well as colour (docs/accuracy.md, Sharpness and false colour): S-CIELAB of the chart and of a \
+         dead-leaves texture, MTF50 of a slanted edge (cycles/pixel; the lens alone: {}) and the false colour at it, \
+         at full and at {low}× exposure:\n\n\
+         | configuration | light | S-CIELAB chart | at {low}× | S-CIELAB texture | at {low}× | MTF50 | at {low}× | false colour | at {low}× |\n\
+         |---|---|---:|---:|---:|---:|---:|---:|---:|---:|\n",
+        opt(
+            r.configs
+                .iter()
+                .flat_map(|c| &c.colour)
+                .find_map(|x| x.spatial.ideal_mtf50),
+            3
+        )
+    );
+    for c in r.configs.iter().filter(|c| !c.colour.is_empty()) {
+        for x in &c.colour {
+            let (f, l) = (&x.spatial, &x.low_light_spatial);
+            s.push_str(&format!(
+                "| {} | {} | {} | {} | {} | {} | {} | {} | {} | {} |\n",
+                c.name,
+                x.illuminant,
+                opt(x.s_cielab_mean, 2),
+                opt(x.low_light_s_cielab_mean, 2),
+                opt(f.s_cielab_texture, 2),
+                opt(l.s_cielab_texture, 2),
+                opt(f.mtf50, 3),
+                opt(l.mtf50, 3),
+                opt(f.false_colour, 2),
+                opt(l.false_colour, 2),
+            ));
+        }
+    }
     s
 }
 
@@ -226,6 +269,13 @@ pub(super) mod test_support {
             max: mean * 3.0,
             pixel_mean: mean * 1.5,
             low_light_pixel_mean: Some(mean * 3.0),
+            s_cielab_mean: Some(mean * 1.2),
+            low_light_s_cielab_mean: None,
+            spatial: crate::eval::SpatialScore {
+                mtf50: Some(0.3),
+                ..Default::default()
+            },
+            low_light_spatial: Default::default(),
         }
     }
 
@@ -273,6 +323,7 @@ pub(super) mod test_support {
             pareto: vec![
                 ParetoFront {
                     illuminant: "Tungsten".into(),
+                    metric: crate::bench::FrontMetric::DeltaE,
                     names: vec![
                         "baseline".into(),
                         "patch 3".into(),
@@ -281,6 +332,7 @@ pub(super) mod test_support {
                 },
                 ParetoFront {
                     illuminant: "Fluorescent".into(),
+                    metric: crate::bench::FrontMetric::DeltaE,
                     names: vec![
                         "baseline".into(),
                         "patch 3".into(),

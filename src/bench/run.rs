@@ -8,8 +8,8 @@ use std::time::Instant;
 use super::BenchError;
 use super::plot::pareto_front;
 use super::records::{
-    BenchReport, ColourResult, ConfigKind, ConfigResult, FrameInfo, ParetoFront, SensorSweep,
-    Throughput,
+    BenchReport, ColourResult, ConfigKind, ConfigResult, FrameInfo, FrontMetric, ParetoFront,
+    SensorSweep, Throughput,
 };
 use super::render::{
     RENDERER, prepare, render_baseline_srgb8, render_baseline_xyz, render_srgb8, render_xyz,
@@ -19,7 +19,10 @@ use super::skips::{EncoderResult, SkipInputs, SkipResult, run_skips};
 use super::stats::time_runs;
 use super::sweep::{BaselineChoice, BenchOptions, L3Config, TableChoice, sensor_sweep_configs};
 use crate::camera::{Camera, NoiseSwitches, SensorDesign, mosaic};
-use crate::eval::{ChartCapture, DeltaEReport, LightLevel, simulate_chart};
+use crate::eval::{
+    ChartCapture, DeltaEReport, LightLevel, SPATIAL_SIZE, SpatialCaptures, simulate_chart,
+    simulate_spatial,
+};
 use crate::l3::L3Table;
 use crate::l3::correct::with_neutral;
 use crate::l3::correct::{IlluminantEntry, IlluminantRegistry};
@@ -35,6 +38,9 @@ struct ChartCase {
     correction: IlluminantEntry,
     full: ChartCapture,
     low: ChartCapture,
+    /// The slanted edge and the texture at both exposures.
+    spatial_full: SpatialCaptures,
+    spatial_low: SpatialCaptures,
 }
 
 impl ChartCase {
@@ -47,12 +53,17 @@ impl ChartCase {
     ) -> Result<Self, BenchError> {
         // the camera's neutral under the light, which balanced chroma classes need
         let correction = with_neutral(camera, &registry.resolve(acquisition, iset)?)?;
-        let full = simulate_chart(camera, acquisition, iset, &opts.chart)?;
+        let full =
+            simulate_chart(camera, acquisition, iset, &opts.chart)?.with_ideal_image(camera)?;
         let low_setup = LightLevel::ExposureFactor(opts.low_light_factor).apply(&opts.chart)?;
-        let low = simulate_chart(camera, acquisition, iset, &low_setup)?;
+        let low =
+            simulate_chart(camera, acquisition, iset, &low_setup)?.with_ideal_image(camera)?;
+        let spatial = |setup| simulate_spatial(camera, acquisition, iset, setup, SPATIAL_SIZE);
         Ok(Self {
             name: full.acquisition.clone(),
             correction,
+            spatial_full: spatial(&opts.chart)?,
+            spatial_low: spatial(&low_setup)?,
             full,
             low,
         })
@@ -70,7 +81,16 @@ impl ChartCase {
         };
         let rep = score(&self.full)?;
         let low = score(&self.low)?;
+        let in_eval = |v: &[f32], w, h| {
+            render(v, w, h).map_err(|e| crate::eval::EvalError::Invalid(e.to_string()))
+        };
+        let spatial = self.spatial_full.score_with(in_eval)?;
+        let low_light_spatial = self.spatial_low.score_with(in_eval)?;
         Ok(ColourResult {
+            s_cielab_mean: rep.s_cielab_mean,
+            low_light_s_cielab_mean: low.s_cielab_mean,
+            spatial,
+            low_light_spatial,
             illuminant: self.name.clone(),
             method: method.to_string(),
             mean: rep.summary.mean,
@@ -442,29 +462,34 @@ impl Bench<'_> {
     }
 }
 
-/// Per case, the rows on the Pareto front of (ms/Mpix all threads, mean ΔE).
+/// Per case and metric, the rows on the Pareto front of (ms/Mpix all threads, the metric).
 fn pareto_fronts(cases: &[ChartCase], rows: &[ConfigResult]) -> Vec<ParetoFront> {
-    cases
-        .iter()
-        .map(|case| {
+    let mut out = Vec::new();
+    for metric in FrontMetric::ALL {
+        for case in cases {
             let pts: Vec<(usize, (f64, f64))> = rows
                 .iter()
                 .enumerate()
                 .filter_map(|(i, r)| {
-                    r.colour_under(&case.name)
-                        .map(|c| (i, (r.all_threads.ms_per_mpix, c.mean)))
+                    let cost = metric.cost(r.colour_under(&case.name)?)?;
+                    Some((i, (r.all_threads.ms_per_mpix, cost)))
                 })
                 .collect();
+            if pts.is_empty() {
+                continue;
+            }
             let xy: Vec<(f64, f64)> = pts.iter().map(|p| p.1).collect();
-            ParetoFront {
+            out.push(ParetoFront {
                 illuminant: case.name.clone(),
+                metric,
                 names: pareto_front(&xy)
                     .into_iter()
                     .map(|k| rows[pts[k].0].name.clone())
                     .collect(),
-            }
-        })
-        .collect()
+            });
+        }
+    }
+    out
 }
 
 /// Run the default L3 configuration (SI ensemble + T), the I tables and the

@@ -4,7 +4,8 @@ use clap::Args;
 
 use super::{Cli, CliError, iset, load_sensor, write_file};
 use crate::bench::{
-    BenchOptions, markdown_table, run_bench, run_sensor_sweep, sensor_sweep_markdown, svg_plot,
+    BenchOptions, FrontMetric, markdown_table, run_bench, run_sensor_sweep, sensor_sweep_markdown,
+    svg_plot, svg_plot_metric,
 };
 use crate::spectral::IsetData;
 
@@ -66,9 +67,16 @@ pub fn run(cli: &Cli, a: &BenchArgs) -> Result<(), CliError> {
     write_file(&a.out.join("bench.json"), &json)?;
     write_file(&a.out.join("bench.md"), md.as_bytes())?;
     write_file(&a.out.join("bench.svg"), svg.as_bytes())?;
+    // the same run time against S-CIELAB and against sharpness, where they were measured
+    for metric in [FrontMetric::SCielab, FrontMetric::Mtf50] {
+        if let Ok(svg) = svg_plot_metric(&report, metric) {
+            let name = format!("bench-{}.svg", metric.name());
+            write_file(&a.out.join(name), svg.as_bytes())?;
+        }
+    }
     println!("{md}");
     println!(
-        "wrote {0}/bench.json, {0}/bench.md and {0}/bench.svg",
+        "wrote {0}/bench.json, {0}/bench.md and {0}/bench.svg (and bench-s_cielab.svg, bench-mtf50.svg)",
         a.out.display()
     );
     Ok(())

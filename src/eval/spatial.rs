@@ -77,8 +77,17 @@ impl SpatialCaptures {
         correction: &IlluminantEntry,
     ) -> Result<SpatialScore, EvalError> {
         let correction = method_correction(camera, method, correction)?;
-        let render =
-            |volts: &[f32], w, h| render_method(method, &correction, volts, w, h, camera.cfa());
+        self.score_with(|volts: &[f32], w, h| {
+            render_method(method, &correction, volts, w, h, camera.cfa())
+        })
+    }
+
+    /// Render both captures with `render(volts, width, height)` (interleaved XYZ out) and
+    /// score them: for renderers that are not a [`Method`] (the bench's prepared ones).
+    pub fn score_with(
+        &self,
+        render: impl Fn(&[f32], usize, usize) -> Result<Vec<f32>, EvalError>,
+    ) -> Result<SpatialScore, EvalError> {
         let e = &self.edge;
         let edge_xyz = render(&e.volts, e.width, e.height)?;
         let mut out = SpatialScore {
