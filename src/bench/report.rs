@@ -356,8 +356,22 @@ mod tests {
     fn markdown_has_a_row_per_configuration_with_aligned_columns() {
         let r = sample_report();
         let md = markdown_table(&r);
-        let table: Vec<&str> = md.lines().filter(|l| l.starts_with('|')).collect();
+        // the main table: the first run of table lines
+        let table: Vec<&str> = md
+            .lines()
+            .skip_while(|l| !l.starts_with('|'))
+            .take_while(|l| l.starts_with('|'))
+            .collect();
         assert_eq!(table.len(), 2 + r.configs.len(), "{md}");
+        // then space beside colour: a row per configuration and light with colour results
+        let spatial: Vec<&str> = md
+            .lines()
+            .skip_while(|l| !l.starts_with("| configuration | light | S-CIELAB chart"))
+            .take_while(|l| l.starts_with('|'))
+            .collect();
+        let with_colour: usize = r.configs.iter().map(|c| c.colour.len()).sum();
+        assert_eq!(spatial.len(), 2 + with_colour, "{md}");
+        assert!(spatial[2].contains("| 0.300 |"), "{}", spatial[2]);
         let cols = table[0].matches('|').count();
         assert!(table.iter().all(|l| l.matches('|').count() == cols), "{md}");
         assert!(table[0].contains("ΔE Tungsten mean") && table[0].contains("ΔE Fluorescent p90"));

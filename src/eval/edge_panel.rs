@@ -6,6 +6,7 @@
 use serde::{Deserialize, Serialize};
 
 use super::EvalError;
+use super::edge::EdgeCapture;
 use super::sfr::Sfr;
 use crate::colour::{encode_srgb8, xyz_to_linear_srgb};
 
@@ -44,6 +45,33 @@ pub struct EdgeCurve {
 pub struct EdgePanel {
     pub ideal: EdgeCurve,
     pub methods: Vec<EdgeCurve>,
+}
+
+impl EdgePanel {
+    /// The panel of `edge`: its ideal image, then each `(name, rendered XYZ)` of it.
+    pub fn new(edge: &EdgeCapture, renders: &[(String, Vec<f32>)]) -> Result<Self, EvalError> {
+        let (w, h) = (edge.width, edge.height);
+        let ideal = EdgeCurve::new(
+            "ideal (lens)",
+            &edge.ideal_image,
+            w,
+            h,
+            Some(&edge.ideal_sfr),
+            edge.false_colour(&edge.ideal_image).ok(),
+        )?;
+        let methods = renders
+            .iter()
+            .map(|(name, xyz)| match edge.score(xyz) {
+                Ok(s) => EdgeCurve::new(name, xyz, w, h, Some(&s.sfr), Some(s.false_colour)),
+                // no edge the SFR finds (noise at very low light): the crop and false colour
+                Err(EvalError::Sfr(_)) => {
+                    EdgeCurve::new(name, xyz, w, h, None, edge.false_colour(xyz).ok())
+                }
+                Err(e) => Err(e),
+            })
+            .collect::<Result<Vec<_>, _>>()?;
+        Ok(Self { ideal, methods })
+    }
 }
 
 /// The SFR up to Nyquist (the figure's range).
