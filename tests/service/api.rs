@@ -632,6 +632,22 @@ async fn every_read_endpoint_tables_illuminants_and_evaluations() {
     for f in ["n", "mean", "p90"] {
         assert!(v["report"]["per_pixel"][f].is_number(), "per_pixel.{f}");
     }
+    // a simulated chart's report carries the render's S-CIELAB and the spatial metrics
+    for f in [
+        "s_cielab_mean",
+        "mtf50",
+        "mtf_at_half_nyquist",
+        "ideal_mtf50",
+        "false_colour",
+        "s_cielab_texture",
+    ] {
+        let x = v["report"][f].as_f64();
+        assert!(
+            x.is_some_and(f64::is_finite),
+            "report.{f}: {:?}",
+            v["report"][f]
+        );
+    }
     assert_eq!(v["report"]["schema"], "l3.delta_e.v1");
     assert_eq!(v["table_id"], table_id.as_str());
     let mean = v["mean_delta_e"].as_f64().unwrap();

@@ -198,3 +198,40 @@ fn rows_over_several_captures_are_reported_beside_the_first() {
     assert!(md.contains("| Baseline_Tun | -1.33 | 1×"), "{md}");
     assert!(!paper_summary(&[one]).contains("captures"));
 }
+
+#[test]
+fn the_spatial_metrics_have_a_table_of_their_own_when_measured() {
+    use super::{ExposurePoint, Spatial};
+    let mut r = row("Tungsten", "I_Tun", 2.7, None);
+    assert!(
+        !table(vec![r.clone()])
+            .markdown()
+            .contains("Spatial metrics")
+    );
+    let sp = |m: f64| Spatial {
+        s_cielab_mean: Some(3.21),
+        s_cielab_texture: Some(4.32),
+        mtf50: Some(m),
+        false_colour: Some(1.5),
+    };
+    r.spatial = sp(0.245);
+    r.exposures = vec![ExposurePoint {
+        factor: 0.1,
+        mean: 3.0,
+        pixel_mean: 5.0,
+        spatial: sp(0.201),
+    }];
+    let md = table(vec![r.clone()]).markdown();
+    assert!(
+        md.contains(
+            "| Tungsten | I_Tun | 3.21 | 4.32 | 0.245 | 1.50 | 3.21 | 4.32 | 0.201 | 1.50 |"
+        ),
+        "{md}"
+    );
+    // flattened into the row's JSON, and read back
+    let v = serde_json::to_value(&r).unwrap();
+    assert_eq!(v["mtf50"], 0.245);
+    assert_eq!(v["exposures"][0]["false_colour"], 1.5);
+    let back: PaperRow = serde_json::from_value(v).unwrap();
+    assert_eq!(back.spatial, r.spatial);
+}
