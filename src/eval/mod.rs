@@ -9,7 +9,7 @@ mod colour_classes;
 mod figure;
 mod illuminant_estimation;
 mod noise_split;
-mod paper_table;
+pub(crate) mod paper_table;
 mod report;
 mod scielab;
 mod sfr;
