@@ -319,7 +319,12 @@ fn evaluate_simulated(
             } else {
                 Method::Baseline(&matrix)
             };
-            let stem = if a.method == "isp" { "ISP" } else { "Baseline" };
+            // the paper table's names: Baseline+T, Baseline_Tun, ISP_D65+T, ISP_Tun
+            let stem = match (a.method.as_str(), a.fit.as_str()) {
+                ("isp", "d65") => "ISP_D65",
+                ("isp", _) => "ISP",
+                _ => "Baseline",
+            };
             let m = MethodOnChart {
                 camera: &camera,
                 method: &method,
