@@ -3,14 +3,16 @@ use std::path::PathBuf;
 use clap::Args;
 
 use super::{Cli, CliError, iset, load_sensor, write_file};
+use crate::baseline::ColourMatrix;
 use crate::camera::Camera;
 use crate::eval::{
-    Border, ChartSetup, DeltaEFormula, DeltaEReport, FilterSet, LightLevel, Method, MethodOnChart,
-    PaperOptions, SweepOptions, catalogue_sweep, fit_baseline_matrix, noise_split, paper_summary,
-    run_paper_table,
+    Border, ChannelSet, ChartSetup, ColourFit, DeltaEFormula, DeltaEReport, FilterSet, LightLevel,
+    Method, MethodOnChart, PaperOptions, SweepOptions, catalogue_sweep, fit_colour_matrix,
+    noise_split, paper_summary, run_paper_table,
 };
 use crate::l3::L3Table;
-use crate::l3::correct::IlluminantRegistry;
+use crate::l3::correct::{IDENTITY, IlluminantEntry, IlluminantRegistry};
+use crate::l3::table::TableKind;
 use crate::pipeline::{CorrectionMode, correction_for, uses_own_kernels};
 use crate::spectral::{IsetData, WavelengthGrid};
 
@@ -28,9 +30,22 @@ pub struct EvalArgs {
     /// The table to evaluate (not with --paper-table or --method baseline).
     #[arg(long)]
     pub table: Option<PathBuf>,
-    /// `l3` (the table) or `baseline` (bilinear + colour matrix fitted under D65).
+    /// `l3` (the table), `baseline` (bilinear + colour matrix) or `isp` (the strong
+    /// conventional ISP: Malvar or gradient-corrected demosaic, a denoiser driven by the
+    /// sensor's noise model, colour matrix).
     #[arg(long, default_value = "l3")]
     pub method: String,
+    /// With --method baseline or isp: the colour matrix's fit, `d65` (under D65, then T, as
+    /// the paper's baseline) or `acquisition` (white-balanced, under the acquisition light to
+    /// XYZ under D65; no T).
+    #[arg(long, default_value = "d65")]
+    pub fit: String,
+    /// With --method baseline or isp: the channels the colour matrix uses, `rgb` (R, G and B
+    /// when the CFA has them, a conventional 3×3) or `all`.
+    #[arg(long, default_value = "rgb")]
+    pub channels: String,
+    #[command(flatten)]
+    pub isp: super::demosaic::IspArgs,
     /// Acquisition illuminant(s); comma-separated with --paper-table. Default:
     /// Tungsten (Tungsten and Fluorescent with --paper-table; with --frame, the
     /// frame's metadata or an estimate from its pixels).
@@ -299,12 +314,25 @@ fn evaluate_simulated(
             };
             evaluate_and_explain(a, &m, chart)
         }
-        "baseline" => {
-            let matrix = fit_baseline_matrix(&camera, &["D65".to_string()], iset)?;
+        "baseline" | "isp" => {
+            let (matrix, name, corr) = conventional_matrix(a, &camera, &acq, &corr, iset)?;
+            let isp;
+            let method = if a.method == "isp" {
+                isp = a.isp.build(matrix, &camera)?;
+                Method::Isp(&isp)
+            } else {
+                Method::Baseline(&matrix)
+            };
+            // the paper table's names: Baseline+T, Baseline_Tun, ISP_D65+T, ISP_Tun
+            let stem = match (a.method.as_str(), a.fit.as_str()) {
+                ("isp", "d65") => "ISP_D65",
+                ("isp", _) => "ISP",
+                _ => "Baseline",
+            };
             let m = MethodOnChart {
                 camera: &camera,
-                method: &Method::Baseline(&matrix),
-                method_name: "Baseline+T",
+                method: &method,
+                method_name: &format!("{stem}{name}"),
                 acquisition: &acq,
                 correction: &corr,
                 iset,
@@ -312,9 +340,65 @@ fn evaluate_simulated(
             evaluate_and_explain(a, &m, chart)
         }
         other => Err(CliError::Usage(format!(
-            "--method '{other}': expected l3 or baseline"
+            "--method '{other}': expected l3, baseline or isp"
         ))),
     }
+}
+
+/// The conventional pipelines' colour matrix for `--fit` and `--channels`, the suffix of
+/// the method's name (`+T`, `_Tun`, with ` all`) and the correction it is rendered with (T,
+/// or none for the acquisition fit, which aims at D65 itself).
+fn conventional_matrix(
+    a: &EvalArgs,
+    camera: &Camera,
+    acq: &str,
+    corr: &IlluminantEntry,
+    iset: Option<&IsetData>,
+) -> Result<(ColourMatrix, String, IlluminantEntry), CliError> {
+    let channels = match a.channels.as_str() {
+        "rgb" => ChannelSet::Rgb,
+        "all" => ChannelSet::All,
+        o => {
+            return Err(CliError::Usage(format!(
+                "--channels '{o}': expected rgb or all"
+            )));
+        }
+    };
+    let all = if channels == ChannelSet::All {
+        " all"
+    } else {
+        ""
+    };
+    let (lights, kind, name, corr) = match a.fit.as_str() {
+        "d65" => (
+            vec!["D65".to_string()],
+            TableKind::SameIlluminant,
+            format!("+T{all}"),
+            corr.clone(),
+        ),
+        "acquisition" => (
+            vec![acq.to_string()],
+            TableKind::CrossIlluminant,
+            format!("_{}{all}", crate::eval::paper_table::short(acq)),
+            IlluminantEntry {
+                t: IDENTITY,
+                ..corr.clone()
+            },
+        ),
+        o => {
+            return Err(CliError::Usage(format!(
+                "--fit '{o}': expected d65 or acquisition"
+            )));
+        }
+    };
+    let fit = ColourFit {
+        illuminants: &lights,
+        kind,
+        channels,
+        preserve_white: kind == TableKind::CrossIlluminant,
+        through_correction: false,
+    };
+    Ok((fit_colour_matrix(camera, &fit, iset)?, name, corr))
 }
 
 /// `--frame`: a captured chart frame rendered with `--table` under the light named by

@@ -2,6 +2,7 @@
 
 mod bench;
 mod colorchecker;
+mod demosaic;
 mod eval;
 mod render;
 mod scielab;
@@ -41,7 +42,10 @@ pub enum Command {
     Render(render::RenderArgs),
     /// ΔE2000 evaluation on the Natural-100 chart; `--paper-table` for Table 1;
     /// `--colorchecker` for a real ColorChecker capture.
-    Eval(eval::EvalArgs),
+    Eval(Box<eval::EvalArgs>),
+    /// Demosaic a mosaic with the conventional pipelines' methods (bilinear, Malvar, the
+    /// gradient-corrected RGBW demosaic, the ISP's denoiser) to float TIFF.
+    Demosaic(demosaic::DemosaicArgs),
     /// Run time against colour error for a sweep of configurations (JSON, markdown, SVG plot).
     Bench(bench::BenchArgs),
     /// Sharpness: the ISO 12233 slanted-edge SFR of an edge in an image (JSON).
@@ -166,6 +170,7 @@ pub fn main() -> ExitCode {
         Command::Render(a) => render::run(&cli, a),
         Command::Eval(a) => eval::run(&cli, a),
         Command::Bench(a) => bench::run(&cli, a),
+        Command::Demosaic(a) => demosaic::run(&cli, a),
         Command::Sfr(a) => sfr::run(a),
         Command::Sensors(a) => sensors::run(a),
         Command::Serve(a) => serve::run(&cli, a),

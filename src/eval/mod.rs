@@ -11,7 +11,7 @@ mod edge_panel;
 mod figure;
 mod illuminant_estimation;
 mod noise_split;
-mod paper_table;
+pub(crate) mod paper_table;
 mod report;
 mod scielab;
 mod sfr;

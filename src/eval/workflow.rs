@@ -6,7 +6,7 @@ use nalgebra::{DMatrix, DVector};
 use serde::{Deserialize, Serialize};
 
 use super::{ChartTruth, DeltaEReport, EvalError, evaluate_chart};
-use crate::baseline::{ColourMatrix, render_baseline};
+use crate::baseline::{ColourMatrix, Isp, NoiseProfile, render_baseline};
 use crate::camera::{Camera, Exposure, NoiseSwitches, simulate};
 use crate::l3::L3Table;
 use crate::l3::correct::{
@@ -23,6 +23,9 @@ pub enum Method<'a> {
     Table(&'a L3Table),
     /// Bilinear demosaic + colour matrix (then T).
     Baseline(&'a ColourMatrix),
+    /// The strong conventional ISP (its colour matrix then T). With a noise profile, its
+    /// denoiser is given the camera's profile at each capture's exposure.
+    Isp(&'a Isp),
 }
 
 /// How the chart is simulated.
@@ -396,6 +399,9 @@ pub fn render_method(
                 .0
         }
         Method::Baseline(m) => render_baseline(volts, width, height, cfa, &m.then(&correction.t))?,
+        Method::Isp(isp) => isp
+            .with_matrix(isp.matrix().then(&correction.t))
+            .render(volts, width, height, cfa)?,
     })
 }
 
@@ -441,6 +447,15 @@ pub fn evaluate_capture(
     setup: &ChartSetup,
 ) -> Result<DeltaEReport, EvalError> {
     let correction = &method_correction(camera, method, correction)?;
+    let (at_exposure, isp_method);
+    let method = match method {
+        Method::Isp(isp) if isp.noise().is_some() => {
+            at_exposure = isp.with_noise(Some(NoiseProfile::new(camera, cap.exposure_s)));
+            isp_method = Method::Isp(&at_exposure);
+            &isp_method
+        }
+        _ => method,
+    };
     let started = std::time::Instant::now();
     let xyz = render_method(
         method,

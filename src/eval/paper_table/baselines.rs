@@ -48,6 +48,19 @@ impl PaperTable {
         self.baseline_row(&row.acquisition, &stem)
     }
 
+    /// The strong ISP row an L3 row is compared with: `ISP_<light>` for the rows judged
+    /// against the acquisition fit, `ISP_D65+T` for the rest, in the sensor's baseline
+    /// variant ([`Self::all_channel_baseline`]).
+    pub fn isp_for(&self, row: &PaperRow) -> Option<&PaperRow> {
+        let stem = match row.baseline? {
+            BaselineFamily::AcquisitionFit => format!("ISP_{}", short(&row.acquisition)),
+            BaselineFamily::D65FitThenT | BaselineFamily::EnsembleFitThenT => {
+                "ISP_D65+T".to_string()
+            }
+        };
+        self.baseline_row(&row.acquisition, &stem)
+    }
+
     /// An ensemble row's D65-fit + T baseline, which judged the ensembles
     /// before [`BaselineFamily::EnsembleFitThenT`]: shown beside its own.
     pub fn d65_baseline_for(&self, row: &PaperRow) -> Option<&PaperRow> {

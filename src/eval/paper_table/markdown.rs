@@ -72,6 +72,38 @@ impl PaperTable {
         s
     }
 
+    /// Every L3 row against the strong ISP of its family ([`Self::isp_for`]): patch-mean
+    /// difference and per-pixel ΔE ratio at each exposure; empty without ISP rows.
+    fn isp_markdown(&self) -> String {
+        let mut s = String::new();
+        for r in &self.rows {
+            let Some(isp) = self.isp_for(r) else { continue };
+            if s.is_empty() {
+                s.push_str("\nEach L3 row against the strong ISP (Malvar or gradient-corrected demosaic, noise-model denoiser, colour matrix) of its family: patch-mean difference, and per-pixel ΔE as a ratio L3 / ISP at each exposure factor.\n\n| acquisition | method | ISP | Δ patch mean | per-pixel L3/ISP |\n|---|---|---|---|---|\n");
+            }
+            let ratio = |l: f64, b: f64| if b > 0.0 { l / b } else { f64::NAN };
+            let mut ratios = vec![format!("1×: {:.2}", ratio(r.pixel_mean, isp.pixel_mean))];
+            for p in &r.exposures {
+                if let Some(q) = isp.exposures.iter().find(|q| q.factor == p.factor) {
+                    ratios.push(format!(
+                        "{}×: {:.2}",
+                        p.factor,
+                        ratio(p.pixel_mean, q.pixel_mean)
+                    ));
+                }
+            }
+            s.push_str(&format!(
+                "| {} | {} | {} | {:+.2} | {} |\n",
+                r.acquisition,
+                r.method,
+                isp.method,
+                r.mean - isp.mean,
+                ratios.join(", ")
+            ));
+        }
+        s
+    }
+
     /// A markdown rendering beside the paper's figures.
     pub fn markdown(&self) -> String {
         let mut s = format!(
@@ -144,6 +176,7 @@ impl PaperTable {
                 ));
             }
         }
+        s.push_str(&self.isp_markdown());
         let st = &self.storage;
         s.push_str(&format!(
             "\nStorage for {} illuminants: one SI table + {} matrices = {} bytes; {} cross-illuminant tables = {} bytes ({:.1}× more).\n",

@@ -8,7 +8,7 @@ use super::rows::{
     BaselineFamily, CaptureSpread, ExposurePoint, PAPER_TABLE1, PaperOptions, PaperRow, PaperTable,
     Spatial, StorageComparison,
 };
-use crate::baseline::ColourMatrix;
+use crate::baseline::{ColourMatrix, Isp, NoiseProfile};
 use crate::camera::{Camera, SensorDesign};
 use crate::eval::noise_split::check_captures;
 use crate::eval::{
@@ -167,6 +167,9 @@ struct Shared {
     n_all: usize,
     d65_rgb: ColourMatrix,
     d65_all: ColourMatrix,
+    /// The strong ISP with the D65 matrices (RGB, all channels), denoising by the camera's
+    /// noise model.
+    isp_d65: [Isp; 2],
     /// Each ensemble's name and its RGB and all-channel matrices.
     ensemble_fits: Vec<(String, ColourMatrix, ColourMatrix)>,
 }
@@ -187,8 +190,8 @@ struct Acquisition<'a> {
     corr: IlluminantEntry,
     /// The acquisition-fit baselines are white-balanced cross maps: no T.
     identity: IlluminantEntry,
-    /// The names of the acquisition-fit baselines.
-    acq_names: [String; 2],
+    /// The names of the acquisition-fit baselines and ISP rows (rendered without T).
+    acq_names: [String; 4],
     cap: ChartCapture,
     /// The further captures of a run over several (chart seeds after the first).
     extra: Vec<ChartCapture>,
@@ -229,6 +232,17 @@ impl Run<'_> {
         fit_colour_matrix(&self.camera, &fit, self.iset)
     }
 
+    /// The strong ISP with `m`, denoising by the camera's noise model (at each capture's
+    /// exposure: [`evaluate_capture`] sets it).
+    fn isp(&self, m: &ColourMatrix) -> Isp {
+        let noise = self
+            .opts
+            .chart
+            .noise
+            .then(|| NoiseProfile::new(&self.camera, 0.0));
+        Isp::new(m.clone(), noise)
+    }
+
     /// Train the SI tables of D65 and the ensembles, and fit the D65 and ensemble matrices.
     fn shared(&self) -> Result<Shared, EvalError> {
         let si_d65 = self.train(TableKind::SameIlluminant, &["D65"])?;
@@ -260,6 +274,7 @@ impl Run<'_> {
                 self.fit_matrix(lights, TableKind::SameIlluminant, ChannelSet::All)?,
             ));
         }
+        let isp_d65 = [self.isp(&d65_rgb), self.isp(&d65_all)];
         Ok(Shared {
             si_d65,
             si_ens,
@@ -267,6 +282,7 @@ impl Run<'_> {
             n_all: all_ens.len(),
             d65_rgb,
             d65_all,
+            isp_d65,
             ensemble_fits,
         })
     }
@@ -293,7 +309,14 @@ impl Run<'_> {
             ..corr.clone()
         };
         baseline_methods(&mut methods, shared, &tag, &acq_rgb, &acq_all);
-        let acq_names = [format!("Baseline_{tag}"), format!("Baseline_{tag} all")];
+        let isp_acq = [self.isp(&acq_rgb), self.isp(&acq_all)];
+        isp_methods(&mut methods, shared, &tag, &isp_acq);
+        let acq_names = [
+            format!("Baseline_{tag}"),
+            format!("Baseline_{tag} all"),
+            format!("ISP_{tag}"),
+            format!("ISP_{tag} all"),
+        ];
         let (cap, extra, lower) = self.captures(acq)?;
         let spatial = self.spatial_captures(acq, &self.opts.chart)?;
         let lower_spatial = lower
@@ -417,7 +440,7 @@ impl Run<'_> {
                 let (mean, means, family) = self.linear_row(a, t, &name, camera_aware)?;
                 (Some(mean), Some(means), Some(family))
             }
-            Method::Baseline(_) => (None, None, None),
+            Method::Baseline(_) | Method::Isp(_) => (None, None, None),
         };
         let exposures = a
             .lower
@@ -585,6 +608,23 @@ fn baseline_methods<'t>(
         Method::Baseline(acq_all),
         None,
     ));
+}
+
+/// The strong ISP's rows: the D65 fit then T (`ISP_D65+T`) and the light's own
+/// white-balanced fit (`ISP_<light>`, no T); RGB and all channels each, as the baselines.
+fn isp_methods<'t>(
+    methods: &mut Vec<MethodRow<'t>>,
+    shared: &'t Shared,
+    tag: &str,
+    acq: &'t [Isp; 2],
+) {
+    for (suffix, d65, own) in [
+        ("", &shared.isp_d65[0], &acq[0]),
+        (" all", &shared.isp_d65[1], &acq[1]),
+    ] {
+        methods.push((format!("ISP_D65+T{suffix}"), Method::Isp(d65), None));
+        methods.push((format!("ISP_{tag}{suffix}"), Method::Isp(own), None));
+    }
 }
 
 /// The paper's (mean, std, p90) for a row, tungsten only.

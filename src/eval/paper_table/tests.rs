@@ -63,6 +63,8 @@ fn one_baseline_variant_per_sensor_by_its_mean_over_every_baseline_row() {
     };
     assert_eq!(base("I_Tun"), "Baseline_Tun all");
     assert_eq!(base("SI_D65+T"), "Baseline+T all");
+    // no ISP rows: no ISP comparison
+    assert!(t.isp_for(t.row("Tungsten", "I_Tun").unwrap()).is_none());
     // RGB wins overall: every row uses it, and a missing variant falls
     // back to the other
     let t = table(vec![
@@ -77,6 +79,23 @@ fn one_baseline_variant_per_sensor_by_its_mean_over_every_baseline_row() {
     assert_eq!(t.baseline_for(i).unwrap().method, "Baseline_Tun");
     let s = t.row("Tungsten", "SI_D65+T").unwrap();
     assert_eq!(t.baseline_for(s).unwrap().method, "Baseline+T all");
+    // the strong ISP of each family, in the sensor's variant (RGB here)
+    let mut t = t;
+    for m in ["ISP_Tun", "ISP_Tun all", "ISP_D65+T", "ISP_D65+T all"] {
+        t.rows.push(row("Tungsten", m, 3.0, None));
+    }
+    let isp = |m: &str| {
+        t.isp_for(t.row("Tungsten", m).unwrap())
+            .unwrap()
+            .method
+            .clone()
+    };
+    assert_eq!(isp("I_Tun"), "ISP_Tun");
+    assert_eq!(isp("SI_D65+T"), "ISP_D65+T");
+    assert!(
+        t.markdown()
+            .contains("| Tungsten | I_Tun | ISP_Tun | -0.30 |")
+    );
 }
 
 #[test]
