@@ -8,7 +8,12 @@ use serde::{Deserialize, Serialize};
 use super::EvalError;
 use super::edge::EdgeCapture;
 use super::sfr::Sfr;
+use super::workflow::{ChannelSet, ColourFit, fit_colour_matrix};
+use crate::baseline::{Isp, NoiseProfile};
+use crate::camera::Camera;
 use crate::colour::{encode_srgb8, xyz_to_linear_srgb};
+use crate::l3::table::TableKind;
+use crate::spectral::IsetData;
 
 /// The side of an edge crop, pixels.
 pub const CROP_SIDE: usize = 40;
@@ -72,6 +77,28 @@ impl EdgePanel {
             .collect::<Result<Vec<_>, _>>()?;
         Ok(Self { ideal, methods })
     }
+}
+
+/// The rival a method's edge is shown beside: the strong ISP with the white-balanced colour
+/// matrix fitted under `acquisition` (a conventional 3×3 on R, G, B where the CFA has them;
+/// Table 1's `ISP_<light>`), denoising by the camera's noise model when `noise`. It renders
+/// with no further correction (its output is already under D65).
+pub fn acquisition_isp(
+    camera: &Camera,
+    acquisition: &str,
+    iset: Option<&IsetData>,
+    noise: bool,
+) -> Result<Isp, EvalError> {
+    let lights = [acquisition.to_string()];
+    let fit = ColourFit {
+        illuminants: &lights,
+        kind: TableKind::CrossIlluminant,
+        channels: ChannelSet::Rgb,
+        preserve_white: true,
+        through_correction: false,
+    };
+    let m = fit_colour_matrix(camera, &fit, iset)?;
+    Ok(Isp::new(m, noise.then(|| NoiseProfile::new(camera, 0.0))))
 }
 
 /// The SFR up to Nyquist (the figure's range).

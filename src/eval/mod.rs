@@ -35,7 +35,7 @@ pub use edge::{
     BAND_PX, EdgeCapture, EdgeScore, FLAT_FAR_PX, FLAT_NEAR_PX, ROI_MARGIN, false_colour,
     simulate_edge,
 };
-pub use edge_panel::{CROP_SIDE, EdgeCrop, EdgeCurve, EdgePanel};
+pub use edge_panel::{CROP_SIDE, EdgeCrop, EdgeCurve, EdgePanel, acquisition_isp};
 pub use figure::{colorchecker_svg, report_svg};
 pub use illuminant_estimation::{
     EstimateResult, EstimationRow, STUDY_LIGHTS, estimation_markdown, illuminant_estimation_study,

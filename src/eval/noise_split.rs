@@ -14,6 +14,7 @@ use serde::{Deserialize, Serialize};
 
 use super::workflow::{ChartSetup, Method, evaluate_capture, evaluate_method, simulate_chart};
 use super::{DeltaEReport, ErrorStats, EvalError, summarize};
+use crate::baseline::NoiseProfile;
 use crate::camera::Camera;
 use crate::colour::{D65_WHITE_XYZ, Xyz, ciede2000, xyz_to_lab};
 use crate::l3::correct::IlluminantEntry;
@@ -94,16 +95,38 @@ impl MethodOnChart<'_> {
     /// [`Self::evaluate_with_s_cielab`] with the spatial metrics of the same method under the
     /// same set-up ([`super::spatial_score`]: sharpness and false colour on a slanted edge,
     /// S-CIELAB on a texture; `DeltaEReport::spatial`).
+    ///
+    /// The report also gets the figure's edge panel ([`DeltaEReport::edge_panel`]): the
+    /// edge's ideal image, this method's render and the strong ISP fitted under the
+    /// acquisition light ([`super::acquisition_isp`]), on the same capture.
     pub fn evaluate_with_spatial(&self, setup: &ChartSetup) -> Result<DeltaEReport, EvalError> {
+        use super::{EdgePanel, SPATIAL_SIZE, method_correction, render_method, simulate_spatial};
         let mut report = self.evaluate_with_s_cielab(setup)?;
-        report.spatial = super::spatial_score(
-            self.camera,
-            self.method,
-            self.correction,
-            self.acquisition,
-            self.iset,
-            setup,
+        let (camera, cfa) = (self.camera, self.camera.cfa());
+        let caps = simulate_spatial(camera, self.acquisition, self.iset, setup, SPATIAL_SIZE)?;
+        report.spatial = caps.score(camera, self.method, self.correction)?;
+        let e = &caps.edge;
+        let corr = method_correction(camera, self.method, self.correction)?;
+        let own = render_method(self.method, &corr, &e.volts, e.width, e.height, cfa)?;
+        let isp = super::acquisition_isp(camera, self.acquisition, self.iset, setup.noise)?;
+        let isp = isp.with_noise(isp.noise().map(|_| NoiseProfile::new(camera, e.exposure_s)));
+        let identity = IlluminantEntry {
+            t: crate::l3::correct::IDENTITY,
+            ..self.correction.clone()
+        };
+        let rival = render_method(
+            &Method::Isp(&isp),
+            &identity,
+            &e.volts,
+            e.width,
+            e.height,
+            cfa,
         )?;
+        let rival_name = format!("ISP_{}", super::paper_table::short(self.acquisition));
+        report.edge_panel = Some(EdgePanel::new(
+            e,
+            &[(self.method_name.to_string(), own), (rival_name, rival)],
+        )?);
         Ok(report)
     }
 }
