@@ -78,6 +78,11 @@ pub struct TrainArgs {
     /// kernels take under a light it was not trained on through T.
     #[arg(long, default_value_t = crate::l3::learn::DEFAULT_CHROMA_CLASSES)]
     pub chroma_classes: usize,
+    /// Pixels per channel whose mean the texture classes' colour maps are fitted for (fewer
+    /// than the flat classes' 48: smaller weights, less false colour at edges); 0: the
+    /// texture classes share the flat classes' maps.
+    #[arg(long, default_value_t = crate::l3::learn::DEFAULT_TEXTURE_AVERAGING_PX)]
+    pub texture_colour_averaging_px: f64,
     #[arg(long, default_value = "table.safetensors")]
     pub out: PathBuf,
     /// Train in this many shards (batch ranges), one after the other, each
@@ -168,6 +173,7 @@ fn training_spec(a: &TrainArgs) -> Result<TrainingSpec, CliError> {
             ColourLossArg::Squared => ColourLoss::SquaredDeltaE,
         }),
         chroma_classes: a.chroma_classes,
+        texture_colour_averaging_px: Some(a.texture_colour_averaging_px).filter(|&px| px != 0.0),
         ..TrainingSpec::default()
     })
 }

@@ -67,6 +67,14 @@ pub struct L3Params {
     /// cross-illuminant tables and in tables trained before the field.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub transfer_maps: Option<Vec<ColourMatrix>>,
+    /// Pixels per channel whose mean the colour maps of the *texture* classes' channel sums
+    /// are fitted for (as [`ColourMapFit::averaging_px`] is for the flat classes'); `None`:
+    /// texture kernels share the flat classes' maps, as every table trained before the
+    /// field did. A patch across an edge averages fewer pixels of each channel on either
+    /// side, and a map fitted for fewer pixels has smaller, less opposed weights, so the
+    /// CFA's sampling phase leaks less into colour at edges (`src/l3/learn/colour_map.rs`).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub texture_averaging_px: Option<f64>,
 }
 
 impl Default for L3Params {
@@ -85,6 +93,7 @@ impl Default for L3Params {
             colour_map: Some(ColourMapFit::default()),
             chroma: None,
             transfer_maps: None,
+            texture_averaging_px: None,
         }
     }
 }
@@ -147,6 +156,11 @@ impl L3Params {
         }
         if let Some(fit) = &self.colour_map {
             fit.validate()?;
+        }
+        if let Some(px) = self.texture_averaging_px
+            && !(px.is_finite() && px >= 1.0)
+        {
+            return bad(format!("texture colour map averaging {px} px (at least 1)"));
         }
         if let Some(c) = &self.chroma {
             c.validate(c.centroids.first().map(Vec::len).unwrap_or(0))?;

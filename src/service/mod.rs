@@ -121,7 +121,8 @@ fn begin_shutdown(state: &AppState) {
 
 /// The default table's training spec: the config's `[training.default_spec]` fields over the
 /// TrainingSpec defaults, with the SI ensemble D65 + Tungsten + Fluorescent when no illuminants
-/// are given and [`crate::l3::learn::DEFAULT_CHROMA_CLASSES`] when no chroma classes are.
+/// are given, and a new spec's defaults ([`crate::l3::learn::new_spec_defaults`]: chroma
+/// classes, the texture classes' colour maps) for the fields it does not name.
 pub fn default_training_spec(cfg: &ServiceConfig) -> Result<TrainingSpec, ServiceError> {
     let mut t = cfg.training.default_spec.clone();
     if !t.contains_key("illuminants") {
@@ -131,9 +132,12 @@ pub fn default_training_spec(cfg: &ServiceConfig) -> Result<TrainingSpec, Servic
             .collect();
         t.insert("illuminants".into(), toml::Value::Array(ills));
     }
-    if !t.contains_key("chroma_classes") {
-        let n = crate::l3::learn::DEFAULT_CHROMA_CLASSES as i64;
-        t.insert("chroma_classes".into(), toml::Value::Integer(n));
+    for (key, value) in crate::l3::learn::new_spec_defaults() {
+        if !t.contains_key(key) {
+            let v = toml::Value::try_from(value)
+                .map_err(|e| ServiceError::Internal(format!("default {key}: {e}")))?;
+            t.insert(key.into(), v);
+        }
     }
     let spec: TrainingSpec = toml::Value::Table(t)
         .try_into()

@@ -209,3 +209,59 @@ fn the_colour_loss_defaults_by_illuminant_count_and_is_recorded_in_the_table() {
     bad["colour_loss"] = "median".into();
     assert!(serde_json::from_value::<TrainingSpec>(bad).is_err());
 }
+
+/// Per texture class of the unsaturated case, the sum over outputs and channels of the
+/// absolute channel sums of its kernel: how strongly it weighs the channels against each
+/// other on a uniform patch.
+fn texture_channel_weight(t: &L3Table) -> f64 {
+    let geo = t.geometry().unwrap();
+    let nf = t.n_features();
+    let mut total = 0.0;
+    for pos in 0..t.n_positions() {
+        for band in 0..t.n_bands() {
+            let kernel = t.kernel(t.class_index(pos, band, 0, true));
+            for out in kernel.chunks_exact(nf).take(3) {
+                let mut sums = vec![0.0f64; geo.n_channels()];
+                for (&c, &w) in geo.channels_of(pos).iter().zip(out) {
+                    sums[c as usize] += f64::from(w);
+                }
+                total += sums.iter().map(|s| s.abs()).sum::<f64>();
+            }
+        }
+    }
+    total
+}
+
+#[test]
+fn texture_classes_take_their_own_colour_maps_and_flat_classes_keep_theirs() {
+    let design = SensorDesign::paper_default();
+    let cancel = AtomicBool::new(false);
+    let shared = TrainingSpec {
+        texture_colour_averaging_px: None,
+        ..tiny(3)
+    };
+    let own = TrainingSpec {
+        texture_colour_averaging_px: Some(4.0),
+        ..tiny(3)
+    };
+    let a = train_table(&design, &shared, None, &|_, _| {}, &cancel).unwrap();
+    let b = train_table(&design, &own, None, &|_, _| {}, &cancel).unwrap();
+    assert_eq!(a.meta.params.texture_averaging_px, None);
+    assert_eq!(b.meta.params.texture_averaging_px, Some(4.0));
+    // the flat classes (what a uniform patch renders with) are the same kernels
+    let mut texture_differs = false;
+    for pos in 0..a.n_positions() {
+        for band in 0..a.n_bands() {
+            let (flat, tex) = (
+                a.class_index(pos, band, 0, false),
+                a.class_index(pos, band, 0, true),
+            );
+            assert_eq!(a.kernel(flat), b.kernel(flat), "flat class {pos}/{band}");
+            texture_differs |= a.kernel(tex) != b.kernel(tex);
+        }
+    }
+    assert!(texture_differs);
+    // maps fitted for 4 pixels' noise weigh the channels against each other less
+    let (wa, wb) = (texture_channel_weight(&a), texture_channel_weight(&b));
+    assert!(wb < 0.95 * wa, "texture channel weights {wb} against {wa}");
+}

@@ -35,6 +35,7 @@ fn base_training_spec(noise_free: bool) -> TrainingSpec {
         TrainingSpec {
             noise: false,
             colour_averaging_px: Some(0.0),
+            texture_colour_averaging_px: None,
             ..TrainingSpec::default()
         }
     } else {

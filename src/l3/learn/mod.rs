@@ -29,13 +29,15 @@ pub use normal_eq::{ChannelSumConstraint, ClassSolution, Gram, solve, solve_with
 pub use partial_format::PARTIAL_FORMAT_VERSION;
 pub use run::{TrainingRun, train_table};
 pub use scenes::{TrainingScenes, mix};
-pub use setup::{Learned, TrainControl, TrainSetup, TrainingFrame};
+pub use setup::{ClassMaps, Learned, TrainControl, TrainSetup, TrainingFrame};
 pub use shards::{
     ClassSums, Classes, GramPartial, Node, ShardSpec, SurveyPartial, SurveyShape, cover,
     merge_partials, merge_surveys, plan_shards,
 };
 pub use solve::{package, solve_learned};
-pub use spec::{DEFAULT_CHROMA_CLASSES, TrainingSpec};
+pub use spec::{
+    DEFAULT_CHROMA_CLASSES, DEFAULT_TEXTURE_AVERAGING_PX, TrainingSpec, new_spec_defaults,
+};
 pub use trainer::{accumulate_batches, classes_from_survey, learn, survey_batches};
 pub use transfer_fit::{
     HELD_OUT_LIGHTS, HeldOutLight, TransferCandidate, TransferChoice, TransferFit,

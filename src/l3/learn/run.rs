@@ -17,7 +17,7 @@ use super::LearnError;
 use super::colour_map::{band_maps, level_maps};
 use super::partial_format::PARTIAL_FORMAT_VERSION;
 use super::scenes::{TrainingScenes, mix};
-use super::setup::{Learned, TrainControl, TrainSetup, TrainingFrame};
+use super::setup::{ClassMaps, Learned, TrainControl, TrainSetup, TrainingFrame};
 use super::shards::{
     Classes, GramPartial, ShardSpec, SurveyPartial, merge_partials, merge_surveys, plan_shards,
 };
@@ -60,6 +60,9 @@ pub struct TrainingRun {
     noise: NoiseSwitches,
     nm: NoiseModel,
     maps: Option<Vec<ColourMatrix>>,
+    /// The texture classes' own maps, when the parameters ask for them
+    /// ([`L3Params::texture_averaging_px`]).
+    texture_maps: Option<Vec<ColourMatrix>>,
     /// Which fit a same-illuminant table's transfer maps took, and each
     /// candidate's score on the held-out lights.
     transfer_choice: Option<TransferChoice>,
@@ -125,6 +128,7 @@ impl TrainingRun {
         let spds: Vec<_> = illuminants.iter().map(|(_, s)| s.clone()).collect();
         let corrections = same_illuminant_corrections(spec.kind, grid, &refl, &spds)?;
         let mut transfer_choice = None;
+        let mut texture_maps = None;
         let maps = match params.colour_map {
             Some(fit) => {
                 let inputs = MapInputs {
@@ -145,6 +149,7 @@ impl TrainingRun {
                 if let Some(classes) = fitted.chroma {
                     params.chroma = Some(classes);
                 }
+                texture_maps = fitted.texture;
                 Some(fitted.maps)
             }
             None => None,
@@ -165,6 +170,7 @@ impl TrainingRun {
             noise,
             nm,
             maps,
+            texture_maps,
             transfer_choice,
             neutrals,
             aim_through: corrections
@@ -197,9 +203,17 @@ impl TrainingRun {
             params: &self.params,
             noise: self.nm,
             n_batches: self.n_batches(),
-            colour_maps: self.maps.as_deref(),
+            colour_maps: self.class_maps(),
             run_key: &self.run_key,
         }
+    }
+
+    /// The maps that fix the kernels' channel sums: the flat classes', and the texture
+    /// classes' own where the run fitted them.
+    fn class_maps(&self) -> Option<ClassMaps<'_>> {
+        self.maps
+            .as_deref()
+            .map(|flat| ClassMaps::new(flat, self.texture_maps.as_deref()))
     }
 
     fn check_shard(&self, shard: &ShardSpec) -> Result<(), LearnError> {
@@ -227,7 +241,7 @@ impl TrainingRun {
             self.nm,
             self.n_batches(),
             frame,
-            self.maps.as_deref(),
+            self.class_maps(),
             &ctl,
         )?;
         self.package(learned)
@@ -419,6 +433,7 @@ impl TrainingRun {
                 "frames": n_batches * self.params.levels.len() * cfa.n_positions(),
                 "samples": samples,
                 "colour_maps": maps.map(map_summary),
+                "texture_colour_maps": self.texture_maps.as_deref().map(map_summary),
                 "transfer_fit": self.transfer_choice,
             }),
         };
@@ -450,6 +465,9 @@ struct FittedMaps {
     chroma: Option<ChromaClasses>,
     /// A same-illuminant table's transfer maps and the fit they took.
     transfer: Option<(Vec<ColourMatrix>, TransferChoice)>,
+    /// The texture classes' own maps (one per band), fitted for
+    /// [`L3Params::texture_averaging_px`] pixels.
+    texture: Option<Vec<ColourMatrix>>,
 }
 
 /// The colour maps of a run with parameters `params` (before its transfer maps and chroma
@@ -478,6 +496,14 @@ fn fit_colour_maps(
     };
     let samples = colour_samples(camera, lights, target, d65, refl)?;
     let pooled = level_maps(&samples, &params.levels, &nm, swing, fit)?;
+    let texture_fit = params.texture_averaging_px.map(|px| ColourMapFit {
+        averaging_px: Some(px),
+        ..*fit
+    });
+    let texture_pooled = texture_fit
+        .as_ref()
+        .map(|f| level_maps(&samples, &params.levels, &nm, swing, f))
+        .transpose()?;
     let transfer = if spec.kind == TableKind::SameIlluminant {
         Some(transfer_maps(
             camera,
@@ -502,11 +528,24 @@ fn fit_colour_maps(
         )?;
         let geo = geo.with_chroma(&classes)?;
         let maps = band_maps(&samples, &classes, &pooled, &params.levels, &nm, swing, fit)?;
+        let texture = match (texture_fit, texture_pooled) {
+            (Some(f), Some(p)) => Some(band_maps(
+                &samples,
+                &classes,
+                &p,
+                &params.levels,
+                &nm,
+                swing,
+                &f,
+            )?),
+            _ => None,
+        };
         Ok(FittedMaps {
             maps,
             geo,
             chroma: Some(classes),
             transfer,
+            texture,
         })
     } else {
         Ok(FittedMaps {
@@ -514,6 +553,7 @@ fn fit_colour_maps(
             geo,
             chroma: None,
             transfer,
+            texture: texture_pooled,
         })
     }
 }

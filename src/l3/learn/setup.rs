@@ -68,6 +68,34 @@ pub struct Learned {
     pub samples: u64,
 }
 
+/// The colour maps (one per band) that fix the channel sums of the unsaturated kernels: the
+/// flat classes' and the texture classes' (the same maps unless the table asks for its own
+/// texture maps, [`crate::l3::L3Params::texture_averaging_px`]).
+#[derive(Clone, Copy, Debug)]
+pub struct ClassMaps<'a> {
+    pub flat: &'a [ColourMatrix],
+    pub texture: &'a [ColourMatrix],
+}
+
+impl<'a> ClassMaps<'a> {
+    /// `flat` for every class, and `texture` for the texture classes when given.
+    pub fn new(flat: &'a [ColourMatrix], texture: Option<&'a [ColourMatrix]>) -> Self {
+        Self {
+            flat,
+            texture: texture.unwrap_or(flat),
+        }
+    }
+
+    /// The map of band `band` for the flat (`texture` false) or texture classes.
+    pub fn at(&self, band: usize, texture: bool) -> &'a ColourMatrix {
+        if texture {
+            &self.texture[band]
+        } else {
+            &self.flat[band]
+        }
+    }
+}
+
 /// What every stage and every shard of a training run share.
 #[derive(Clone, Copy)]
 pub struct TrainSetup<'a> {
@@ -76,9 +104,9 @@ pub struct TrainSetup<'a> {
     pub noise: NoiseModel,
     /// Batches of the run, numbered `0..n_batches`.
     pub n_batches: usize,
-    /// One per level: the channel sums of every unsaturated kernel; `None`
-    /// leaves every kernel to plain ridge regression.
-    pub colour_maps: Option<&'a [ColourMatrix]>,
+    /// The channel sums of every unsaturated kernel; `None` leaves every kernel to plain
+    /// ridge regression.
+    pub colour_maps: Option<ClassMaps<'a>>,
     /// Names the run in its partial sums, whose merge refuses parts of
     /// another run (e.g. a digest of the training spec).
     pub run_key: &'a str,
@@ -96,15 +124,17 @@ impl TrainSetup<'_> {
                 "noise-variance ridge needs a noise model".into(),
             ));
         }
-        if let Some(maps) = self.colour_maps
-            && (maps.len() != geo.n_bands() || maps.iter().any(|m| m.m.len() != geo.n_channels()))
-        {
-            return Err(LearnError::InvalidParams(format!(
-                "{} colour maps for {} bands and {} channels",
-                maps.len(),
-                geo.n_bands(),
-                geo.n_channels()
-            )));
+        if let Some(maps) = self.colour_maps {
+            for set in [maps.flat, maps.texture] {
+                if set.len() != geo.n_bands() || set.iter().any(|m| m.m.len() != geo.n_channels()) {
+                    return Err(LearnError::InvalidParams(format!(
+                        "{} colour maps for {} bands and {} channels",
+                        set.len(),
+                        geo.n_bands(),
+                        geo.n_channels()
+                    )));
+                }
+            }
         }
         Ok(())
     }

@@ -7,7 +7,7 @@ use std::sync::atomic::Ordering;
 
 use super::LearnError;
 use super::normal_eq::{ChannelSumConstraint, ClassSolution, Gram, solve_with};
-use super::setup::{Dims, Learned, TrainControl, TrainSetup};
+use super::setup::{ClassMaps, Dims, Learned, TrainControl, TrainSetup};
 use super::shards::Classes;
 use crate::baseline::ColourMatrix;
 use crate::l3::classify::{MAX_CHANNELS, PatchGeometry, sat_case_index};
@@ -257,7 +257,7 @@ fn solve_classes(
     d: &Dims,
     classes: &Classes,
     mut grams: Vec<Gram>,
-    colour_maps: Option<&[ColourMatrix]>,
+    colour_maps: Option<ClassMaps>,
 ) -> Result<(Vec<f32>, Vec<ClassReport>), LearnError> {
     let nf = geo.n_features();
     let n_sat = classes.n_sat();
@@ -299,7 +299,9 @@ fn solve_classes(
                     }
                     let level_v = geo.levels()[l / d.n_chroma.max(1)] as f64;
                     let con = match colour_maps {
-                        Some(maps) if c == 0 => Some(colour_constraint(geo, pos, &maps[l])),
+                        Some(maps) if c == 0 => {
+                            Some(colour_constraint(geo, pos, maps.at(l, t_src == 1)))
+                        }
                         _ => None,
                     };
                     let sol =

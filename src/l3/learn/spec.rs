@@ -63,6 +63,29 @@ pub struct TrainingSpec {
     /// [`DEFAULT_CHROMA_CLASSES`].
     #[serde(default = "absent_chroma_classes", skip_serializing_if = "is_one")]
     pub chroma_classes: usize,
+    /// Pixels per channel whose mean the texture classes' colour maps are fitted for
+    /// ([`L3Params::texture_averaging_px`]); absent: the texture classes share the flat
+    /// classes' maps, as in the records written before the field. A new spec gets
+    /// [`DEFAULT_TEXTURE_AVERAGING_PX`].
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub texture_colour_averaging_px: Option<f64>,
+}
+
+/// The texture classes' colour-map averaging of a new table (see
+/// [`TrainingSpec::texture_colour_averaging_px`] and docs/research/false-colour.md).
+pub const DEFAULT_TEXTURE_AVERAGING_PX: f64 = 8.0;
+
+/// The fields a new spec (a training job's body, the service's default table) gets when it
+/// does not name them, where a stored record that does not name them keeps the older
+/// meaning: [`DEFAULT_CHROMA_CLASSES`] and [`DEFAULT_TEXTURE_AVERAGING_PX`].
+pub fn new_spec_defaults() -> [(&'static str, serde_json::Value); 2] {
+    [
+        ("chroma_classes", DEFAULT_CHROMA_CLASSES.into()),
+        (
+            "texture_colour_averaging_px",
+            DEFAULT_TEXTURE_AVERAGING_PX.into(),
+        ),
+    ]
 }
 
 fn default_kind() -> TableKind {
@@ -120,6 +143,7 @@ impl Default for TrainingSpec {
             colour_averaging_px: None,
             colour_loss: None,
             chroma_classes: DEFAULT_CHROMA_CLASSES,
+            texture_colour_averaging_px: Some(DEFAULT_TEXTURE_AVERAGING_PX),
         }
     }
 }
@@ -149,6 +173,11 @@ impl TrainingSpec {
             && !(px.is_finite() && (px == 0.0 || px >= 1.0))
         {
             return bad(format!("colour_averaging_px {px} (0, or at least 1)"));
+        }
+        if let Some(px) = self.texture_colour_averaging_px
+            && !(px.is_finite() && px >= 1.0)
+        {
+            return bad(format!("texture_colour_averaging_px {px} (at least 1)"));
         }
         if !(self.mean_luminance.is_finite() && self.mean_luminance > 0.0) {
             return bad(format!("mean_luminance {}", self.mean_luminance));
@@ -222,9 +251,48 @@ impl TrainingSpec {
                 perceptual: true,
                 loss: self.colour_loss(),
             }),
+            texture_averaging_px: self.texture_colour_averaging_px,
             ..L3Params::default()
         };
         p.validate()?;
         Ok(p)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_new_spec_gets_texture_maps_and_a_stored_record_keeps_its_meaning() {
+        assert_eq!(
+            TrainingSpec::default().texture_colour_averaging_px,
+            Some(DEFAULT_TEXTURE_AVERAGING_PX)
+        );
+        // a record written before the field: texture classes share the flat maps, and
+        // writing it back does not add the field
+        let old: TrainingSpec = serde_json::from_str(r#"{"kind":"si","scenes":4}"#).unwrap();
+        assert_eq!(old.texture_colour_averaging_px, None);
+        assert_eq!(old.params(1.8).unwrap().texture_averaging_px, None);
+        let json = serde_json::to_string(&old).unwrap();
+        assert!(!json.contains("texture_colour_averaging_px"), "{json}");
+        // a new spec's defaults name real fields with valid values
+        let mut map = serde_json::Map::new();
+        for (k, v) in new_spec_defaults() {
+            map.insert(k.into(), v);
+        }
+        let new: TrainingSpec = serde_json::from_value(map.into()).unwrap();
+        new.validate().unwrap();
+        assert_eq!(new.chroma_classes, DEFAULT_CHROMA_CLASSES);
+        assert_eq!(
+            new.params(1.8).unwrap().texture_averaging_px,
+            Some(DEFAULT_TEXTURE_AVERAGING_PX)
+        );
+        // below one pixel is refused
+        let bad = TrainingSpec {
+            texture_colour_averaging_px: Some(0.5),
+            ..TrainingSpec::default()
+        };
+        assert!(bad.validate().is_err());
     }
 }

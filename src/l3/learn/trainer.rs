@@ -21,13 +21,12 @@ use rayon::prelude::*;
 
 use super::LearnError;
 use super::normal_eq::Gram;
-use super::setup::{HIST_BINS, Learned, TrainControl, TrainSetup, TrainingFrame};
+use super::setup::{ClassMaps, HIST_BINS, Learned, TrainControl, TrainSetup, TrainingFrame};
 use super::shards::{
     ClassSums, Classes, GramPartial, Node, SurveyPartial, add_class_sums, cover, merge_partials,
     tree_sum,
 };
 use super::solve::solve_learned;
-use crate::baseline::ColourMatrix;
 use crate::l3::classify::{MAX_CHANNELS, PatchGeometry, sat_case_index};
 use crate::l3::correct::NoiseModel;
 use crate::l3::params::L3Params;
@@ -95,9 +94,9 @@ impl<'a> Ticker<'a> {
 /// survey subset). A batch is typically one scene under one illuminant at
 /// several exposures and CFA shifts.
 ///
-/// `colour_maps`, one per level, fix the channel sums of every unsaturated
-/// kernel (how it renders a uniform patch); `None` leaves every kernel to
-/// plain ridge regression on the patches.
+/// `colour_maps`, one per band for the flat and for the texture classes, fix the channel
+/// sums of every unsaturated kernel (how it renders a uniform patch); `None` leaves every
+/// kernel to plain ridge regression on the patches.
 ///
 /// This is the sharded path of [`super::shards`] with one shard: survey,
 /// classes, accumulation, merge, solve.
@@ -107,7 +106,7 @@ pub fn learn<F>(
     noise: NoiseModel,
     n_frames: usize,
     frame: F,
-    colour_maps: Option<&[ColourMatrix]>,
+    colour_maps: Option<ClassMaps>,
     ctl: &TrainControl,
 ) -> Result<Learned, LearnError>
 where

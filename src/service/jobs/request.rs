@@ -78,9 +78,10 @@ pub fn parse_job_request(body: &[u8]) -> Result<(JobRequest, Value), ServiceErro
             d
         }
     };
-    // a new table's default, not the stored records' (see `TrainingSpec::chroma_classes`)
-    map.entry("chroma_classes")
-        .or_insert(Value::from(crate::l3::learn::DEFAULT_CHROMA_CLASSES));
+    // a new table's defaults, not the stored records' (see `TrainingSpec::chroma_classes`)
+    for (key, value) in crate::l3::learn::new_spec_defaults() {
+        map.entry(key).or_insert(value);
+    }
     // the error names the field (`scenes: invalid type: floating point 4.5, …`)
     let spec: TrainingSpec = serde_path_to_error::deserialize(Value::Object(map))
         .map_err(|e| bad(format!("training spec: {}: {}", e.path(), e.inner())))?;
