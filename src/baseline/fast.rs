@@ -570,7 +570,7 @@ fn split_row(src: &[f32], out: &mut [Vec<f32>; 2]) {
         odd[w / 2] = src[w - 1];
     }
     let right = src[mirror(w as isize, w)];
-    if w % 2 == 0 {
+    if w.is_multiple_of(2) {
         odd[w / 2] = right;
     } else {
         even[w.div_ceil(2)] = right;
