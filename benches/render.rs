@@ -1,7 +1,8 @@
 //! Render throughput: a 12 MP RGBW frame → XYZ → sRGB 8-bit with the
 //! reference renderer (fused T) and the fast renderer (pooled, new and reused
 //! output buffers; AVX-512 and AVX2 kernels), against a plain copy of the same
-//! frame measured in the same run. Run: `cargo bench --bench render`
+//! frame measured in the same run; and the conventional baseline (bilinear demosaic + colour
+//! matrix → sRGB 8-bit) as separate steps and fused in one pass. Run: `cargo bench --bench render`
 //! (`L3_BENCH_TABLE=FILE` renders that table instead of training one;
 //! `L3_BENCH_SENSOR=TOML` simulates the frame, and trains the table, on that
 //! sensor instead of the default RGBW design, e.g. a Bayer camera).
@@ -10,6 +11,7 @@ use std::hint::black_box;
 use std::sync::atomic::AtomicBool;
 
 use criterion::{Criterion, Throughput, criterion_group, criterion_main};
+use l3::baseline::{render_baseline, render_baseline_fused_srgb8};
 use l3::camera::{Camera, NoiseSwitches, SensorDesign, mosaic};
 use l3::l3::correct::IlluminantRegistry;
 use l3::l3::learn::{TrainingSpec, train_table};
@@ -150,6 +152,24 @@ fn bench(c: &mut Criterion) {
         b.iter(|| {
             black_box(
                 fast.render_xyz(Mosaic::Volts(black_box(&frame)), W, H, None)
+                    .expect("render"),
+            )
+        })
+    });
+    // the conventional baseline: the straightforward steps one after another (what `l3 bench`
+    // timed before) and fused in one pass (what it times now; the same bytes)
+    let matrix = l3::eval::fit_baseline_matrix(&camera, &["D65".into()], None).expect("matrix");
+    let cfa = camera.cfa();
+    g.bench_function("baseline_bilinear_matrix_to_srgb8_stepwise", |b| {
+        b.iter(|| {
+            let xyz = render_baseline(black_box(&frame), W, H, cfa, &matrix).expect("render");
+            black_box(xyz_to_srgb8(&xyz, 1.0))
+        })
+    });
+    g.bench_function("baseline_bilinear_matrix_to_srgb8_fused", |b| {
+        b.iter(|| {
+            black_box(
+                render_baseline_fused_srgb8(black_box(&frame), W, H, cfa, &matrix, 1.0)
                     .expect("render"),
             )
         })

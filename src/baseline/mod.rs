@@ -1,7 +1,8 @@
 //! The conventional pipelines L3 is compared with.
 //!
 //! - The **baseline** ([`render_baseline`]): bilinear demosaicking ([`bilinear_demosaic`])
-//!   followed by a least-squares colour matrix ([`ColourMatrix`]: channels → XYZ), and T.
+//!   followed by a least-squares colour matrix ([`ColourMatrix`]: channels → XYZ), and T;
+//!   [`render_baseline_fused`] is the same render in one parallel, vectorised pass.
 //! - A **strong ISP** ([`Isp`]): Malvar–He–Cutler demosaicking on Bayer CFAs
 //!   ([`malvar_demosaic`]), its generalisation to other 2×2 CFAs such as RGBW
 //!   ([`gradient_demosaic`]), a luma/chroma denoiser whose strength comes from the sensor's
@@ -11,6 +12,7 @@
 
 mod bilinear;
 mod denoise;
+mod fast;
 mod isp;
 mod malvar;
 mod matrix;
@@ -18,6 +20,7 @@ mod rgbw;
 
 pub use bilinear::bilinear_demosaic;
 pub use denoise::{DenoiseParams, NoiseProfile, denoise};
+pub use fast::{render_baseline_fused, render_baseline_fused_srgb8};
 pub use isp::{DemosaicMethod, Isp, demosaic};
 pub use malvar::{BayerLayout, malvar_demosaic};
 pub use matrix::ColourMatrix;

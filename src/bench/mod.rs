@@ -1,6 +1,6 @@
 //! `l3 bench`: render throughput against colour error for a sweep of L3
-//! configurations, the conventional baseline and a plain copy, measured in
-//! one run on the same frames (issue 5). Pure core: no HTTP, no SQL.
+//! configurations, the conventional pipelines (bilinear baselines and the strong ISP) and a
+//! plain copy, measured in one run on the same frames (issue 5). Pure core: no HTTP, no SQL.
 
 mod plot;
 mod records;
@@ -17,7 +17,8 @@ pub use records::{
     SensorSweep, Throughput,
 };
 pub use render::{
-    BENCH_WHITE_Y, RENDERER, render_baseline_srgb8, render_baseline_xyz, render_srgb8, render_xyz,
+    BENCH_WHITE_Y, RENDERER, render_baseline_srgb8, render_baseline_xyz, render_isp_srgb8,
+    render_srgb8, render_xyz,
 };
 pub use report::{BENCH_SCHEMA, markdown_table, sensor_sweep_markdown};
 pub use run::{run_bench, run_sensor_sweep};

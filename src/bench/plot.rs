@@ -372,7 +372,7 @@ mod tests {
         assert_eq!(svg.matches("class=\"pareto-front\"").count(), 2, "{svg}");
         assert!(svg.contains("Pareto front under Tungsten"));
         assert!(svg.contains("plain copy"));
-        assert!(svg.contains("patch 7") && svg.contains("baseline"));
+        assert!(svg.contains("patch 7") && svg.contains("baseline") && svg.contains("ISP_D65+T"));
         // the label with markup characters is escaped
         assert!(!svg.contains("<5×5>"));
         let mut empty = r.clone();

@@ -13,6 +13,9 @@ pub enum ConfigKind {
     L3,
     /// Bilinear demosaic + 3×3 colour matrix + T.
     Baseline,
+    /// The strong conventional ISP ([`crate::baseline::Isp`]): Malvar or gradient-corrected
+    /// demosaic, a denoiser driven by the sensor's noise model, a colour matrix (+ T).
+    Isp,
     /// A plain copy of the frame (speed reference; no colour).
     Copy,
 }
@@ -78,10 +81,10 @@ pub struct ColourResult {
 pub struct ConfigResult {
     pub name: String,
     pub kind: ConfigKind,
-    /// The L3 configuration (None for the baseline and the copy).
+    /// The L3 configuration (None for the conventional pipelines and the copy).
     pub config: Option<L3Config>,
-    /// Wall time to train every table of the configuration (fit the matrix
-    /// for the baseline), seconds; None for the copy.
+    /// Wall time to train every table of the configuration (fit the matrices
+    /// for the conventional pipelines), seconds; None for the copy.
     pub training_seconds: Option<f64>,
     /// One entry per acquisition illuminant (empty for the copy).
     pub colour: Vec<ColourResult>,

@@ -1,8 +1,12 @@
 //! The one place where the benchmark renders: every throughput and every
 //! colour figure goes through these wrappers, so swapping the renderer here
-//! changes both at once.
+//! changes both at once. (The strong ISP's colour figures are the evaluation's own scoring
+//! of [`crate::eval::Method::Isp`], which renders with the same [`Isp::render`] as
+//! [`render_isp_srgb8`].)
 
-use crate::baseline::{BaselineError, ColourMatrix, render_baseline};
+use crate::baseline::{
+    BaselineError, ColourMatrix, Isp, render_baseline_fused, render_baseline_fused_srgb8,
+};
 use crate::camera::Cfa;
 use crate::l3::L3Table;
 use crate::l3::correct::IlluminantEntry;
@@ -54,7 +58,8 @@ pub fn render_srgb8(
         .0)
 }
 
-/// Baseline: bilinear demosaic + colour matrix (T already folded in) → XYZ.
+/// Baseline: bilinear demosaic + colour matrix (T already folded in) → XYZ, in one pass
+/// ([`render_baseline_fused`]: [`crate::baseline::render_baseline`]'s values bit for bit).
 pub fn render_baseline_xyz(
     volts: &[f32],
     width: usize,
@@ -62,10 +67,11 @@ pub fn render_baseline_xyz(
     cfa: &Cfa,
     m: &ColourMatrix,
 ) -> Result<Vec<f32>, BaselineError> {
-    render_baseline(volts, width, height, cfa, m)
+    render_baseline_fused(volts, width, height, cfa, m)
 }
 
-/// Baseline → 8-bit sRGB at [`BENCH_WHITE_Y`].
+/// Baseline → 8-bit sRGB at [`BENCH_WHITE_Y`], in one pass (the bytes [`xyz_to_srgb8`]
+/// makes of [`render_baseline_xyz`]'s XYZ).
 pub fn render_baseline_srgb8(
     volts: &[f32],
     width: usize,
@@ -73,8 +79,21 @@ pub fn render_baseline_srgb8(
     cfa: &Cfa,
     m: &ColourMatrix,
 ) -> Result<Vec<u8>, BaselineError> {
-    let xyz = render_baseline_xyz(volts, width, height, cfa, m)?;
-    Ok(xyz_to_srgb8(&xyz, BENCH_WHITE_Y))
+    render_baseline_fused_srgb8(volts, width, height, cfa, m, BENCH_WHITE_Y)
+}
+
+/// The strong ISP → 8-bit sRGB at [`BENCH_WHITE_Y`].
+pub fn render_isp_srgb8(
+    isp: &Isp,
+    volts: &[f32],
+    width: usize,
+    height: usize,
+    cfa: &Cfa,
+) -> Result<Vec<u8>, BaselineError> {
+    Ok(xyz_to_srgb8(
+        &isp.render(volts, width, height, cfa)?,
+        BENCH_WHITE_Y,
+    ))
 }
 
 #[cfg(test)]
@@ -84,6 +103,38 @@ mod tests {
     use crate::l3::classify::ChromaClasses;
     use crate::l3::correct::IDENTITY;
     use crate::test_support::{synthetic_frame_with_blocks, train_synthetic_table};
+
+    #[test]
+    fn conventional_wrappers_render_as_the_pipelines_do() {
+        let cfa = crate::camera::Cfa::parse("RG/WB").unwrap();
+        let f = synthetic_frame_with_blocks(3, 48, 12, 1.0, 0.02, (0, 0));
+        let m = ColourMatrix {
+            m: vec![
+                [0.5, 0.2, 0.0],
+                [0.3, 0.7, 0.1],
+                [0.1, 0.1, 0.1],
+                [0.0, 0.1, 0.9],
+            ],
+            n_channels: 4,
+        };
+        // the baseline's fused pass is the straightforward render, bit for bit
+        let xyz = crate::baseline::render_baseline(&f.volts, 48, 48, &cfa, &m).unwrap();
+        assert_eq!(
+            render_baseline_xyz(&f.volts, 48, 48, &cfa, &m).unwrap(),
+            xyz
+        );
+        assert_eq!(
+            render_baseline_srgb8(&f.volts, 48, 48, &cfa, &m).unwrap(),
+            xyz_to_srgb8(&xyz, BENCH_WHITE_Y)
+        );
+        let isp = Isp::new(m, None);
+        let isp_xyz = isp.render(&f.volts, 48, 48, &cfa).unwrap();
+        assert_ne!(isp_xyz, xyz);
+        assert_eq!(
+            render_isp_srgb8(&isp, &f.volts, 48, 48, &cfa).unwrap(),
+            xyz_to_srgb8(&isp_xyz, BENCH_WHITE_Y)
+        );
+    }
 
     #[test]
     fn prepare_balances_chroma_classes_by_the_lights_neutral() {

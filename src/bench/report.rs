@@ -296,7 +296,7 @@ pub(super) mod test_support {
         }
     }
 
-    /// A hand-made report: a copy, three L3 rows and a baseline.
+    /// A hand-made report: a copy, three L3 rows, a baseline and a strong ISP.
     pub fn sample_report() -> BenchReport {
         BenchReport {
             skips: Vec::new(),
@@ -319,6 +319,7 @@ pub(super) mod test_support {
                 row("patch 3", ConfigKind::L3, 600.0, 2.6, 3.0),
                 row("patch 7", ConfigKind::L3, 2400.0, 2.1, 2.4),
                 row("baseline", ConfigKind::Baseline, 300.0, 3.5, 4.0),
+                row("ISP_D65+T", ConfigKind::Isp, 900.0, 3.0, 3.2),
             ],
             pareto: vec![
                 ParetoFront {
@@ -393,6 +394,23 @@ mod tests {
             "{d}"
         );
         assert!(table[5].ends_with("| Fluorescent |"), "{}", table[5]);
+        // the conventional rows in italics, the strong ISP's with its figures and off the fronts
+        assert!(
+            table[6].starts_with("| *baseline* | 2.5 | 3.50 |"),
+            "{}",
+            table[6]
+        );
+        assert!(
+            table[7].starts_with("| *ISP_D65+T* | 2.5 | 3.00 | 6.00 | 4.50 | 9.00 |")
+                && table[7].ends_with("| — |"),
+            "{}",
+            table[7]
+        );
+        assert!(
+            spatial
+                .iter()
+                .any(|l| l.starts_with("| ISP_D65+T | Fluorescent |"))
+        );
         assert!(md.contains("median of 2 runs"));
     }
 

@@ -1,5 +1,6 @@
 //! Running the benchmark: the chart under each light, the throughput frame, every
-//! configuration's tables, colour error and throughput, the baselines and the skips.
+//! configuration's tables, colour error and throughput, the conventional pipelines (the
+//! bilinear baselines and the strong ISP) and the skips.
 
 use std::hint::black_box;
 use std::sync::atomic::AtomicBool;
@@ -12,19 +13,21 @@ use super::records::{
     SensorSweep, Throughput,
 };
 use super::render::{
-    RENDERER, prepare, render_baseline_srgb8, render_baseline_xyz, render_srgb8, render_xyz,
+    RENDERER, prepare, render_baseline_srgb8, render_baseline_xyz, render_isp_srgb8, render_srgb8,
+    render_xyz,
 };
 use super::report::BENCH_SCHEMA;
 use super::skips::{EncoderResult, SkipInputs, SkipResult, run_skips};
 use super::stats::time_runs;
 use super::sweep::{BaselineChoice, BenchOptions, L3Config, TableChoice, sensor_sweep_configs};
+use crate::baseline::{ColourMatrix, Isp, NoiseProfile};
 use crate::camera::{Camera, NoiseSwitches, SensorDesign, mosaic};
 use crate::eval::{
-    ChartCapture, DeltaEReport, LightLevel, SPATIAL_SIZE, SpatialCaptures, simulate_chart,
-    simulate_spatial,
+    ChartCapture, ChartSetup, DeltaEReport, EvalError, LightLevel, Method, SPATIAL_SIZE,
+    SpatialCaptures, SpatialScore, evaluate_capture, simulate_chart, simulate_spatial,
 };
 use crate::l3::L3Table;
-use crate::l3::correct::with_neutral;
+use crate::l3::correct::{IDENTITY, with_neutral};
 use crate::l3::correct::{IlluminantEntry, IlluminantRegistry};
 use crate::l3::learn::{TrainingSpec, train_table};
 use crate::l3::table::TableKind;
@@ -41,6 +44,8 @@ struct ChartCase {
     /// The slanted edge and the texture at both exposures.
     spatial_full: SpatialCaptures,
     spatial_low: SpatialCaptures,
+    /// The set-ups of the full and the low-light captures.
+    setups: [ChartSetup; 2],
 }
 
 impl ChartCase {
@@ -64,6 +69,7 @@ impl ChartCase {
             correction,
             spatial_full: spatial(&opts.chart)?,
             spatial_low: spatial(&low_setup)?,
+            setups: [opts.chart.clone(), low_setup],
             full,
             low,
         })
@@ -75,17 +81,51 @@ impl ChartCase {
         method: &str,
         render: impl Fn(&[f32], usize, usize) -> Result<Vec<f32>, BenchError>,
     ) -> Result<ColourResult, BenchError> {
-        let score = |cap: &ChartCapture| -> Result<DeltaEReport, BenchError> {
-            let xyz = render(&cap.volts, cap.width, cap.height)?;
-            Ok(cap.score(&xyz, method, serde_json::Value::Null)?)
+        let in_eval = |v: &[f32], w: usize, h: usize| {
+            render(v, w, h).map_err(|e| EvalError::Invalid(e.to_string()))
         };
-        let rep = score(&self.full)?;
-        let low = score(&self.low)?;
-        let in_eval = |v: &[f32], w, h| {
-            render(v, w, h).map_err(|e| crate::eval::EvalError::Invalid(e.to_string()))
-        };
-        let spatial = self.spatial_full.score_with(in_eval)?;
-        let low_light_spatial = self.spatial_low.score_with(in_eval)?;
+        self.score(
+            method,
+            |cap, _| {
+                let xyz = render(&cap.volts, cap.width, cap.height)?;
+                Ok(cap.score(&xyz, method, serde_json::Value::Null)?)
+            },
+            |spatial| Ok(spatial.score_with(in_eval)?),
+        )
+    }
+
+    /// Score `method` under `correction` as the evaluation does ([`evaluate_capture`], which
+    /// has the strong ISP denoise by the noise model at each capture's exposure, and
+    /// [`SpatialCaptures::score`]).
+    fn evaluate_method(
+        &self,
+        camera: &Camera,
+        name: &str,
+        method: &Method,
+        correction: &IlluminantEntry,
+    ) -> Result<ColourResult, BenchError> {
+        self.score(
+            name,
+            |cap, setup| {
+                Ok(evaluate_capture(
+                    camera, cap, method, name, correction, setup,
+                )?)
+            },
+            |spatial| Ok(spatial.score(camera, method, correction)?),
+        )
+    }
+
+    /// Score both captures with `chart(capture, its set-up)` and `spatial`.
+    fn score(
+        &self,
+        method: &str,
+        chart: impl Fn(&ChartCapture, &ChartSetup) -> Result<DeltaEReport, BenchError>,
+        spatial: impl Fn(&SpatialCaptures) -> Result<SpatialScore, BenchError>,
+    ) -> Result<ColourResult, BenchError> {
+        let rep = chart(&self.full, &self.setups[0])?;
+        let low = chart(&self.low, &self.setups[1])?;
+        let low_light_spatial = spatial(&self.spatial_low)?;
+        let spatial = spatial(&self.spatial_full)?;
         Ok(ColourResult {
             s_cielab_mean: rep.s_cielab_mean,
             low_light_s_cielab_mean: low.s_cielab_mean,
@@ -242,6 +282,9 @@ pub fn run_bench(
     }
     for choice in BaselineChoice::ALL {
         rows.push(b.baseline_row(choice, copy_ms)?);
+    }
+    for choice in BaselineChoice::ISP {
+        rows.push(b.isp_row(choice, copy_ms)?);
     }
     let pareto = pareto_fronts(&b.cases, &rows);
     let (skips, encoders) = b.skips(skip_table.as_ref().map(|(_, t)| t))?;
@@ -403,34 +446,35 @@ impl Bench<'_> {
         Ok((tables, per_case))
     }
 
-    /// One conventional baseline: a matrix per light (T folded in where the choice uses
-    /// T), scored under every light and timed with the first light's.
-    fn baseline_row(&self, b: BaselineChoice, copy_ms: f64) -> Result<ConfigResult, BenchError> {
-        (self.progress)(&format!("[baseline] fitting {}", b.name()));
+    /// The matrix of `b` per case (T folded in where the choice uses T) and the seconds
+    /// the fits took.
+    fn matrices(&self, b: BaselineChoice) -> Result<(Vec<ColourMatrix>, f64), BenchError> {
         let t0 = Instant::now();
-        // one matrix per case, T folded in where the choice uses T
         let matrices = self
             .cases
             .iter()
             .map(|case| b.matrix(&self.camera, &case.name, &case.correction, self.iset))
             .collect::<Result<Vec<_>, BenchError>>()?;
-        let training_seconds = t0.elapsed().as_secs_f64();
-        let cfa = self.camera.cfa();
-        let mut colour = Vec::new();
-        for (case, m) in self.cases.iter().zip(&matrices) {
-            colour.push(case.evaluate(&b.label(&case.name), |v, w, h| {
-                Ok(render_baseline_xyz(v, w, h, cfa, m)?)
-            })?);
-        }
-        (self.progress)(&format!("[baseline] timing {} runs", self.opts.runs));
-        let m0 = &matrices[0];
+        Ok((matrices, t0.elapsed().as_secs_f64()))
+    }
+
+    /// A conventional pipeline's row: `colour` and the throughput of `render(frame, width,
+    /// height)`.
+    fn conventional_row<T: Send>(
+        &self,
+        (name, kind): (&str, ConfigKind),
+        (training_seconds, colour): (f64, Vec<ColourResult>),
+        copy_ms: f64,
+        render: impl Fn(&[f32], usize, usize) -> Result<T, BenchError> + Sync,
+    ) -> Result<ConfigResult, BenchError> {
+        (self.progress)(&format!("[{name}] timing {} runs", self.opts.runs));
         let (frame, w, h) = (&self.frame, self.w, self.h);
         let (one, all) = measure(&self.single, self.opts.runs, self.mpix, || {
-            Ok(render_baseline_srgb8(frame, w, h, cfa, m0)?)
+            render(frame, w, h)
         })?;
         Ok(ConfigResult {
-            name: b.name().into(),
-            kind: ConfigKind::Baseline,
+            name: name.into(),
+            kind,
             config: None,
             training_seconds: Some(training_seconds),
             colour,
@@ -438,6 +482,66 @@ impl Bench<'_> {
             one_thread: one,
             all_threads: all,
         })
+    }
+
+    /// One conventional baseline: a matrix per light (T folded in where the choice uses
+    /// T), scored under every light and timed with the first light's.
+    fn baseline_row(&self, b: BaselineChoice, copy_ms: f64) -> Result<ConfigResult, BenchError> {
+        (self.progress)(&format!("[baseline] fitting {}", b.name()));
+        let (matrices, training_seconds) = self.matrices(b)?;
+        let cfa = self.camera.cfa();
+        let mut colour = Vec::new();
+        for (case, m) in self.cases.iter().zip(&matrices) {
+            colour.push(case.evaluate(&b.label(&case.name), |v, w, h| {
+                Ok(render_baseline_xyz(v, w, h, cfa, m)?)
+            })?);
+        }
+        let m0 = &matrices[0];
+        self.conventional_row(
+            (b.name(), ConfigKind::Baseline),
+            (training_seconds, colour),
+            copy_ms,
+            |f, w, h| Ok(render_baseline_srgb8(f, w, h, cfa, m0)?),
+        )
+    }
+
+    /// The strong ISP with the matrices of `b` (T folded in where it uses T), denoising by
+    /// the camera's noise model when the chart is noisy (as `l3 eval --method isp`): scored
+    /// under every light as the evaluation scores it, timed with the first light's. The
+    /// timed render denoises with the profile at no exposure, as the evaluation's spatial
+    /// scores do (the exposure moves only the dark signal, not the cost).
+    fn isp_row(&self, b: BaselineChoice, copy_ms: f64) -> Result<ConfigResult, BenchError> {
+        (self.progress)(&format!("[ISP] fitting {}", b.isp_name()));
+        let (matrices, training_seconds) = self.matrices(b)?;
+        let noise = self
+            .opts
+            .chart
+            .noise
+            .then(|| NoiseProfile::new(&self.camera, 0.0));
+        let isps: Vec<Isp> = matrices
+            .into_iter()
+            .map(|m| Isp::new(m, noise.clone()))
+            .collect();
+        // T is in the matrix: no further correction
+        let identity = IlluminantEntry::from_matrix("identity", IDENTITY);
+        let mut colour = Vec::new();
+        for (case, isp) in self.cases.iter().zip(&isps) {
+            let label = b.isp_label(&case.name);
+            (self.progress)(&format!("[ISP] {label} under {}", case.name));
+            colour.push(case.evaluate_method(
+                &self.camera,
+                &label,
+                &Method::Isp(isp),
+                &identity,
+            )?);
+        }
+        let cfa = self.camera.cfa();
+        self.conventional_row(
+            (b.isp_name(), ConfigKind::Isp),
+            (training_seconds, colour),
+            copy_ms,
+            |f, w, h| Ok(render_isp_srgb8(&isps[0], f, w, h, cfa)?),
+        )
     }
 
     /// The skips and encoders on `table`, when the options ask for them.

@@ -202,7 +202,8 @@ impl BenchOptions {
 }
 
 /// The conventional pipelines of the benchmark: bilinear demosaic of every
-/// CFA channel and a least-squares colour matrix.
+/// CFA channel and a least-squares colour matrix; [`BaselineChoice::ISP`]'s matrices
+/// also serve the strong ISP's rows.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum BaselineChoice {
     /// R, G, B → XYZ fitted under the acquisition light, white-balanced.
@@ -220,6 +221,11 @@ impl BaselineChoice {
         BaselineChoice::D65RgbThenT,
     ];
 
+    /// The matrices of the strong ISP's rows: the acquisition light's RGB fit (Table 1's
+    /// `ISP_<light>`) and D65's then T (`ISP_D65+T`).
+    pub const ISP: [BaselineChoice; 2] =
+        [BaselineChoice::AcquisitionRgb, BaselineChoice::D65RgbThenT];
+
     /// The row name.
     pub fn name(self) -> &'static str {
         match self {
@@ -234,6 +240,26 @@ impl BaselineChoice {
             BaselineChoice::AcquisitionRgb => format!("Baseline_{acquisition}"),
             BaselineChoice::AcquisitionAll => format!("Baseline_{acquisition} all"),
             BaselineChoice::D65RgbThenT => "Baseline+T".into(),
+        }
+    }
+
+    /// The name of the strong ISP's row with this matrix.
+    pub fn isp_name(self) -> &'static str {
+        match self {
+            BaselineChoice::AcquisitionRgb => "ISP (demosaic + denoise + RGB matrix per light)",
+            BaselineChoice::AcquisitionAll => {
+                "ISP (demosaic + denoise + all-channel matrix per light)"
+            }
+            BaselineChoice::D65RgbThenT => "ISP (demosaic + denoise + 3×3 D65 + T)",
+        }
+    }
+
+    /// The strong ISP's method label under `acquisition`, as Table 1 names it.
+    pub(super) fn isp_label(self, acquisition: &str) -> String {
+        match self {
+            BaselineChoice::AcquisitionRgb => format!("ISP_{acquisition}"),
+            BaselineChoice::AcquisitionAll => format!("ISP_{acquisition} all"),
+            BaselineChoice::D65RgbThenT => "ISP_D65+T".into(),
         }
     }
 
@@ -319,5 +345,22 @@ mod tests {
             .collect();
         assert_eq!(kinds.len(), 4);
         assert!(kinds.contains(&(TableChoice::CrossPerIlluminant, 8)));
+    }
+
+    #[test]
+    fn the_strong_isp_rows_are_named_as_table_1_names_them() {
+        let labels: Vec<String> = BaselineChoice::ISP
+            .iter()
+            .map(|b| b.isp_label("Tungsten"))
+            .collect();
+        assert_eq!(labels, ["ISP_Tungsten", "ISP_D65+T"]);
+        // every row name is distinct from every other
+        let mut names: Vec<&str> = BaselineChoice::ALL
+            .iter()
+            .flat_map(|b| [b.name(), b.isp_name()])
+            .collect();
+        names.sort_unstable();
+        names.dedup();
+        assert_eq!(names.len(), 2 * BaselineChoice::ALL.len());
     }
 }

@@ -49,8 +49,8 @@ fn quick_bench_writes_json_markdown_and_plot() {
     assert_eq!(json["schema"], "l3.bench.v1");
     assert!(json["renderer"].as_str().is_some_and(|s| !s.is_empty()));
     let report: l3::bench::BenchReport = serde_json::from_value(json.clone()).unwrap();
-    // 2 configurations + 3 baselines + copy
-    assert_eq!(report.configs.len(), 6);
+    // 2 configurations + 3 baselines + 2 strong ISPs + copy
+    assert_eq!(report.configs.len(), 8);
     assert_eq!(report.acquisitions, ["Tungsten", "Fluorescent"]);
     for c in &report.configs {
         let has_colour = c.kind != l3::bench::ConfigKind::Copy;
@@ -59,16 +59,47 @@ fn quick_bench_writes_json_markdown_and_plot() {
         assert_eq!(c.one_thread.runs, 2);
         assert_eq!(c.one_thread.threads, 1);
     }
-    // a tenth of the light: every baseline's per-pixel error grows, and the
-    // per-light baselines are white-balanced cross maps (no T)
+    // a tenth of the light: every conventional pipeline's per-pixel error grows
+    use l3::bench::ConfigKind::{Baseline, Isp};
     for c in report
         .configs
         .iter()
-        .filter(|c| c.kind == l3::bench::ConfigKind::Baseline)
+        .filter(|c| [Baseline, Isp].contains(&c.kind))
     {
         for col in &c.colour {
             let low = col.low_light_pixel_mean.expect("low-light column");
             assert!(low > col.pixel_mean, "{} {}: {low}", c.name, col.illuminant);
+        }
+    }
+    // the strong ISP beside the baselines, with its own light's matrix and with D65's then T,
+    // every metric measured at both exposures
+    let isp: Vec<_> = report.configs.iter().filter(|c| c.kind == Isp).collect();
+    assert_eq!(isp.len(), 2);
+    let labels: Vec<&str> = isp.iter().map(|c| c.colour[0].method.as_str()).collect();
+    assert_eq!(labels, ["ISP_Tungsten", "ISP_D65+T"]);
+    for c in &isp {
+        assert!(c.all_threads.mpix_per_s > 0.0 && c.one_thread.runs == 2);
+        for col in &c.colour {
+            let (f, l) = (&col.spatial, &col.low_light_spatial);
+            let metrics = [
+                Some(col.mean),
+                Some(col.p90),
+                Some(col.pixel_mean),
+                col.low_light_pixel_mean,
+                col.s_cielab_mean,
+                col.low_light_s_cielab_mean,
+                f.s_cielab_texture,
+                l.s_cielab_texture,
+                f.false_colour,
+                l.false_colour,
+                f.mtf50,
+            ];
+            assert!(
+                metrics.iter().all(|m| m.is_some_and(f64::is_finite)),
+                "{} {}: {col:?}",
+                c.name,
+                col.illuminant
+            );
         }
     }
     let mut nums = Vec::new();
@@ -124,6 +155,7 @@ fn quick_bench_writes_json_markdown_and_plot() {
 
     let md = std::fs::read_to_string(out_dir.join("bench.md")).unwrap();
     assert!(md.contains("| configuration |") && md.contains("plain copy"));
+    assert!(md.contains(&format!("| *{}* |", isp[1].name)), "{md}");
     assert!(stdout.contains("| configuration |"));
     let svg = std::fs::read_to_string(out_dir.join("bench.svg")).unwrap();
     assert!(svg.trim_start().starts_with("<svg") && svg.trim_end().ends_with("</svg>"));
@@ -131,6 +163,7 @@ fn quick_bench_writes_json_markdown_and_plot() {
         svg.contains("class=\"pareto-front\""),
         "no Pareto front element"
     );
+    assert!(svg.contains("ISP (demosaic"), "no ISP point in the plot");
 }
 
 #[test]
@@ -147,9 +180,9 @@ fn sensor_sweep_runs_every_sensor_in_one_go() {
     let names: Vec<&str> = sweep.reports.iter().map(|r| r.sensor.as_str()).collect();
     assert_eq!(names, ["rgbw-iset", "bayer-nikon-d5100"]);
     for r in &sweep.reports {
-        // default + I tables, each with 8 and with one chroma class, 3 baselines, copy; no
-        // skips in a sweep
-        assert_eq!(r.configs.len(), 8, "{}", r.sensor);
+        // default + I tables, each with 8 and with one chroma class, 3 baselines, 2 strong
+        // ISPs, copy; no skips in a sweep
+        assert_eq!(r.configs.len(), 10, "{}", r.sensor);
         assert!(
             r.configs
                 .iter()

@@ -10,8 +10,8 @@ pub(super) mod reference;
 pub use error::RenderError;
 pub use fast::{FastOptions, FastRenderer, Frame, Mosaic, Region};
 pub use output::{
-    WHITE_GRID, WhiteLevel, white_from_samples, white_sample_points, white_y, xyz_to_srgb8,
-    xyz_to_srgb16,
+    WHITE_GRID, WhiteLevel, linear_srgb_matrix, white_from_samples, white_sample_points, white_y,
+    xyz_to_srgb8, xyz_to_srgb16,
 };
 pub use reference::{
     RenderStats, fuse_entry, fuse_kernels, render_reference, render_reference_under,

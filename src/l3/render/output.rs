@@ -80,14 +80,16 @@ fn linear_rgb(p: &[f32], m: &[[f32; 3]; 3]) -> [f32; 3] {
     [0, 1, 2].map(|i| m[i][0] * p[0] + m[i][1] * p[1] + m[i][2] * p[2])
 }
 
-fn scaled_matrix(white_y: f64) -> [[f32; 3]; 3] {
+/// XYZ → linear sRGB in f32 with Y = `white_y` as white: the matrix [`xyz_to_srgb8`] applies
+/// (before [`SrgbLut`]), for renderers that encode sRGB in a pass of their own.
+pub fn linear_srgb_matrix(white_y: f64) -> [[f32; 3]; 3] {
     let k = 1.0 / white_y;
     XYZ_TO_LINEAR_SRGB.map(|r| r.map(|v| (v * k) as f32))
 }
 
 /// Interleaved XYZ → 8-bit sRGB (clipped), Y = `white_y` maps to white.
 pub fn xyz_to_srgb8(xyz: &[f32], white_y: f64) -> Vec<u8> {
-    let m = scaled_matrix(white_y);
+    let m = linear_srgb_matrix(white_y);
     let lut = SrgbLut::new();
     let mut out = vec![0u8; xyz.len()];
     out.par_chunks_mut(3 * 4096)
@@ -105,7 +107,7 @@ pub fn xyz_to_srgb8(xyz: &[f32], white_y: f64) -> Vec<u8> {
 
 /// Interleaved XYZ → 16-bit sRGB (clipped).
 pub fn xyz_to_srgb16(xyz: &[f32], white_y: f64) -> Vec<u16> {
-    let m = scaled_matrix(white_y);
+    let m = linear_srgb_matrix(white_y);
     let mut out = vec![0u16; xyz.len()];
     out.par_chunks_mut(3 * 4096)
         .zip(xyz.par_chunks(3 * 4096))
