@@ -11,6 +11,7 @@
 
 mod bilinear;
 mod denoise;
+mod guided;
 mod isp;
 mod malvar;
 mod matrix;
