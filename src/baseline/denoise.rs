@@ -25,7 +25,7 @@ use std::ops::Range;
 use rayon::prelude::*;
 
 use super::BaselineError;
-use super::guided::SelfGuided;
+use super::guided::{SelfGuided, run_side_by_side};
 use crate::camera::{Camera, SensorDesign};
 
 /// The variance of a pixel's noise as a function of its signal, from the sensor's noise
@@ -72,6 +72,7 @@ impl NoiseProfile {
     }
 
     /// Noise variance (V²) of a pixel whose mean is `v` volts.
+    #[inline]
     pub fn variance(&self, v: f64) -> f64 {
         let u = (v - self.offset_v).max(0.0);
         let photo = (u - self.dark_v).max(0.0);
@@ -134,22 +135,23 @@ pub fn denoise(
     };
     let row = width * nc;
     let mut out = vec![0f32; n * nc];
-    out.par_chunks_mut(STRIP * row)
-        .enumerate()
-        .for_each_init(
-            || Scratch::new(width, height, params),
-            |scratch, (strip, o)| {
-                let y0 = strip * STRIP;
-                frame.strip(scratch, y0..y0 + o.len() / row, o);
-            },
-        );
+    out.par_chunks_mut(STRIP * row).enumerate().for_each_init(
+        || Scratch::new(height, nc, params),
+        |scratch, (strip, o)| {
+            let y0 = strip * STRIP;
+            frame.strip(scratch, y0..y0 + o.len() / row, o);
+        },
+    );
     Ok(out)
 }
 
-/// Rows per parallel task: the strip's filters start from the strip's first rows' windows (a
-/// few rows of extra work, see [`Frame::strip`]), so strips are tall enough to make that small
-/// and short enough to share out among the threads.
-const STRIP: usize = 64;
+/// Rows per parallel task: each task's filters start from its first rows' windows (a few rows
+/// of extra work, see [`Frame::tile`]), so strips are tall enough to make that small and
+/// short enough to share out among the threads.
+const STRIP: usize = 128;
+/// Columns per tile within a strip: the tile's rows stay in cache from one filter to the
+/// next. The filters reach beyond the tile's sides as they do beyond the strip's ends.
+const TILE: usize = 512;
 
 /// A frame being denoised: its channels, their shares of the luma, the noise model.
 struct Frame<'a> {
@@ -162,99 +164,181 @@ struct Frame<'a> {
     params: &'a DenoiseParams,
 }
 
-/// A task's filters and its strip's denoised luma, reused from strip to strip.
+/// A task's filters and row buffers, reused from tile to tile.
 struct Scratch {
     luma: SelfGuided,
-    chroma: SelfGuided,
-    luma_d: Vec<f32>,
+    /// One per channel.
+    chroma: Vec<SelfGuided>,
+    /// The tile's luma and denoised luma.
+    luma_in: Rows,
+    luma_d: Rows,
+    /// The luma noise's variance along a row.
+    var: Vec<f64>,
+}
+
+/// A block of a plane: its rows from `start`, `width` values each.
+#[derive(Default)]
+struct Rows {
+    start: usize,
+    width: usize,
+    v: Vec<f32>,
+}
+
+impl Rows {
+    fn set(&mut self, rows: &Range<usize>, width: usize) {
+        self.start = rows.start;
+        self.width = width;
+        self.v.resize(rows.len() * width, 0.0);
+    }
+
+    fn row(&self, y: usize) -> &[f32] {
+        let at = (y - self.start) * self.width;
+        &self.v[at..at + self.width]
+    }
+
+    fn row_mut(&mut self, y: usize) -> &mut [f32] {
+        let at = (y - self.start) * self.width;
+        &mut self.v[at..at + self.width]
+    }
 }
 
 impl Scratch {
-    fn new(width: usize, height: usize, params: &DenoiseParams) -> Self {
+    fn new(height: usize, nc: usize, params: &DenoiseParams) -> Self {
         Self {
-            luma: SelfGuided::new(width, height, params.luma_radius),
-            chroma: SelfGuided::new(width, height, params.chroma_radius),
-            luma_d: Vec::new(),
+            luma: SelfGuided::new(height, params.luma_radius),
+            chroma: (0..nc)
+                .map(|_| SelfGuided::new(height, params.chroma_radius))
+                .collect(),
+            luma_in: Rows::default(),
+            luma_d: Rows::default(),
+            var: Vec::new(),
         }
     }
 }
 
+/// `r` widened by `by` on both sides, within `0..end`.
+fn widen(r: &Range<usize>, by: usize, end: usize) -> Range<usize> {
+    r.start.saturating_sub(by)..r.end.saturating_add(by).min(end)
+}
+
 impl Frame<'_> {
-    /// The pixels of row `t`, interleaved.
-    fn row(&self, t: usize) -> &[f32] {
-        let n = self.width * self.nc;
-        &self.channels[t * n..(t + 1) * n]
+    /// The pixels of row `t` at columns `xs`, interleaved (`nc` channels).
+    fn pixels(&self, t: usize, xs: &Range<usize>, nc: usize) -> &[f32] {
+        let at = (t * self.width) * nc;
+        &self.channels[at + xs.start * nc..at + xs.end * nc]
     }
 
-    /// The luma `L` (the mean of a pixel's channels) of row `t`.
-    fn luma(&self, t: usize, out: &mut [f32]) {
-        let nc = self.nc;
-        for (o, px) in out.iter_mut().zip(self.row(t).chunks_exact(nc)) {
-            *o = px.iter().sum::<f32>() / nc as f32;
+    /// `e = strength · σ²_L(m)`, with σ²_L(m) the variance of L's noise at luma `m`: the
+    /// channels' variances at β_k·m over nc² (summed in `var`).
+    fn luma_eps(&self, m: &[f64], var: &mut Vec<f64>, e: &mut [f32]) {
+        var.clear();
+        var.resize(m.len(), 0.0);
+        for &b in &self.beta {
+            for (v, &m) in var.iter_mut().zip(m) {
+                *v += self.profile.variance(b as f64 * m);
+            }
+        }
+        let k = 1.0 / (self.nc * self.nc) as f64;
+        for (e, &v) in e.iter_mut().zip(var.iter()) {
+            *e = self.params.luma_strength * (v * k) as f32;
         }
     }
 
-    /// Channel `k`'s chroma `C_k = ch_k − β_k·L` of row `t`.
-    fn chroma(&self, k: usize, t: usize, out: &mut [f32]) {
-        let (nc, b) = (self.nc, self.beta[k]);
-        for (o, px) in out.iter_mut().zip(self.row(t).chunks_exact(nc)) {
-            *o = px[k] - b * (px.iter().sum::<f32>() / nc as f32);
-        }
-    }
-
-    /// The variance of L's noise at luma `m`: the channels' variances at β_k·m over nc².
-    fn luma_var(&self, m: f64) -> f32 {
-        let v: f64 = self
-            .beta
-            .iter()
-            .map(|&b| self.profile.variance(b as f64 * m))
-            .sum();
-        (v / (self.nc * self.nc) as f64) as f32
-    }
-
-    /// Denoise the rows `ys` into `out` (their interleaved pixels): the luma filter on the
-    /// rows the chroma filters' ε reads (`ys` widened by the chroma radius), then each
-    /// channel's chroma filter, rebuilt on the denoised luma.
+    /// Denoise the rows `ys` into `out` (their interleaved pixels), tile by tile; with the
+    /// common channel counts a constant, so that the (de)interleaving loops vectorise.
     fn strip(&self, scratch: &mut Scratch, ys: Range<usize>, out: &mut [f32]) {
-        let (w, nc, prm) = (self.width, self.nc, self.params);
+        for x0 in (0..self.width).step_by(TILE) {
+            let xs = x0..(x0 + TILE).min(self.width);
+            match self.nc {
+                3 => self.tile::<3>(scratch, &ys, xs, out),
+                4 => self.tile::<4>(scratch, &ys, xs, out),
+                _ => self.tile::<0>(scratch, &ys, xs, out),
+            }
+        }
+    }
+
+    /// Denoise the block `ys × xs` into `out` (the strip `ys`): the luma filter on the block
+    /// the chroma filters' ε reads (widened by the chroma radius), then each channel's
+    /// chroma filter, rebuilt on the denoised luma. Each filter works on its block widened
+    /// by twice its radius, so that the block's result is the whole frame's.
+    fn tile<const NC: usize>(
+        &self,
+        scratch: &mut Scratch,
+        ys: &Range<usize>,
+        xs: Range<usize>,
+        out: &mut [f32],
+    ) {
+        let nc = if NC == 0 { self.nc } else { NC };
+        let (w, h, prm) = (self.width, self.height, self.params);
+        let (lr, cr) = (prm.luma_radius, prm.chroma_radius);
         let Scratch {
             luma,
             chroma,
+            luma_in,
             luma_d,
+            var,
         } = scratch;
-        let ld_lo = ys.start.saturating_sub(prm.chroma_radius);
-        let ld_hi = (ys.end + prm.chroma_radius).min(self.height);
-        luma_d.resize((ld_hi - ld_lo) * w, 0.0);
-        luma.run(
-            ld_lo..ld_hi,
-            |t, row| self.luma(t, row),
-            |_, m, e| {
-                for (e, &m) in e.iter_mut().zip(m) {
-                    *e = prm.luma_strength * self.luma_var(m);
+        // columns: the chroma filters' block, the luma's (which holds it)
+        let cxs = widen(&xs, 2 * cr, w);
+        let lxs = widen(&cxs, 2 * lr, w);
+        let (cw, lw) = (cxs.len(), lxs.len());
+        // rows: the denoised luma's, and the luma both filters read
+        let ld_rows = widen(ys, cr, h);
+        let (a, b) = (widen(&ld_rows, 2 * lr, h), widen(ys, 2 * cr, h));
+        let in_rows = a.start.min(b.start)..a.end.max(b.end);
+        luma_in.set(&in_rows, lw);
+        for t in in_rows {
+            let px = self.pixels(t, &lxs, nc).chunks_exact(nc);
+            for (o, px) in luma_in.row_mut(t).iter_mut().zip(px) {
+                *o = px.iter().sum::<f32>() / nc as f32;
+            }
+        }
+        luma_d.set(&ld_rows, lw);
+        run_side_by_side(
+            std::slice::from_mut(luma),
+            lw,
+            ld_rows,
+            |_, t, row| row.copy_from_slice(luma_in.row(t)),
+            |_, _, m, e| self.luma_eps(m, var, e),
+            |_, y, row| luma_d.row_mut(y).copy_from_slice(row),
+        );
+        let (luma_in, luma_d, beta) = (&*luma_in, &*luma_d, &self.beta);
+        // the chroma block's and the tile's columns in the luma block, the tile's in the
+        // chroma block
+        let (c_in_l, x_in_l, x_in_c) = (
+            cxs.start - lxs.start..cxs.end - lxs.start,
+            xs.start - lxs.start..xs.end - lxs.start,
+            xs.start - cxs.start..xs.end - cxs.start,
+        );
+        let row_len = w * nc;
+        // self-guided: chroma edges above the channel's noise are kept (isoluminant edges
+        // too, which a luma guide cannot see), the rest is flattened
+        run_side_by_side(
+            chroma,
+            cw,
+            ys.clone(),
+            |k, t, row| {
+                let (px, b) = (self.pixels(t, &cxs, nc).chunks_exact(nc), beta[k]);
+                let l = &luma_in.row(t)[c_in_l.clone()];
+                for ((o, px), &l) in row.iter_mut().zip(px).zip(l) {
+                    *o = px[k] - b * l;
                 }
             },
-            |y, row| luma_d[(y - ld_lo) * w..(y - ld_lo + 1) * w].copy_from_slice(row),
+            |k, s, _, e| {
+                let b = beta[k];
+                for (e, &l) in e.iter_mut().zip(&luma_d.row(s)[c_in_l.clone()]) {
+                    *e = prm.chroma_strength * self.profile.variance((b * l) as f64) as f32;
+                }
+            },
+            |k, y, c| {
+                let at = (y - ys.start) * row_len;
+                let o = &mut out[at + xs.start * nc..at + xs.end * nc];
+                let (l, b) = (&luma_d.row(y)[x_in_l.clone()], beta[k]);
+                for ((px, &c), &l) in o.chunks_exact_mut(nc).zip(&c[x_in_c.clone()]).zip(l) {
+                    px[k] = b * l + c;
+                }
+            },
         );
-        let ld = |y: usize| &luma_d[(y - ld_lo) * w..(y - ld_lo + 1) * w];
-        for (k, &b) in self.beta.iter().enumerate() {
-            // self-guided: chroma edges above the channel's noise are kept (isoluminant
-            // edges too, which a luma guide cannot see), the rest is flattened
-            chroma.run(
-                ys.clone(),
-                |t, row| self.chroma(k, t, row),
-                |s, _, e| {
-                    for (e, &l) in e.iter_mut().zip(ld(s)) {
-                        *e = prm.chroma_strength * self.profile.variance((b * l) as f64) as f32;
-                    }
-                },
-                |y, c| {
-                    let o = &mut out[(y - ys.start) * w * nc..(y - ys.start + 1) * w * nc];
-                    for ((px, &c), &l) in o.chunks_exact_mut(nc).zip(c).zip(ld(y)) {
-                        px[k] = b * l + c;
-                    }
-                },
-            );
-        }
     }
 }
 
