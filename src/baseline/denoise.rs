@@ -16,9 +16,16 @@
 //! The noise variance of a pixel at `v` volts is `floor + shot·u + prnu²·u²` with
 //! `u = v − offset` ([`crate::camera::Camera::analytic_noise`]'s terms); at a tenth of the
 //! exposure the signal is ten times lower, its relative noise higher, so the filter works
-//! relatively harder with no change of parameters. The guided filter is written here (box
-//! filters with running sums, O(1) per pixel whatever the radius) because no maintained crate
-//! offers it on f32 planes with a per-window ε; it is a few dozen lines.
+//! relatively harder with no change of parameters.
+//!
+//! **Structure.** The frame is cut into strips of rows (one rayon task each, no nested
+//! parallelism) and each strip into tiles of columns; on a tile the luma is made once, its
+//! filter run, then the `nc` chroma filters run side by side (each source row read once for
+//! all channels) and the channels rebuilt. Each filter reads its tile widened by twice its
+//! radius, so the result is the whole frame's to float rounding (the tests compare it with
+//! the filters' definition). The guided filter itself, streamed down rows with fused box
+//! filters, is `guided.rs`'s, hand-written because no maintained crate offers it on
+//! f32 planes with a per-window ε.
 
 use std::ops::Range;
 

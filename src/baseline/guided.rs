@@ -521,7 +521,7 @@ pub(super) mod tests {
                 s ^= s << 17;
                 let u = (s >> 40) as f32 / (1u64 << 24) as f32;
                 let step = if (i % w) * 3 > w { 0.6 } else { 0.0 };
-                0.1 + 0.05 * u + step + 0.5 * ((i / w) % 5 == 0) as u8 as f32 * u
+                0.1 + 0.05 * u + step + 0.5 * (i / w).is_multiple_of(5) as u8 as f32 * u
             })
             .collect()
     }

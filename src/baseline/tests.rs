@@ -229,6 +229,9 @@ fn gradient_demosaic_reproduces_ramps_matches_bilinear_at_gain_0_and_falls_back(
     assert_eq!(a, bilinear_demosaic(&v, w, h, &big).unwrap());
 }
 
+/// A neighbour group: its offsets, its channel, the curvature it carries along x and y.
+type Group = (&'static [(isize, isize)], usize, f32, f32);
+
 /// The gradient-corrected demosaic from the module doc's formula, tap by tap (the frame
 /// mirrored about its edges; the neighbours' channels those of the true CFA positions).
 fn gradient_reference(v: &[f32], w: usize, h: usize, cfa: &Cfa, gain: f32) -> Vec<f32> {
@@ -243,7 +246,7 @@ fn gradient_reference(v: &[f32], w: usize, h: usize, cfa: &Cfa, gain: f32) -> Ve
             let (h2, v2) = (at(0, -2) + at(0, 2), at(-2, 0) + at(2, 0));
             let (lx, ly) = (x - 0.5 * h2, x - 0.5 * v2);
             let own_mean = 0.5 * x + 0.125 * (h2 + v2);
-            let groups: [(&[(isize, isize)], usize, f32, f32); 3] = [
+            let groups: [Group; 3] = [
                 (&[(0, -1), (0, 1)], cfa.channel_at(r, c + 1), 1.0, 0.0),
                 (&[(-1, 0), (1, 0)], cfa.channel_at(r + 1, c), 0.0, 1.0),
                 (
