@@ -11,7 +11,7 @@
 
 use rayon::prelude::*;
 
-use super::{BaselineError, check_frame, pad_mirrored};
+use super::{BaselineError, Window5, check_frame};
 use crate::camera::Cfa;
 
 /// A Bayer CFA: a 2×2 tile of channels named R, G, G, B with the two G on a diagonal.
@@ -82,23 +82,20 @@ pub fn malvar_demosaic(
             (false, true) => Site::GonB,
         }
     };
-    let pw = width + 4;
-    let p = pad_mirrored(volts, width, height, 2);
     let mut out = vec![0f32; width * height * 3];
     out.par_chunks_mut(width * 3)
         .enumerate()
         .for_each(|(r, row)| {
             let sites = [site(r, 0), site(r, 1)];
-            let rows: [&[f32]; 5] = std::array::from_fn(|k| &p[(r + k) * pw..(r + k + 1) * pw]);
+            let win = Window5::new(volts, width, height, r);
             for (c, px) in row.chunks_exact_mut(3).enumerate() {
-                let [u2, u1, m0, d1, d2] = rows;
-                let j = c + 2;
-                let x = m0[j];
-                let h1 = m0[j - 1] + m0[j + 1];
-                let v1 = u1[j] + d1[j];
-                let h2 = m0[j - 2] + m0[j + 2];
-                let v2 = u2[j] + d2[j];
-                let dg = u1[j - 1] + u1[j + 1] + d1[j - 1] + d1[j + 1];
+                let t = win.taps(c);
+                let x = t.x;
+                let h1 = t.l1 + t.r1;
+                let v1 = t.u1 + t.d1;
+                let h2 = t.l2 + t.r2;
+                let v2 = t.u2 + t.d2;
+                let dg = t.ul + t.ur + t.dl + t.dr;
                 // G at R or B; R at B or B at R; the other colour at G (its row's, its column's)
                 let g_at_rb = || (4.0 * x + 2.0 * (h1 + v1) - (h2 + v2)) * 0.125;
                 let opp = || (6.0 * x + 2.0 * dg - 1.5 * (h2 + v2)) * 0.125;

@@ -13,6 +13,7 @@
 mod bilinear;
 mod denoise;
 mod fast;
+mod guided;
 mod isp;
 mod malvar;
 mod matrix;
@@ -77,22 +78,70 @@ fn check_frame(volts: &[f32], width: usize, height: usize) -> Result<(), Baselin
     Ok(())
 }
 
-/// The frame with a border of `pad` pixels mirrored about its edges (as
-/// [`mirror`] does), row-major, `(width + 2·pad) × (height + 2·pad)`: the 5×5 demosaics
-/// read it without a bounds test per tap.
-fn pad_mirrored(volts: &[f32], width: usize, height: usize, pad: usize) -> Vec<f32> {
-    let pw = width + 2 * pad;
-    let mut out = vec![0f32; pw * (height + 2 * pad)];
-    for (pr, row) in out.chunks_exact_mut(pw).enumerate() {
-        let r = mirror(pr as isize - pad as isize, height);
-        let src = &volts[r * width..(r + 1) * width];
-        row[pad..pad + width].copy_from_slice(src);
-        for p in 0..pad {
-            row[p] = src[mirror(p as isize - pad as isize, width)];
-            row[pad + width + p] = src[mirror((width + p) as isize, width)];
+/// The taps the 5×5 demosaics read around a pixel: the pixel, its horizontal and vertical
+/// neighbours at distances 1 and 2, and its four diagonal neighbours.
+#[derive(Clone, Copy)]
+struct Taps {
+    x: f32,
+    /// Left, right, up, down at distance 1.
+    l1: f32,
+    r1: f32,
+    u1: f32,
+    d1: f32,
+    /// The same at distance 2.
+    l2: f32,
+    r2: f32,
+    u2: f32,
+    d2: f32,
+    /// Up-left, up-right, down-left, down-right.
+    ul: f32,
+    ur: f32,
+    dl: f32,
+    dr: f32,
+}
+
+/// A row's neighbourhood in a frame, the frame mirrored about its edges (as [`mirror`]
+/// does): rows `r−2 ..= r+2`, read without copying the frame.
+struct Window5<'a> {
+    rows: [&'a [f32]; 5],
+}
+
+impl<'a> Window5<'a> {
+    fn new(volts: &'a [f32], width: usize, height: usize, r: usize) -> Self {
+        Self {
+            rows: std::array::from_fn(|k| {
+                let rr = mirror(r as isize + k as isize - 2, height);
+                &volts[rr * width..(rr + 1) * width]
+            }),
         }
     }
-    out
+
+    /// The taps around column `c` (columns mirrored at the sides).
+    #[inline(always)]
+    fn taps(&self, c: usize) -> Taps {
+        let [u2, u1, m0, d1, d2] = self.rows;
+        let w = m0.len();
+        let [a, b, j, d, e] = if c >= 2 && c + 2 < w {
+            [c - 2, c - 1, c, c + 1, c + 2]
+        } else {
+            std::array::from_fn(|k| mirror(c as isize + k as isize - 2, w))
+        };
+        Taps {
+            x: m0[j],
+            l1: m0[b],
+            r1: m0[d],
+            u1: u1[j],
+            d1: d1[j],
+            l2: m0[a],
+            r2: m0[e],
+            u2: u2[j],
+            d2: d2[j],
+            ul: u1[b],
+            ur: u1[d],
+            dl: d1[b],
+            dr: d1[d],
+        }
+    }
 }
 
 #[cfg(test)]

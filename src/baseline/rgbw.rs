@@ -25,18 +25,22 @@
 
 use rayon::prelude::*;
 
-use super::{BaselineError, bilinear_demosaic, check_frame, pad_mirrored};
+use super::{BaselineError, Taps, Window5, bilinear_demosaic, check_frame};
 use crate::camera::Cfa;
 
 /// The gradient gain the ISP uses (see the module doc).
 pub const DEFAULT_GRADIENT_GAIN: f32 = 1.0;
 
-/// How one channel is estimated at one tile position.
+/// How one channel is estimated at one tile position: the pixel's own value, or the mean of
+/// the neighbour groups that hold the channel (the horizontal pair, the vertical pair, the
+/// diagonal quad; `n` samples in all) corrected by the curvatures.
 #[derive(Clone, Copy, Default)]
 struct Plan {
     own: bool,
-    offsets: [(isize, isize); 8],
-    n: usize,
+    h: bool,
+    v: bool,
+    d: bool,
+    n: f32,
     cxx: f32,
     cyy: f32,
 }
@@ -54,35 +58,27 @@ fn plans(cfa: &Cfa, pr: usize, pc: usize) -> Vec<Plan> {
     let d = cfa.channel_at(pr + 1, pc + 1);
     (0..cfa.n_channels())
         .map(|k| {
-            let mut p = Plan {
-                own: k == own,
-                ..Plan::default()
-            };
-            if p.own {
-                return p;
+            if k == own {
+                return Plan {
+                    own: true,
+                    ..Plan::default()
+                };
             }
-            let (mut axx, mut ayy) = (0f32, 0f32);
-            let mut add = |offs: &[(isize, isize)], xx: f32, yy: f32| {
-                for &o in offs {
-                    p.offsets[p.n] = o;
-                    p.n += 1;
-                }
-                axx += xx;
-                ayy += yy;
-            };
-            if h == k {
-                add(&[(0, -1), (0, 1)], 1.0, 0.0);
+            let (h, v, d) = (h == k, v == k, d == k);
+            // each group's samples and the curvature they carry: a horizontal pair 1 along
+            // x, a vertical pair 1 along y, a diagonal quad 2 and 2
+            let n = (2 * h as usize + 2 * v as usize + 4 * d as usize).max(1) as f32;
+            let axx = h as u8 as f32 + 2.0 * d as u8 as f32;
+            let ayy = v as u8 as f32 + 2.0 * d as u8 as f32;
+            Plan {
+                own: false,
+                h,
+                v,
+                d,
+                n,
+                cxx: axx / (2.0 * n),
+                cyy: ayy / (2.0 * n),
             }
-            if v == k {
-                add(&[(-1, 0), (1, 0)], 0.0, 1.0);
-            }
-            if d == k {
-                add(&[(-1, -1), (-1, 1), (1, -1), (1, 1)], 2.0, 2.0);
-            }
-            let n = p.n.max(1) as f32;
-            p.cxx = axx / (2.0 * n);
-            p.cyy = ayy / (2.0 * n);
-            p
         })
         .collect()
 }
@@ -103,40 +99,64 @@ pub fn gradient_demosaic(
     }
     let nc = cfa.n_channels();
     let tile: Vec<Vec<Plan>> = (0..4).map(|i| plans(cfa, i / 2, i % 2)).collect();
-    let pw = width + 4;
-    let p = pad_mirrored(volts, width, height, 2);
     let mut out = vec![0f32; width * height * nc];
     out.par_chunks_mut(width * nc)
         .enumerate()
         .for_each(|(r, row)| {
-            let base = (r + 2) * pw + 2;
-            for (c, px) in row.chunks_exact_mut(nc).enumerate() {
-                let at = |dy: isize, dx: isize| {
-                    p[(base as isize + dy * pw as isize + c as isize + dx) as usize]
-                };
-                let x = at(0, 0);
-                let (h2, v2) = (at(0, -2) + at(0, 2), at(-2, 0) + at(2, 0));
-                let lx = x - 0.5 * h2;
-                let ly = x - 0.5 * v2;
-                let own_mean = 0.5 * x + 0.125 * (h2 + v2);
-                for (k, plan) in tile[(r % 2) * 2 + c % 2].iter().enumerate() {
-                    px[k] = if plan.own {
-                        x
-                    } else {
-                        let s: f32 = plan.offsets[..plan.n]
-                            .iter()
-                            .map(|&(dy, dx)| at(dy, dx))
-                            .sum();
-                        let mean = s / plan.n.max(1) as f32;
-                        let rho = if own_mean > 0.0 {
-                            (mean / own_mean).clamp(0.0, 4.0)
-                        } else {
-                            1.0
-                        };
-                        mean + gain * rho * (plan.cxx * lx + plan.cyy * ly)
-                    };
-                }
+            let win = Window5::new(volts, width, height, r);
+            let plans = [&tile[(r % 2) * 2][..], &tile[(r % 2) * 2 + 1][..]];
+            // the common channel counts as constants, so that the channel loop unrolls
+            match nc {
+                3 => demosaic_row::<3>(&win, plans, gain, row),
+                4 => demosaic_row::<4>(&win, plans, gain, row),
+                _ => demosaic_row::<0>(&win, plans, gain, row),
             }
         });
     Ok(out)
+}
+
+/// One row of [`gradient_demosaic`]: `plans` for the even and the odd columns, `NC` the
+/// channel count (0: `plans`' length).
+fn demosaic_row<const NC: usize>(win: &Window5, plans: [&[Plan]; 2], gain: f32, row: &mut [f32]) {
+    let nc = if NC == 0 { plans[0].len() } else { NC };
+    for (c, px) in row.chunks_exact_mut(nc).enumerate() {
+        estimate(&win.taps(c), plans[c & 1], gain, px);
+    }
+}
+
+/// A pixel's channels from its taps.
+#[inline(always)]
+fn estimate(t: &Taps, plans: &[Plan], gain: f32, px: &mut [f32]) {
+    let (h2, v2) = (t.l2 + t.r2, t.u2 + t.d2);
+    let lx = t.x - 0.5 * h2;
+    let ly = t.x - 0.5 * v2;
+    let own_mean = 0.5 * t.x + 0.125 * (h2 + v2);
+    for (o, p) in px.iter_mut().zip(plans) {
+        *o = if p.own {
+            t.x
+        } else {
+            let mut s = 0f32;
+            if p.h {
+                s += t.l1;
+                s += t.r1;
+            }
+            if p.v {
+                s += t.u1;
+                s += t.d1;
+            }
+            if p.d {
+                s += t.ul;
+                s += t.ur;
+                s += t.dl;
+                s += t.dr;
+            }
+            let mean = s / p.n;
+            let rho = if own_mean > 0.0 {
+                (mean / own_mean).clamp(0.0, 4.0)
+            } else {
+                1.0
+            };
+            mean + gain * rho * (p.cxx * lx + p.cyy * ly)
+        };
+    }
 }

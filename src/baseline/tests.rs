@@ -1,6 +1,7 @@
 use proptest::prelude::*;
 
 use super::*;
+use crate::l3::classify::mirror;
 
 const PHASES: [&str; 4] = ["RG/GB", "GR/BG", "GB/RG", "BG/GR"];
 
@@ -86,12 +87,20 @@ fn bayer_layout_is_found_for_the_four_phases_only() {
     assert!(malvar_demosaic(&v, 5, 4, &Cfa::parse("RG/GB").unwrap()).is_err());
 }
 
-/// The paper's kernels written out (eighths), applied by direct convolution.
-fn malvar_reference(v: &[f32], w: usize, r: usize, c: usize, kernel: &[[f32; 5]; 5]) -> f32 {
+/// The paper's kernels written out (eighths), applied by direct convolution (the frame
+/// mirrored about its edges).
+fn malvar_reference(
+    v: &[f32],
+    (w, h): (usize, usize),
+    r: usize,
+    c: usize,
+    kernel: &[[f32; 5]; 5],
+) -> f32 {
     let mut s = 0f32;
     for (dy, row) in kernel.iter().enumerate() {
         for (dx, k) in row.iter().enumerate() {
-            s += k * v[(r + dy - 2) * w + c + dx - 2];
+            let rr = mirror(r as isize + dy as isize - 2, h);
+            s += k * v[rr * w + mirror(c as isize + dx as isize - 2, w)];
         }
     }
     s / 8.0
@@ -121,33 +130,38 @@ fn malvar_is_the_papers_kernels_and_reproduces_ramps_in_every_phase() {
         [0., 2., 0., 2., 0.],
         [0., 0., -1.5, 0., 0.],
     ];
-    let (w, h) = (13, 11);
-    for p in PHASES {
-        let cfa = Cfa::parse(p).unwrap();
-        let lay = BayerLayout::of(&cfa).unwrap();
-        let noise = normals(w * h, 3);
-        let v: Vec<f32> = noise.iter().map(|n| 0.5 + 0.1 * n).collect();
-        let dm = malvar_demosaic(&v, w, h, &cfa).unwrap();
-        for r in 2..h - 2 {
-            for c in 2..w - 2 {
-                let own = cfa.channel_at(r, c);
-                let px = &dm[(r * w + c) * 3..][..3];
-                assert_eq!(px[own], v[r * w + c]);
-                let rb_row = cfa.channel_at(r, c + 1);
-                for (k, want) in (0..3).filter(|&k| k != own).map(|k| {
-                    let kern = if own != lay.g {
-                        if k == lay.g { &g_at_rb } else { &opposite }
-                    } else if k == rb_row {
-                        &row_nb
-                    } else {
-                        &col_nb
-                    };
-                    (k, malvar_reference(&v, w, r, c, kern))
-                }) {
-                    assert!((px[k] - want).abs() < 1e-5, "{p} ({r},{c}) ch {k}");
+    // every pixel, the border too, at any size
+    for (w, h) in [(13, 11), (1, 1), (2, 3), (3, 2), (4, 5)] {
+        for p in PHASES {
+            let cfa = Cfa::parse(p).unwrap();
+            let lay = BayerLayout::of(&cfa).unwrap();
+            let noise = normals(w * h, 3);
+            let v: Vec<f32> = noise.iter().map(|n| 0.5 + 0.1 * n).collect();
+            let dm = malvar_demosaic(&v, w, h, &cfa).unwrap();
+            for r in 0..h {
+                for c in 0..w {
+                    let own = cfa.channel_at(r, c);
+                    let px = &dm[(r * w + c) * 3..][..3];
+                    assert_eq!(px[own], v[r * w + c]);
+                    let rb_row = cfa.channel_at(r, c + 1);
+                    for k in (0..3).filter(|&k| k != own) {
+                        let kern = if own != lay.g {
+                            if k == lay.g { &g_at_rb } else { &opposite }
+                        } else if k == rb_row {
+                            &row_nb
+                        } else {
+                            &col_nb
+                        };
+                        let want = malvar_reference(&v, (w, h), r, c, kern);
+                        assert!((px[k] - want).abs() < 1e-5, "{p} {w}×{h} ({r},{c}) ch {k}");
+                    }
                 }
             }
         }
+    }
+    let (w, h) = (13, 11);
+    for p in PHASES {
+        let cfa = Cfa::parse(p).unwrap();
         // channel-specific linear ramps are reproduced exactly away from the border
         let ramp = |k: usize, r: f32, c: f32| {
             0.1 + 0.01 * k as f32 + 0.003 * r - 0.002 * c * (k as f32 + 1.0)
@@ -213,6 +227,80 @@ fn gradient_demosaic_reproduces_ramps_matches_bilinear_at_gain_0_and_falls_back(
     let big = Cfa::parse("RGBW/GBWR/BWRG/WRGB").unwrap();
     let a = gradient_demosaic(&v, w, h, &big, 1.0).unwrap();
     assert_eq!(a, bilinear_demosaic(&v, w, h, &big).unwrap());
+}
+
+/// A neighbour group: its offsets, its channel, the curvature it carries along x and y.
+type Group = (&'static [(isize, isize)], usize, f32, f32);
+
+/// The gradient-corrected demosaic from the module doc's formula, tap by tap (the frame
+/// mirrored about its edges; the neighbours' channels those of the true CFA positions).
+fn gradient_reference(v: &[f32], w: usize, h: usize, cfa: &Cfa, gain: f32) -> Vec<f32> {
+    let nc = cfa.n_channels();
+    let mut out = vec![0f32; w * h * nc];
+    for r in 0..h {
+        for c in 0..w {
+            let at = |dy: isize, dx: isize| {
+                v[mirror(r as isize + dy, h) * w + mirror(c as isize + dx, w)]
+            };
+            let x = at(0, 0);
+            let (h2, v2) = (at(0, -2) + at(0, 2), at(-2, 0) + at(2, 0));
+            let (lx, ly) = (x - 0.5 * h2, x - 0.5 * v2);
+            let own_mean = 0.5 * x + 0.125 * (h2 + v2);
+            let groups: [Group; 3] = [
+                (&[(0, -1), (0, 1)], cfa.channel_at(r, c + 1), 1.0, 0.0),
+                (&[(-1, 0), (1, 0)], cfa.channel_at(r + 1, c), 0.0, 1.0),
+                (
+                    &[(-1, -1), (-1, 1), (1, -1), (1, 1)],
+                    cfa.channel_at(r + 1, c + 1),
+                    2.0,
+                    2.0,
+                ),
+            ];
+            for k in 0..nc {
+                out[(r * w + c) * nc + k] = if k == cfa.channel_at(r, c) {
+                    x
+                } else {
+                    let (mut s, mut n, mut axx, mut ayy) = (0f32, 0usize, 0f32, 0f32);
+                    for (offs, _, xx, yy) in groups.iter().filter(|g| g.1 == k) {
+                        for &(dy, dx) in *offs {
+                            s += at(dy, dx);
+                            n += 1;
+                        }
+                        (axx, ayy) = (axx + xx, ayy + yy);
+                    }
+                    let n = n.max(1) as f32;
+                    let mean = s / n;
+                    let rho = if own_mean > 0.0 {
+                        (mean / own_mean).clamp(0.0, 4.0)
+                    } else {
+                        1.0
+                    };
+                    mean + gain * rho * (axx / (2.0 * n) * lx + ayy / (2.0 * n) * ly)
+                };
+            }
+        }
+    }
+    out
+}
+
+#[test]
+fn gradient_demosaic_is_its_formula_at_every_pixel_and_size() {
+    for (w, h) in [(12, 10), (1, 1), (2, 3), (3, 2), (5, 4)] {
+        for s in ["RG/WB", "GR/BW", "WB/RG", "BW/GR", "RG/GB", "GB/RG"] {
+            let cfa = Cfa::parse(s).unwrap();
+            let v: Vec<f32> = normals(w * h, 7).iter().map(|n| 0.4 + 0.1 * n).collect();
+            for gain in [1.0, 0.5] {
+                let got = gradient_demosaic(&v, w, h, &cfa, gain).unwrap();
+                let want = gradient_reference(&v, w, h, &cfa, gain);
+                for (i, (g, t)) in got.iter().zip(&want).enumerate() {
+                    assert!(
+                        (g - t).abs() < 1e-6,
+                        "{s} {w}×{h} gain {gain} at {i}: {g} vs {t}"
+                    );
+                }
+            }
+        }
+    }
 }
 
 fn profile() -> NoiseProfile {
