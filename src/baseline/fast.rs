@@ -20,7 +20,7 @@
 
 use rayon::prelude::*;
 
-use super::{BaselineError, ColourMatrix, check_frame, check_matrix, pad_mirrored};
+use super::{BaselineError, ColourMatrix, check_frame, check_matrix};
 use crate::camera::Cfa;
 use crate::colour::SrgbLut;
 use crate::l3::classify::mirror;
@@ -309,6 +309,23 @@ fn render<S: Sink>(
         }
     }
     Ok(out)
+}
+
+/// The frame mirrored `pad` pixels past every edge (as [`mirror`] does), for the per-pixel
+/// path's fixed 5 × 5 neighbourhood.
+fn pad_mirrored(volts: &[f32], width: usize, height: usize, pad: usize) -> Vec<f32> {
+    let pw = width + 2 * pad;
+    let mut out = vec![0f32; pw * (height + 2 * pad)];
+    for (pr, row) in out.chunks_exact_mut(pw).enumerate() {
+        let r = mirror(pr as isize - pad as isize, height);
+        let src = &volts[r * width..(r + 1) * width];
+        row[pad..pad + width].copy_from_slice(src);
+        for p in 0..pad {
+            row[p] = src[mirror(p as isize - pad as isize, width)];
+            row[pad + width + p] = src[mirror((width + p) as isize, width)];
+        }
+    }
+    out
 }
 
 fn non_finite() -> BaselineError {
