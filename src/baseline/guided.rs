@@ -1,6 +1,6 @@
 //! The self-guided filter (He, Sun and Tang, *Guided image filtering*, 2010/2013) with a
 //! per-pixel ε, streamed down a band of rows of a plane: the denoiser's one filter
-//! ([`super::denoise`]).
+//! ([`super::denoise`]), and the L3 renderer's chroma stage's ([`crate::l3::render::chroma`]).
 //!
 //! For a plane `I` and radius `r`, with every window the `(2r+1)²` square clamped to the plane:
 //! `m`, `q` the window means of `I` and `I²`, `cov = q − m²`,
@@ -33,7 +33,7 @@ use std::ops::Range;
 
 /// One self-guided filter of radius `r` down planes of a given height, with its rings and
 /// accumulators (reused from band to band, and resized to each band's width).
-pub(super) struct SelfGuided {
+pub(crate) struct SelfGuided {
     h: usize,
     /// The radius asked for, and the one used on the current width (cut to the plane's
     /// sides: a larger one is the whole plane's).
@@ -61,7 +61,7 @@ pub(super) struct SelfGuided {
 
 impl SelfGuided {
     /// A filter of radius `r` for planes `height` rows high.
-    pub(super) fn new(height: usize, r: usize) -> Self {
+    pub(crate) fn new(height: usize, r: usize) -> Self {
         Self {
             h: height,
             radius: r,
@@ -290,7 +290,7 @@ impl SelfGuided {
 /// `r`. Side by side, the filters take their rows at the same time, so that inputs made from
 /// the same source rows (a pixel's channels) read them once. Runs with AVX2 where the CPU
 /// has it (the same arithmetic, more of it per instruction).
-pub(super) fn run_side_by_side(
+pub(crate) fn run_side_by_side(
     filters: &mut [SelfGuided],
     width: usize,
     rows: Range<usize>,

@@ -13,7 +13,7 @@
 mod bilinear;
 mod denoise;
 mod fast;
-mod guided;
+pub(crate) mod guided;
 mod isp;
 mod malvar;
 mod matrix;

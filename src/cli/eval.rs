@@ -12,6 +12,7 @@ use crate::eval::{
 };
 use crate::l3::L3Table;
 use crate::l3::correct::{IDENTITY, IlluminantEntry, IlluminantRegistry};
+use crate::l3::render::ChromaMode;
 use crate::l3::table::TableKind;
 use crate::pipeline::{CorrectionMode, correction_for, uses_own_kernels};
 use crate::spectral::{IsetData, WavelengthGrid};
@@ -73,6 +74,10 @@ pub struct EvalArgs {
     /// the light (low light).
     #[arg(long, conflicts_with = "scene_luminance")]
     pub exposure: Option<f64>,
+    /// The chroma stage of L3 renders: `auto` (when the frame's chroma noise needs it), `on`
+    /// or `off` (as `l3 render --chroma-denoise`).
+    #[arg(long, default_value_t = ChromaMode::default())]
+    pub chroma_denoise: ChromaMode,
     /// Mean chart luminance in cd/m². Below 100 cd/m² the camera holds its
     /// longest exposure (auto-exposure's time at 100 cd/m²), so the signal
     /// falls with the light.
@@ -195,6 +200,7 @@ fn chart_setup(a: &EvalArgs) -> Result<ChartSetup, CliError> {
         seed: a.seed,
         noise: !a.no_noise,
         patch_px: a.patch_px.into(),
+        chroma_denoise: a.chroma_denoise,
         ..ChartSetup::default()
     };
     let light = match (a.exposure, a.scene_luminance) {

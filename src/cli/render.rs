@@ -14,7 +14,7 @@ use crate::io::{
 };
 use crate::l3::L3Table;
 use crate::l3::correct::{IlluminantEntry, IlluminantRegistry};
-use crate::l3::render::WhiteLevel;
+use crate::l3::render::{ChromaMode, WhiteLevel};
 use crate::l3::table::TableKind;
 use crate::pipeline::{
     CorrectionMode, DecodedFrame, Input, Levels, LightChoice, LightOrigin, OutputFormat,
@@ -84,6 +84,10 @@ pub struct RenderArgs {
     /// `colorimetric` (the paper's T).
     #[arg(long, default_value = "camera")]
     pub correction: CorrectionMode,
+    /// The chroma stage at low light: `auto` (when the frame's chroma noise needs it), `on`
+    /// or `off` (as the service's `chroma_denoise`; docs/accuracy.md).
+    #[arg(long, default_value_t = ChromaMode::default())]
+    pub chroma_denoise: ChromaMode,
 }
 
 /// A failure of `l3 render`: the pipeline's (shown with the input's path where it is about
@@ -212,6 +216,7 @@ fn render_request(
             quality: a.quality,
             subsampling: a.subsampling,
         },
+        chroma: a.chroma_denoise,
     };
     let renderer = match a.renderer.as_str() {
         "fast" => Renderer::Fast,

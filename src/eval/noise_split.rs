@@ -107,7 +107,15 @@ impl MethodOnChart<'_> {
         report.spatial = caps.score(camera, self.method, self.correction)?;
         let e = &caps.edge;
         let corr = method_correction(camera, self.method, self.correction)?;
-        let own = render_method(self.method, &corr, &e.volts, e.width, e.height, cfa)?;
+        let size = (e.width, e.height);
+        let own = render_method(
+            self.method,
+            &corr,
+            &e.volts,
+            size,
+            cfa,
+            setup.chroma_denoise,
+        )?;
         let isp = super::acquisition_isp(camera, self.acquisition, self.iset, setup.noise)?;
         let isp = isp.with_noise(isp.noise().map(|_| NoiseProfile::new(camera, e.exposure_s)));
         let identity = IlluminantEntry {
@@ -118,9 +126,9 @@ impl MethodOnChart<'_> {
             &Method::Isp(&isp),
             &identity,
             &e.volts,
-            e.width,
-            e.height,
+            size,
             cfa,
+            setup.chroma_denoise,
         )?;
         let rival_name = format!("ISP_{}", super::paper_table::short(self.acquisition));
         report.edge_panel = Some(EdgePanel::new(

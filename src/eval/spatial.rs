@@ -12,6 +12,7 @@ use super::texture::{TextureCapture, simulate_texture};
 use super::workflow::{ChartSetup, Method, method_correction, render_method};
 use crate::camera::Camera;
 use crate::l3::correct::IlluminantEntry;
+use crate::l3::render::ChromaMode;
 use crate::scene::SlantedEdgeParams;
 use crate::spectral::IsetData;
 
@@ -45,6 +46,8 @@ pub struct SpatialScore {
 pub struct SpatialCaptures {
     pub edge: EdgeCapture,
     pub texture: TextureCapture,
+    /// Whether L3 renders of them run the chroma stage (the set-up's).
+    pub chroma: ChromaMode,
 }
 
 /// Simulate the edge and the texture (`size × size` each) under `acquisition` as `setup` says.
@@ -64,6 +67,7 @@ pub fn simulate_spatial(
             &SlantedEdgeParams::new(size, size),
         )?,
         texture: simulate_texture(camera, acquisition, iset, setup, size)?,
+        chroma: setup.chroma_denoise,
     })
 }
 
@@ -78,7 +82,14 @@ impl SpatialCaptures {
     ) -> Result<SpatialScore, EvalError> {
         let correction = method_correction(camera, method, correction)?;
         self.score_with(|volts: &[f32], w, h| {
-            render_method(method, &correction, volts, w, h, camera.cfa())
+            render_method(
+                method,
+                &correction,
+                volts,
+                (w, h),
+                camera.cfa(),
+                self.chroma,
+            )
         })
     }
 

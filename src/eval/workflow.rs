@@ -12,7 +12,7 @@ use crate::l3::L3Table;
 use crate::l3::correct::{
     ColourSamples, ColourTarget, IlluminantEntry, colour_samples, same_illuminant_corrections,
 };
-use crate::l3::render::Mosaic;
+use crate::l3::render::{ChromaMode, Mosaic};
 use crate::l3::table::TableKind;
 use crate::scene::{Scene, SceneOptions, macbeth, natural100_chart};
 use crate::spectral::{Extrapolation, IlluminantSpec, IsetData, Spectrum, cie_illuminant};
@@ -44,6 +44,9 @@ pub struct ChartSetup {
     /// The chart: Natural-100 (the paper's) or the Macbeth ColorChecker.
     #[serde(default)]
     pub chart: EvalChart,
+    /// Whether L3 renders run the chroma stage ([`ChromaMode`]; `auto` by default).
+    #[serde(default)]
+    pub chroma_denoise: ChromaMode,
 }
 
 /// The chart an evaluation simulates (or reads from a frame).
@@ -95,6 +98,7 @@ impl Default for ChartSetup {
             noise: true,
             exposure_factor: 1.0,
             chart: EvalChart::Natural100,
+            chroma_denoise: ChromaMode::Auto,
         }
     }
 }
@@ -381,21 +385,22 @@ pub fn frame_chart_capture(
     })
 }
 
-/// Render a mosaic with `method`, correcting with `correction` (ignored for
-/// cross-illuminant tables, whose output is already under D65). XYZ out.
+/// Render a mosaic (`width × height`) with `method`, correcting with `correction` (ignored
+/// for cross-illuminant tables, whose output is already under D65); a table's render runs
+/// the chroma stage as `chroma` says. XYZ out.
 pub fn render_method(
     method: &Method,
     correction: &IlluminantEntry,
     volts: &[f32],
-    width: usize,
-    height: usize,
+    (width, height): (usize, usize),
     cfa: &crate::camera::Cfa,
+    chroma: ChromaMode,
 ) -> Result<Vec<f32>, EvalError> {
     Ok(match method {
         Method::Table(t) => {
+            let never = std::sync::atomic::AtomicBool::new(false);
             crate::pipeline::RenderPipeline::new(t, correction)?
-                .renderer()
-                .render_xyz(Mosaic::Volts(volts), width, height, None)?
+                .render_xyz(Mosaic::Volts(volts), width, height, None, chroma, &never)?
                 .0
         }
         Method::Baseline(m) => render_baseline(volts, width, height, cfa, &m.then(&correction.t))?,
@@ -461,9 +466,9 @@ pub fn evaluate_capture(
         method,
         correction,
         &cap.volts,
-        cap.width,
-        cap.height,
+        (cap.width, cap.height),
         camera.cfa(),
+        setup.chroma_denoise,
     )?;
     let render_ms = started.elapsed().as_secs_f64() * 1e3;
     let ctx = serde_json::json!({

@@ -4,6 +4,7 @@
 use super::error::PipelineError;
 use super::output::Encoding;
 use crate::io::{JpegOptions, PngCompression};
+use crate::l3::render::ChromaMode;
 use crate::l3::render::{Region, WhiteLevel};
 
 /// Largest preview downscale factor.
@@ -22,6 +23,8 @@ pub struct RenderOptions {
     pub png: PngCompression,
     /// JPEG quality and chroma subsampling.
     pub jpeg: JpegOptions,
+    /// Whether the chroma stage runs ([`ChromaMode`]; `auto`: when the frame needs it).
+    pub chroma: ChromaMode,
 }
 
 impl Default for RenderOptions {
@@ -32,6 +35,7 @@ impl Default for RenderOptions {
             preview: 1,
             png: PngCompression::Fast,
             jpeg: JpegOptions::default(),
+            chroma: ChromaMode::Auto,
         }
     }
 }

@@ -11,7 +11,7 @@ use super::options::{RenderOptions, downscale, output_size};
 use super::output::{Encoded, Image, OutputFormat, Pixels, encode};
 use crate::l3::L3Table;
 use crate::l3::correct::IlluminantEntry;
-use crate::l3::render::RenderError;
+use crate::l3::render::{ChromaMode, ChromaStage, RenderError};
 use crate::l3::render::{FastRenderer, Mosaic, RenderStats, render_reference_under, white_y};
 
 /// The output of a render.
@@ -27,9 +27,11 @@ pub struct Rendered {
     pub encode_ms: f64,
 }
 
-/// A table prepared to render under one illuminant.
+/// A table prepared to render under one illuminant: the fast renderer and the chroma stage
+/// ([`ChromaStage`]; `None` for a table that names no sensor).
 pub struct RenderPipeline {
     renderer: FastRenderer,
+    chroma: Option<ChromaStage>,
 }
 
 fn ms(a: Instant, b: Instant) -> f64 {
@@ -39,19 +41,18 @@ fn ms(a: Instant, b: Instant) -> f64 {
 impl RenderPipeline {
     /// Prepares `table` for `entry` (kernel selection: [`kernels_for`]).
     pub fn new(table: &L3Table, entry: &IlluminantEntry) -> Result<Self, RenderError> {
-        Ok(Self {
-            renderer: FastRenderer::under_light(
-                table,
-                &kernels_for(table, entry)?,
-                entry.neutral.as_deref(),
-            )?,
-        })
+        let kernels = Kernels {
+            xyz: kernels_for(table, entry)?,
+            neutral: entry.neutral.clone(),
+        };
+        Self::prepare(table, &kernels)
     }
 
     /// Prepares `table` with chosen kernels ([`super::kernels::KernelChoice::kernels`]).
     pub fn prepare(table: &L3Table, kernels: &Kernels) -> Result<Self, RenderError> {
         Ok(Self {
             renderer: FastRenderer::under_light(table, &kernels.xyz, kernels.neutral.as_deref())?,
+            chroma: ChromaStage::new(table, &kernels.xyz)?,
         })
     }
 
@@ -59,7 +60,40 @@ impl RenderPipeline {
     pub fn with_kernels(table: &L3Table, kernels: &[f32]) -> Result<Self, RenderError> {
         Ok(Self {
             renderer: FastRenderer::new(table, kernels)?,
+            chroma: ChromaStage::new(table, kernels)?,
         })
+    }
+
+    /// The chroma stage, when this frame runs it under `mode`.
+    fn chroma_for(&self, mode: ChromaMode, mosaic: &Mosaic<'_>) -> Option<&ChromaStage> {
+        self.chroma
+            .as_ref()
+            .filter(|c| c.runs(mode, mosaic_sample(mosaic, self.renderer.voltage_swing())))
+    }
+
+    /// Renders `mosaic` (`width × height`, or its `region`) to XYZ, then the chroma stage
+    /// when the frame runs it under `mode`: what every XYZ render of a pipeline goes
+    /// through (the service, `l3 render`, the evaluations).
+    pub fn render_xyz(
+        &self,
+        mosaic: Mosaic<'_>,
+        width: usize,
+        height: usize,
+        region: Option<crate::l3::render::Region>,
+        mode: ChromaMode,
+        cancel: &AtomicBool,
+    ) -> Result<(Vec<f32>, RenderStats), RenderError> {
+        let stage = self.chroma_for(mode, &mosaic);
+        let (xyz, stats) = self
+            .renderer
+            .render_xyz_until(mosaic, width, height, region, cancel)?;
+        match stage {
+            Some(c) => {
+                let (rw, rh) = region.map_or((width, height), |g| (g.width, g.height));
+                Ok((c.apply(&xyz, rw, rh)?, stats))
+            }
+            None => Ok((xyz, stats)),
+        }
     }
 
     /// The fast renderer behind the pipeline.
@@ -87,13 +121,20 @@ impl RenderPipeline {
         let r = &self.renderer;
         let t0 = Instant::now();
         // only what the output needs: 8-bit sRGB straight from the kernels for a PNG or PPM
-        // at full size, XYZ otherwise; only the region's pixels
-        let (pixels, stats, wy) = if format.is_srgb8() && opts.preview == 1 {
+        // at full size when the chroma stage does not run, XYZ otherwise; only the region's
+        // pixels
+        let chroma = self.chroma_for(opts.chroma, &mosaic).is_some();
+        let (pixels, stats, wy) = if format.is_srgb8() && opts.preview == 1 && !chroma {
             let (rgb, wy, stats) =
                 r.render_srgb8_until(mosaic, width, height, opts.region, opts.white, cancel)?;
             (Pixels::Srgb8(rgb), stats, wy)
         } else {
-            let (xyz, stats) = r.render_xyz_until(mosaic, width, height, opts.region, cancel)?;
+            let mode = if chroma {
+                ChromaMode::On
+            } else {
+                ChromaMode::Off
+            };
+            let (xyz, stats) = self.render_xyz(mosaic, width, height, opts.region, mode, cancel)?;
             let wy = if format.needs_white() {
                 r.white_y(mosaic, width, height, opts.white)?
             } else {
@@ -149,6 +190,13 @@ pub fn render_reference(
         width,
         height,
     )?;
+    let stage = ChromaStage::new(table, &kernels.xyz)?;
+    let swing = table.meta.voltage_swing as f32;
+    let xyz =
+        match stage.filter(|c| c.runs(opts.chroma, mosaic_sample(&Mosaic::Volts(volts), swing))) {
+            Some(c) => c.apply(&xyz, width, height)?,
+            None => xyz,
+        };
     let wy = if format.needs_white() {
         white_y(&xyz, width, height, opts.white)
     } else {
@@ -171,4 +219,23 @@ pub fn render_reference(
         render_ms: ms(t0, t1),
         encode_ms: ms(t1, Instant::now()),
     })
+}
+
+/// Every 7th value of a mosaic, in volts: what [`ChromaStage::runs`] decides on.
+fn mosaic_sample<'a>(mosaic: &'a Mosaic<'_>, swing: f32) -> impl Iterator<Item = f32> + 'a {
+    const STEP: usize = 7;
+    let (volts, dn) = match *mosaic {
+        Mosaic::Volts(v) => (Some(v), None),
+        Mosaic::Dn { data, black, white } => (None, Some((data, black, white))),
+    };
+    let a = volts
+        .into_iter()
+        .flat_map(|v| v.iter().step_by(STEP).copied());
+    let b = dn.into_iter().flat_map(move |(d, black, white)| {
+        let k = swing / f32::from(white.saturating_sub(black).max(1));
+        d.iter()
+            .step_by(STEP)
+            .map(move |&v| f32::from(v.saturating_sub(black)) * k)
+    });
+    a.chain(b)
 }

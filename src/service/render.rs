@@ -34,7 +34,7 @@ use crate::io::{
 };
 use crate::l3::L3Table;
 use crate::l3::correct::IlluminantEntry;
-use crate::l3::render::WhiteLevel;
+use crate::l3::render::{UnknownChromaMode, WhiteLevel};
 use crate::pipeline::{
     CorrectionMode, Encoded, Input, KernelChoice, Levels, LightChoice, LightOrigin, OutputFormat,
     PipelineError, RenderContext, RenderOptions, RenderOutcome, RenderPipeline, RenderRequest,
@@ -70,6 +70,8 @@ pub struct RenderQuery {
     pub quality: Option<String>,
     /// JPEG chroma subsampling: `420` (default), `422` or `444`.
     pub subsampling: Option<String>,
+    /// The chroma stage at low light: `auto` (default), `on` or `off`.
+    pub chroma_denoise: Option<String>,
     /// `camera` or `colorimetric` (default: the config's `correction`).
     pub correction: Option<String>,
     /// A stored table to render with instead of the active one (or the DNG camera's).
@@ -301,6 +303,13 @@ fn output_of(
                 .map_err(|e: UnknownSubsampling| ServiceError::BadRequest(e.to_string()))?
                 .unwrap_or_default(),
         },
+        chroma: q
+            .chroma_denoise
+            .as_deref()
+            .map(str::parse)
+            .transpose()
+            .map_err(|e: UnknownChromaMode| ServiceError::BadRequest(e.to_string()))?
+            .unwrap_or_default(),
     };
     Ok((format, options))
 }

@@ -1,12 +1,15 @@
 //! Rendering a mosaic with a table: the reference renderer (`reference.rs`: simple,
 //! parallel over rows), the fast renderer ([`FastRenderer`], docs/design.md §9: the same classes
-//! and kernels, organised for speed) and the output encodings (`output.rs`).
+//! and kernels, organised for speed), the chroma stage at low light ([`chroma`]) and the
+//! output encodings (`output.rs`).
 
+pub mod chroma;
 pub(super) mod error;
 mod fast;
 pub(super) mod output;
 pub(super) mod reference;
 
+pub use chroma::{ChromaMode, ChromaStage, UnknownChromaMode};
 pub use error::RenderError;
 pub use fast::{FastOptions, FastRenderer, Frame, Mosaic, Region};
 pub use output::{

@@ -268,6 +268,11 @@ impl FastRenderer {
             && matches!(self.geo.size, 3 | 5 | 7)
     }
 
+    /// The voltage swing the renderer's mosaics are scaled to.
+    pub fn voltage_swing(&self) -> f32 {
+        self.swing
+    }
+
     /// Render `region` (default: the whole frame) of a `width × height` mosaic to
     /// interleaved XYZ. Equals cropping [`render_reference`](super::render_reference)'s
     /// output to the region, to float rounding.
