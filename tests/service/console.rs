@@ -1,8 +1,9 @@
 //! The console at `/`: served as small, self-contained files without a token, and used end to
 //! end in headless Chromium driven through chromedriver (WebDriver): the status, a simulated
 //! RGBW DNG rendered with its light and timings, a tiny training job to 100 %, an evaluation's
-//! figure. The browser test prints `skipped:` without Chromium or chromedriver (fails under
-//! `CI`); it writes screenshots to a temporary folder and prints its path.
+//! figure, a light added and removed. The browser test prints `skipped:` without Chromium or
+//! chromedriver (fails under `CI`); it writes screenshots to a temporary folder and prints its
+//! path.
 
 use std::path::{Path, PathBuf};
 use std::process::{Child, Command, Stdio};
@@ -393,11 +394,52 @@ async fn evaluate(b: &Client, shots: &Path) {
     screenshot(b, shots, "console-evaluation.png").await;
 }
 
+/// Adds a light from a colour temperature, finds it among the render's lights, removes it.
+async fn add_and_remove_a_light(b: &Client) {
+    click(b, "button[data-tab=\"lights\"]").await;
+    set_field(b, "#light-name", "Studio4700").await;
+    set_field(b, "#light-cct", "4700").await;
+    click(b, "#light-go").await;
+    let row = "#lights-body tr:has(button.danger)";
+    wait_js(
+        b,
+        "the new light",
+        &format!("return !!document.querySelector('{row}')"),
+        30,
+    )
+    .await;
+    assert!(text(b, row).await.starts_with("Studio4700"));
+    assert!(
+        text(b, "#light-msg")
+            .await
+            .starts_with("Added Studio4700 (4700 K)")
+    );
+    let option = b
+        .find(Locator::Css("#render-light option[value=\"Studio4700\"]"))
+        .await
+        .unwrap();
+    assert_eq!(
+        option.prop("textContent").await.unwrap().unwrap(),
+        "Studio4700 (4700 K)"
+    );
+    click(b, &format!("{row} button")).await;
+    b.accept_alert().await.unwrap();
+    wait_js(
+        b,
+        "the light removed",
+        &format!("return !document.querySelector('{row}')"),
+        30,
+    )
+    .await;
+}
+
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn the_console_renders_trains_and_evaluates_in_chromium() {
     let (chromium, chromedriver) = match browser() {
         Ok(found) => found,
-        Err(why) if std::env::var_os("CI").is_some() => panic!("the console test needs {why}"),
+        Err(why) if std::env::var_os("CI").is_some() => {
+            panic!("the console test cannot run under CI: {why}")
+        }
         Err(why) => {
             println!("skipped: {why}");
             return;
@@ -429,6 +471,7 @@ async fn the_console_renders_trains_and_evaluates_in_chromium() {
     render_a_dng(&b, &dng, &shots).await;
     let job = train_a_tiny_table(&b, &shots).await;
     evaluate(&b, &shots).await;
+    add_and_remove_a_light(&b).await;
     // the job the page submitted is the service's
     let j = json(
         client()
