@@ -395,7 +395,7 @@ async fn evaluate(b: &Client, shots: &Path) {
 }
 
 /// Adds a light from a colour temperature, finds it among the render's lights, removes it.
-async fn add_and_remove_a_light(b: &Client) {
+async fn add_and_remove_a_light(b: &Client, shots: &Path) {
     click(b, "button[data-tab=\"lights\"]").await;
     set_field(b, "#light-name", "Studio4700").await;
     set_field(b, "#light-cct", "4700").await;
@@ -422,6 +422,7 @@ async fn add_and_remove_a_light(b: &Client) {
         option.prop("textContent").await.unwrap().unwrap(),
         "Studio4700 (4700 K)"
     );
+    screenshot(b, shots, "console-lights.png").await;
     click(b, &format!("{row} button")).await;
     b.accept_alert().await.unwrap();
     wait_js(
@@ -471,7 +472,22 @@ async fn the_console_renders_trains_and_evaluates_in_chromium() {
     render_a_dng(&b, &dng, &shots).await;
     let job = train_a_tiny_table(&b, &shots).await;
     evaluate(&b, &shots).await;
-    add_and_remove_a_light(&b).await;
+    // the tables: the active one and the job's, each with the sensor it was trained for
+    click(&b, "button[data-tab=\"tables\"]").await;
+    wait_js(
+        &b,
+        "two tables",
+        "return document.querySelectorAll('#tables-body tr').length == 2",
+        30,
+    )
+    .await;
+    let tables = text(&b, "#tables-body").await;
+    assert!(
+        tables.contains("rgbw-paper") && tables.contains("active"),
+        "{tables}"
+    );
+    screenshot(&b, &shots, "console-tables.png").await;
+    add_and_remove_a_light(&b, &shots).await;
     // the job the page submitted is the service's
     let j = json(
         client()
