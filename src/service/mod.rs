@@ -6,6 +6,7 @@ mod accept;
 mod admission;
 mod colorchecker;
 mod config;
+mod console;
 mod cpu;
 mod error;
 mod evaluations;

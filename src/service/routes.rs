@@ -1,5 +1,5 @@
-//! The router: the route list (one const, checked against openapi.yaml by a test), health,
-//! readiness, metrics, the OpenAPI document, and the middleware (auth, timeout, metrics,
+//! The router: the route list (one const, checked against openapi.yaml by a test), the
+//! console, health, readiness, metrics, the OpenAPI document, and the middleware (auth, timeout, metrics,
 //! tracing, request ids, body limit).
 
 use std::sync::atomic::{AtomicU64, Ordering};
@@ -18,7 +18,7 @@ use tower_http::request_id::{
 use tower_http::trace::TraceLayer;
 
 use super::state::AppState;
-use super::{ServiceError, evaluations, illuminants, jobs, render, sensors, tables};
+use super::{ServiceError, console, evaluations, illuminants, jobs, render, sensors, tables};
 
 /// Every served route as (method, path); openapi.yaml documents exactly these.
 pub const ROUTES: &[(&str, &str)] = &[
@@ -44,6 +44,9 @@ pub const ROUTES: &[(&str, &str)] = &[
     ("GET", "/readyz"),
     ("GET", "/metrics"),
     ("GET", "/openapi.yaml"),
+    ("GET", "/"),
+    ("GET", "/console/console.css"),
+    ("GET", "/console/console.js"),
 ];
 
 /// The committed OpenAPI document, served at `/openapi.yaml`.
@@ -78,12 +81,19 @@ fn handler(method: &str, path: &str) -> Option<MethodRouter<AppState>> {
         ("GET", "/readyz") => get(readyz),
         ("GET", "/metrics") => get(metrics),
         ("GET", "/openapi.yaml") => get(openapi),
+        ("GET", "/") => get(console::page),
+        ("GET", "/console/console.css") => get(console::css),
+        ("GET", "/console/console.js") => get(console::js),
         _ => return None,
     })
 }
 
-async fn healthz() -> impl IntoResponse {
-    axum::Json(json!({ "status": "ok", "version": env!("CARGO_PKG_VERSION") }))
+async fn healthz(State(state): State<AppState>) -> impl IntoResponse {
+    axum::Json(json!({
+        "status": "ok",
+        "version": env!("CARGO_PKG_VERSION"),
+        "backend": state.store.backend(),
+    }))
 }
 
 async fn readyz(State(state): State<AppState>) -> Result<Response, ServiceError> {
