@@ -236,11 +236,39 @@ async fn render_of_a_tungsten_frame_equals_l3_render_bit_for_bit() {
         ("quality=0", "expected an integer from 1 to 100"),
         ("quality=high", "expected an integer from 1 to 100"),
         ("subsampling=411", "expected 420, 422 or 444"),
+        ("chroma_denoise=sometimes", "expected auto, on or off"),
     ] {
         let r = post_jpeg(format!("{q}&{bad}")).await.unwrap();
         let detail = problem(r, 400, "bad_request").await;
         assert!(detail.contains(says), "{bad}: {detail}");
     }
+    // the chroma stage on request: the CLI's bytes; this synthetic table names no sensor, so it
+    // has no noise model and the stage cannot run (tests/cli/spatial.rs has it running)
+    l3_cli(
+        &[
+            "render",
+            "--table",
+            "table.safetensors",
+            "--in",
+            "sim/mosaic.raw",
+            "--illuminant",
+            "Tungsten",
+            "--chroma-denoise",
+            "on",
+            "--out",
+            "cli-cd.png",
+        ],
+        d,
+    );
+    let r = post_png(format!("{q}&chroma_denoise=on")).await.unwrap();
+    assert_eq!(r.status(), 200);
+    let body = r.bytes().await.unwrap();
+    assert!(body[..] == std::fs::read(d.join("cli-cd.png")).unwrap()[..]);
+    let plain = post_png(q.clone()).await.unwrap().bytes().await.unwrap();
+    assert!(
+        body == plain,
+        "a table without a sensor ran the chroma stage"
+    );
     // the correction: camera-aware C by default, the paper's T on request, on both sides
     let r = post_png(q.clone()).await.unwrap();
     assert_eq!(r.headers()["x-l3-correction"], "camera");
