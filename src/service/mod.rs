@@ -244,6 +244,9 @@ async fn open_state(cfg: &ServiceConfig) -> Result<(AppState, TrainingSpec), Ser
         cfg.training.background_threads,
         cfg.training.background_priority,
     )?;
+    let tables = table_cache::TableCache::new(cfg.tables.cache_bytes);
+    let metrics = metrics::Metrics::new(&tables.counters)
+        .map_err(|e| ServiceError::Internal(format!("metrics registry: {e}")))?;
     let state = AppState(Arc::new(Inner {
         admission: admission::Admission::new(&cfg.server),
         cpu_gate: Arc::new(Semaphore::new(
@@ -261,8 +264,8 @@ async fn open_state(cfg: &ServiceConfig) -> Result<(AppState, TrainingSpec), Ser
         default_registry: defaults,
         active: ArcSwapOption::empty(),
         kernel_cache: Mutex::new(HashMap::new()),
-        tables: table_cache::TableCache::new(cfg.tables.cache_bytes),
-        metrics: metrics::Metrics::default(),
+        tables,
+        metrics,
         tables_dir,
         job_notify: Notify::new(),
         running_jobs: Mutex::new(HashMap::new()),
