@@ -34,7 +34,8 @@ use tokio::sync::{Notify, Semaphore};
 
 pub use admission::Admission;
 pub use config::{
-    DEFAULT_CONFIG_TOML, DataConfig, ServerConfig, ServiceConfig, TablesConfig, TrainingConfig,
+    ConfigFlags, DEFAULT_CONFIG_TOML, DataConfig, ServerConfig, ServiceConfig, TablesConfig,
+    TrainingConfig,
 };
 pub use error::ServiceError;
 // what the fuzz bodies (`crate::fuzzing`, test support only) run as the service does
