@@ -23,11 +23,12 @@ pub struct SensorsArgs {
 
 /// The service's configuration with `data_dir` over its data directory.
 pub(crate) fn data_config(data_dir: &Option<PathBuf>) -> Result<ServiceConfig, CliError> {
-    let mut cfg = ServiceConfig::load(None).map_err(|e| CliError::Usage(e.to_string()))?;
-    if let Some(d) = data_dir {
-        cfg.data.dir = d.clone();
-    }
-    Ok(cfg)
+    let flags = crate::service::ConfigFlags {
+        data_dir: data_dir.clone(),
+        ..Default::default()
+    };
+    ServiceConfig::load_layers(None, &ServiceConfig::process_env(), &flags)
+        .map_err(|e| CliError::Usage(e.to_string()))
 }
 
 /// Runs `f` to completion on a single-threaded runtime.

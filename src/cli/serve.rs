@@ -3,7 +3,7 @@ use std::path::PathBuf;
 use clap::Args;
 
 use super::{Cli, CliError};
-use crate::service::{ServiceConfig, ServiceError, start_with};
+use crate::service::{ConfigFlags, ServiceConfig, ServiceError, start_with};
 
 #[derive(Args, Debug)]
 pub struct ServeArgs {
@@ -41,17 +41,14 @@ async fn shutdown_signal() {
 }
 
 pub fn run(cli: &Cli, a: &ServeArgs) -> Result<(), CliError> {
-    let mut cfg =
-        ServiceConfig::load(a.config.as_deref()).map_err(|e| CliError::Usage(e.to_string()))?;
-    if let Some(d) = &cli.iset_dir {
-        cfg.data.iset_dir = Some(d.clone());
-    }
-    if let Some(bind) = a.bind {
-        cfg.server.bind = bind;
-    }
-    if let Some(d) = &a.data_dir {
-        cfg.data.dir = d.clone();
-    }
+    let flags = ConfigFlags {
+        bind: a.bind,
+        data_dir: a.data_dir.clone(),
+        iset_dir: cli.iset_dir.clone(),
+    };
+    let cfg =
+        ServiceConfig::load_layers(a.config.as_deref(), &ServiceConfig::process_env(), &flags)
+            .map_err(|e| CliError::Usage(e.to_string()))?;
     let filter = tracing_subscriber::EnvFilter::try_from_env("L3_LOG")
         .unwrap_or_else(|_| tracing_subscriber::EnvFilter::new("info,sqlx=warn"));
     let builder = tracing_subscriber::fmt().with_env_filter(filter);

@@ -92,16 +92,11 @@ impl Admission {
         }
     }
 
-    /// Gauges in the Prometheus text format: bytes of the budget reserved, requests queued.
-    pub fn exposition(&self) -> String {
-        let reserved = self
-            .budget_units
+    /// Bytes of the body budget reserved by bodies in flight now.
+    pub fn reserved_bytes(&self) -> usize {
+        self.budget_units
             .saturating_sub(self.body_budget.available_permits())
-            * BUDGET_UNIT;
-        format!(
-            "# HELP l3_render_body_bytes_reserved Body budget held by render bodies in flight (bytes).\n# TYPE l3_render_body_bytes_reserved gauge\nl3_render_body_bytes_reserved {reserved}\n# HELP l3_render_queue_length Renders waiting for a render slot.\n# TYPE l3_render_queue_length gauge\nl3_render_queue_length {}\n",
-            self.queued()
-        )
+            * BUDGET_UNIT
     }
 
     /// Requests waiting for a render slot now.
@@ -117,7 +112,7 @@ impl Admission {
     }
 
     fn budget_spent(&self, bytes: usize, counters: &AdmissionCounters) -> ServiceError {
-        counters.budget_refusals.fetch_add(1, Ordering::Relaxed);
+        counters.budget_refusals.inc();
         ServiceError::Overloaded {
             msg: format!(
                 "the bodies in flight hold the whole body budget; this one ({bytes} bytes) must wait; retry shortly"
@@ -177,7 +172,7 @@ impl Admission {
         elapsed: Duration,
         counters: &AdmissionCounters,
     ) -> ServiceError {
-        counters.body_timeouts.fetch_add(1, Ordering::Relaxed);
+        counters.body_timeouts.inc();
         ServiceError::BodyTimeout(format!(
             "the request body was too slow: {got} bytes in {:.1} s (limits: {} s for the whole body, at least {} bytes/s)",
             elapsed.as_secs_f64(),
@@ -248,7 +243,7 @@ impl Admission {
         let ahead = self.queued.fetch_add(1, Ordering::AcqRel);
         let _in_queue = InQueue(&self.queued);
         let refuse = |why: String| {
-            counters.queue_refusals.fetch_add(1, Ordering::Relaxed);
+            counters.queue_refusals.inc();
             ServiceError::Overloaded {
                 msg: why,
                 retry_after_s: RETRY_AFTER_S,
@@ -300,7 +295,7 @@ mod tests {
         let mut r3 = a.reserve(1, &n).unwrap();
         a.grow(&mut r3, 4096, &n).unwrap();
         drop((r2, r3));
-        assert_eq!(n.budget_refusals.load(Ordering::Relaxed), 1);
+        assert_eq!(n.budget_refusals.get(), 1);
     }
 
     #[tokio::test]
@@ -320,6 +315,6 @@ mod tests {
         assert_eq!(a.queued(), 0);
         drop(held);
         assert!(a.render_slot(&n).await.is_ok());
-        assert_eq!(n.queue_refusals.load(Ordering::Relaxed), 2);
+        assert_eq!(n.queue_refusals.get(), 2);
     }
 }

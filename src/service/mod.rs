@@ -35,7 +35,8 @@ use tokio::sync::{Notify, Semaphore};
 
 pub use admission::Admission;
 pub use config::{
-    DEFAULT_CONFIG_TOML, DataConfig, ServerConfig, ServiceConfig, TablesConfig, TrainingConfig,
+    ConfigFlags, DEFAULT_CONFIG_TOML, DataConfig, ServerConfig, ServiceConfig, TablesConfig,
+    TrainingConfig,
 };
 pub use error::ServiceError;
 // what the fuzz bodies (`crate::fuzzing`, test support only) run as the service does
@@ -245,6 +246,9 @@ async fn open_state(cfg: &ServiceConfig) -> Result<(AppState, TrainingSpec), Ser
         cfg.training.background_threads,
         cfg.training.background_priority,
     )?;
+    let tables = table_cache::TableCache::new(cfg.tables.cache_bytes);
+    let metrics = metrics::Metrics::new(&tables.counters)
+        .map_err(|e| ServiceError::Internal(format!("metrics registry: {e}")))?;
     let state = AppState(Arc::new(Inner {
         admission: admission::Admission::new(&cfg.server),
         cpu_gate: Arc::new(Semaphore::new(
@@ -262,8 +266,8 @@ async fn open_state(cfg: &ServiceConfig) -> Result<(AppState, TrainingSpec), Ser
         default_registry: defaults,
         active: ArcSwapOption::empty(),
         kernel_cache: Mutex::new(HashMap::new()),
-        tables: table_cache::TableCache::new(cfg.tables.cache_bytes),
-        metrics: metrics::Metrics::default(),
+        tables,
+        metrics,
         tables_dir,
         job_notify: Notify::new(),
         running_jobs: Mutex::new(HashMap::new()),

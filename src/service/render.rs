@@ -428,8 +428,7 @@ pub async fn render(
             prepared.run(&ctx, &cancel)
         };
         if cancel.load(Ordering::Relaxed) {
-            let canceled = &ctx.state.metrics.admission.renders_canceled;
-            canceled.fetch_add(1, Ordering::Relaxed);
+            ctx.state.metrics.admission.renders_canceled.inc();
         }
         // free the slots before answering, so a client's next request finds them free
         drop(gate);

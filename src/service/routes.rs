@@ -113,9 +113,17 @@ async fn readyz(State(state): State<AppState>) -> Result<Response, ServiceError>
 
 async fn metrics(State(state): State<AppState>) -> Result<Response, ServiceError> {
     let counts = jobs::counts(&state).await?;
-    let mut text = state.metrics.render(&counts, state.active.load().is_some());
-    text.push_str(&state.admission.exposition());
-    text.push_str(&state.tables.exposition());
+    let text = state
+        .metrics
+        .render(&super::metrics::Scrape {
+            jobs: &counts,
+            ready: state.active.load().is_some(),
+            body_bytes_reserved: state.admission.reserved_bytes(),
+            queue_length: state.admission.queued(),
+            cache_bytes: state.tables.held_bytes(),
+            cache_bound_bytes: state.tables.bound(),
+        })
+        .map_err(|e| ServiceError::Internal(format!("metrics exposition: {e}")))?;
     let mut r = text.into_response();
     r.headers_mut().insert(
         header::CONTENT_TYPE,

@@ -9,10 +9,9 @@
 //! handful of them, so a scan for the oldest is cheaper than any bookkeeping.
 
 use std::collections::HashMap;
-use std::fmt::Write;
-use std::sync::atomic::{AtomicU64, Ordering};
 use std::sync::{Arc, Mutex};
 
+use super::metrics::CacheCounters;
 use crate::l3::L3Table;
 
 /// A table's weight in the cache: its kernels' bytes.
@@ -37,9 +36,8 @@ struct Lru<T> {
 pub struct TableCache<T> {
     bound: usize,
     lru: Mutex<Lru<T>>,
-    pub hits: AtomicU64,
-    pub misses: AtomicU64,
-    pub evictions: AtomicU64,
+    /// Hits, misses and evictions (exposed by the service's metrics).
+    pub counters: CacheCounters,
 }
 
 impl<T> TableCache<T> {
@@ -52,9 +50,7 @@ impl<T> TableCache<T> {
                 held: 0,
                 clock: 0,
             }),
-            hits: AtomicU64::new(0),
-            misses: AtomicU64::new(0),
-            evictions: AtomicU64::new(0),
+            counters: CacheCounters::default(),
         }
     }
 
@@ -80,11 +76,11 @@ impl<T> TableCache<T> {
         match lru.entries.get_mut(id) {
             Some(e) => {
                 e.used = now;
-                self.hits.fetch_add(1, Ordering::Relaxed);
+                self.counters.hits.inc();
                 Some(e.table.clone())
             }
             None => {
-                self.misses.fetch_add(1, Ordering::Relaxed);
+                self.counters.misses.inc();
                 None
             }
         }
@@ -114,7 +110,7 @@ impl<T> TableCache<T> {
             if let Some(e) = lru.entries.remove(&oldest) {
                 lru.held -= e.bytes;
             }
-            self.evictions.fetch_add(1, Ordering::Relaxed);
+            self.counters.evictions.inc();
             evicted.push(oldest);
         }
         lru.clock += 1;
@@ -123,50 +119,6 @@ impl<T> TableCache<T> {
         lru.entries
             .insert(id.to_string(), Entry { table, bytes, used });
         evicted
-    }
-
-    /// The cache's Prometheus metrics: hits, misses, evictions, bytes held and the bound.
-    pub fn exposition(&self) -> String {
-        let n = |a: &AtomicU64| a.load(Ordering::Relaxed);
-        let mut out = String::new();
-        for (name, kind, help, v) in [
-            (
-                "l3_table_cache_hits_total",
-                "counter",
-                "Renders whose non-active table was in the table cache.",
-                n(&self.hits),
-            ),
-            (
-                "l3_table_cache_misses_total",
-                "counter",
-                "Renders whose non-active table was loaded from the store.",
-                n(&self.misses),
-            ),
-            (
-                "l3_table_cache_evictions_total",
-                "counter",
-                "Tables evicted from the table cache to keep its bound.",
-                n(&self.evictions),
-            ),
-            (
-                "l3_table_cache_bytes",
-                "gauge",
-                "Bytes of kernels the table cache holds.",
-                self.held_bytes() as u64,
-            ),
-            (
-                "l3_table_cache_bound_bytes",
-                "gauge",
-                "The table cache's bound (config [tables] cache_bytes).",
-                self.bound as u64,
-            ),
-        ] {
-            let _ = writeln!(
-                out,
-                "# HELP {name} {help}\n# TYPE {name} {kind}\n{name} {v}"
-            );
-        }
-        out
     }
 
     /// Whether `id` is cached.
@@ -203,13 +155,7 @@ mod tests {
         assert!(!c.contains("huge"));
         assert_eq!(put(&c, "d", 250), ["a", "c"]);
         assert_eq!(c.held_bytes(), 1000);
-        let n = |a: &AtomicU64| a.load(Ordering::Relaxed);
-        assert_eq!((n(&c.hits), n(&c.misses), n(&c.evictions)), (1, 1, 3));
-        let text = c.exposition();
-        assert!(text.contains("\nl3_table_cache_bytes 1000\n"), "{text}");
-        assert!(
-            text.contains("\nl3_table_cache_evictions_total 3\n"),
-            "{text}"
-        );
+        let n = &c.counters;
+        assert_eq!((n.hits.get(), n.misses.get(), n.evictions.get()), (1, 1, 3));
     }
 }

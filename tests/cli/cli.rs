@@ -792,7 +792,8 @@ fn train_with_chroma_classes_shards_and_renders() {
 }
 
 /// `l3 serve --bind ADDR --data-dir DIR` listens where the flags say and keeps its database
-/// in that directory, over the configuration's defaults.
+/// in that directory, over the configuration's defaults, a `--config` file and the `L3_*`
+/// variables that name others.
 #[test]
 fn serve_takes_bind_and_data_dir_flags() {
     use std::io::{Read, Write};
@@ -804,9 +805,19 @@ fn serve_takes_bind_and_data_dir_flags() {
         .unwrap()
         .port();
     let bind = format!("127.0.0.1:{port}");
+    let config = tmp.path().join("l3.toml");
+    std::fs::write(
+        &config,
+        "[server]\nbind = \"127.0.0.1:1\"\n[data]\ndir = \"from-file\"\n",
+    )
+    .unwrap();
     let mut child = Command::new(env!("CARGO_BIN_EXE_l3"))
-        .args(["serve", "--bind", &bind, "--data-dir"])
+        .args(["serve", "--config"])
+        .arg(&config)
+        .args(["--bind", &bind, "--data-dir"])
         .arg(&data)
+        .env("L3_BIND", "127.0.0.1:2")
+        .env("L3_DATA_DIR", tmp.path().join("from-env"))
         .env("L3_AUTO_TRAIN", "false")
         .env("L3_ISET_DIR", tmp.path().join("no-iset"))
         .current_dir(tmp.path())
@@ -838,9 +849,30 @@ fn serve_takes_bind_and_data_dir_flags() {
     let _ = child.wait();
     assert!(answer.starts_with("HTTP/1.1 200"), "{answer}");
     assert!(db, "no database in --data-dir");
+    for other in ["data", "from-file", "from-env"] {
+        assert!(!tmp.path().join(other).exists(), "{other} was used");
+    }
+}
+
+/// A bad configuration value stops `l3 serve` with exit code 2 and a message naming it: the
+/// variable, or the key and the file.
+#[test]
+fn serve_names_a_bad_configuration_value() {
+    let tmp = tempfile::tempdir().unwrap();
+    let d = tmp.path();
+    let (code, err) = serve_until_exit(d, &[], &[("L3_MAX_PIXELS", "lots")]);
+    assert_eq!(code, Some(2), "{err}");
     assert!(
-        !tmp.path().join("data").exists(),
-        "the default data dir was used"
+        err.contains("L3_MAX_PIXELS=\"lots\" is not a valid number"),
+        "{err}"
+    );
+    let config = d.join("bad.toml");
+    std::fs::write(&config, "[server]\nmax_pixels = \"many\"\n").unwrap();
+    let (code, err) = serve_until_exit(d, &["--config", config.to_str().unwrap()], &[]);
+    assert_eq!(code, Some(2), "{err}");
+    assert!(
+        err.contains("server.max_pixels") && err.contains("bad.toml"),
+        "{err}"
     );
 }
 

@@ -1,7 +1,8 @@
 //! The HTTP service, one test binary: the API end to end (`api`), training jobs (`jobs`), renders
 //! with the table of a DNG's camera or a named table and the sensor catalogue (`cameras`), the
 //! evaluation figure (`figure`), ColorChecker frames (`colorchecker`), the browser console
-//! (`console`: headless Chromium through chromedriver), render admission (`admission`), crash safety of the real
+//! (`console`: headless Chromium through chromedriver), render admission (`admission`),
+//! /metrics read by a Prometheus parser (`metrics`), crash safety of the real
 //! `l3 serve` process (`crash`), the typed store over rows the previous store wrote
 //! (`store_compat`), and openapi.yaml against the served routes (`spec`: not named
 //! `openapi`, so that the filter `api::` selects the API tests alone).
@@ -24,5 +25,6 @@ mod console;
 mod crash;
 mod figure;
 mod jobs;
+mod metrics;
 mod spec;
 mod store_compat;

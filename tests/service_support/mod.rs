@@ -72,6 +72,17 @@ pub async fn server_with_table(data: &Path, cfg: Option<ServiceConfig>) -> (Serv
     (server, id)
 }
 
+/// A simple synthetic raw u16 frame (a gradient), little-endian bytes.
+pub fn gradient_raw(w: usize, h: usize) -> Vec<u8> {
+    (0..w * h)
+        .flat_map(|i| {
+            let (x, y) = (i % w, i / w);
+            let v = (2000 + (x * 40000 / w) + (y * 10000 / h)) as u16;
+            v.to_le_bytes()
+        })
+        .collect()
+}
+
 pub fn url(server: &Server, path: &str) -> String {
     format!("http://{}{}", server.addr(), path)
 }
