@@ -29,12 +29,10 @@ use super::accept::negotiate;
 use super::config::ServerConfig;
 use super::state::{ActiveTable, AppState};
 use super::table_choice::table_for;
-use crate::io::{
-    InvalidJpegQuality, JpegOptions, Limits, UnknownPngCompression, UnknownSubsampling,
-};
+use crate::io::{JpegOptions, Limits};
 use crate::l3::L3Table;
 use crate::l3::correct::IlluminantEntry;
-use crate::l3::render::{UnknownChromaMode, WhiteLevel};
+use crate::l3::render::WhiteLevel;
 use crate::pipeline::{
     CorrectionMode, Encoded, Input, KernelChoice, Levels, LightChoice, LightOrigin, OutputFormat,
     PipelineError, RenderContext, RenderOptions, RenderOutcome, RenderPipeline, RenderRequest,
@@ -281,37 +279,25 @@ fn output_of(
         white,
         region: q.region.as_deref().map(parse_region).transpose()?,
         preview: check_preview(q.preview.unwrap_or(1))?,
-        png: match q.png_compression.as_deref() {
-            None => server.png_compression,
-            Some(s) => s
-                .parse()
-                .map_err(|e: UnknownPngCompression| ServiceError::BadRequest(e.to_string()))?,
-        },
+        png: parse_query(q.png_compression.as_deref())?.unwrap_or(server.png_compression),
         jpeg: JpegOptions {
-            quality: q
-                .quality
-                .as_deref()
-                .map(str::parse)
-                .transpose()
-                .map_err(|e: InvalidJpegQuality| ServiceError::BadRequest(e.to_string()))?
-                .unwrap_or_default(),
-            subsampling: q
-                .subsampling
-                .as_deref()
-                .map(str::parse)
-                .transpose()
-                .map_err(|e: UnknownSubsampling| ServiceError::BadRequest(e.to_string()))?
-                .unwrap_or_default(),
+            quality: parse_query(q.quality.as_deref())?.unwrap_or_default(),
+            subsampling: parse_query(q.subsampling.as_deref())?.unwrap_or_default(),
         },
-        chroma: q
-            .chroma_denoise
-            .as_deref()
-            .map(str::parse)
-            .transpose()
-            .map_err(|e: UnknownChromaMode| ServiceError::BadRequest(e.to_string()))?
-            .unwrap_or_default(),
+        chroma: parse_query(q.chroma_denoise.as_deref())?.unwrap_or_default(),
     };
     Ok((format, options))
+}
+
+/// A query parameter parsed by its type's `FromStr`; a bad value is 400 with the parser's words.
+fn parse_query<T>(v: Option<&str>) -> Result<Option<T>, ServiceError>
+where
+    T: std::str::FromStr,
+    T::Err: std::fmt::Display,
+{
+    v.map(str::parse)
+        .transpose()
+        .map_err(|e: T::Err| ServiceError::BadRequest(e.to_string()))
 }
 
 /// The render a request asks for, its parts checked in this order: the Content-Type, a
