@@ -2,6 +2,7 @@
 //! configurations, the conventional pipelines (bilinear baselines and the strong ISP) and a
 //! plain copy, measured in one run on the same frames (issue 5). Pure core: no HTTP, no SQL.
 
+mod labels;
 mod plot;
 mod records;
 mod render;

@@ -5,6 +5,9 @@
 use plotters::coord::types::RangedCoordf64;
 use plotters::prelude::*;
 
+use plotters::style::text_anchor::{HPos, Pos, VPos};
+
+use super::labels::{GAP, PxBox, TextMetrics, place_labels};
 use super::records::{BenchReport, FrontMetric};
 
 /// Errors of drawing the plot.
@@ -132,8 +135,17 @@ pub fn svg_plot_metric(report: &BenchReport, metric: FrontMetric) -> Result<Stri
         if let Some(cx) = copy_x {
             copy_line(&mut chart, cx, y_hi)?;
         }
+        // the legend's lines, for the labels to keep out of it
+        let mut legend: Vec<String> = copy_x
+            .map(|cx| format!("plain copy of the frame: {cx:.2} ms/Mpix (no colour)"))
+            .into_iter()
+            .collect();
+        for ill in &report.acquisitions {
+            legend.push(format!("Pareto front under {ill}"));
+            legend.push(format!("{} under {ill}", metric.name()));
+        }
         for (k, ill) in report.acquisitions.iter().enumerate() {
-            acquisition_series(&mut chart, &rows, k, ill, metric)?;
+            acquisition_series(&mut chart, &rows, (k, ill), metric, &legend)?;
         }
         chart
             .configure_series_labels()
@@ -197,9 +209,9 @@ fn copy_line(chart: &mut Chart<'_, '_>, cx: f64, y_hi: f64) -> Result<(), PlotEr
 fn acquisition_series(
     chart: &mut Chart<'_, '_>,
     rows: &[PlotRow<'_>],
-    k: usize,
-    ill: &str,
+    (k, ill): (usize, &str),
     metric: FrontMetric,
+    legend: &[String],
 ) -> Result<(), PlotError> {
     let colour = SERIES[k % SERIES.len()];
     let pts: Vec<(usize, (f64, f64))> = rows
@@ -257,12 +269,75 @@ fn acquisition_series(
             .legend(move |(x, y)| TriangleMarker::new((x + 10, y), 6, colour.filled()));
     }
     if k == 0 {
-        chart
-            .draw_series(pts.iter().map(|&(i, p)| {
-                EmptyElement::at(p) + Text::new(rows[i].0.to_string(), (8, -16), ("sans-serif", 15))
-            }))
-            .map_err(draw_err)?;
+        point_labels(chart, rows, &pts, legend)?;
     }
+    Ok(())
+}
+
+/// Where the upper-right legend with the entries `legend` lies (an estimate from the text's
+/// size, on the generous side; plotters does not report it).
+fn legend_box(area: PxBox, legend: &[String]) -> PxBox {
+    let chars = legend.iter().map(|s| s.chars().count()).max().unwrap_or(0);
+    PxBox {
+        l: area.r - (chars as f64 * 8.0) as i32 - 60,
+        t: area.t,
+        r: area.r,
+        b: area.t + 22 * legend.len() as i32 + 30,
+    }
+}
+
+/// The configuration names beside their points ([`place_labels`]), with a leader line to
+/// each one moved off its point's row.
+fn point_labels(
+    chart: &mut Chart<'_, '_>,
+    rows: &[PlotRow<'_>],
+    pts: &[(usize, (f64, f64))],
+    legend: &[String],
+) -> Result<(), PlotError> {
+    let at: Vec<(i32, i32)> = pts.iter().map(|(_, p)| chart.backend_coord(p)).collect();
+    let texts: Vec<&str> = pts.iter().map(|&(i, _)| rows[i].0).collect();
+    let (xr, yr) = chart.plotting_area().get_pixel_range();
+    let area = PxBox {
+        l: xr.start,
+        t: yr.start,
+        r: xr.end,
+        b: yr.end,
+    };
+    let metrics = TextMetrics {
+        char_w: 8.0,
+        line_h: 17,
+    };
+    let placed = place_labels(&at, &texts, area, &[legend_box(area, legend)], metrics);
+    let grey = RGBColor(150, 150, 150);
+    let labelled = || pts.iter().zip(&texts).zip(&placed);
+    // a leader meets its label's near edge at its middle
+    let leaders = labelled()
+        .filter(|(_, q)| q.leader)
+        .map(|((&(_, p), &t), q)| {
+            let w = (t.chars().count() as f64 * metrics.char_w) as i32;
+            let edge = if q.dx > 0 { q.dx } else { q.dx + w };
+            EmptyElement::at(p)
+                + PathElement::new(
+                    vec![(0, 0), (edge, q.dy + metrics.line_h / 2)],
+                    grey.stroke_width(1),
+                )
+        });
+    chart.draw_series(leaders).map_err(draw_err)?;
+    // a label left of its point ends at the gap whatever its true width
+    let font = ("sans-serif", 15)
+        .into_font()
+        .into_text_style(chart.plotting_area());
+    let right_of = font.clone().pos(Pos::new(HPos::Left, VPos::Top));
+    let left_of = font.pos(Pos::new(HPos::Right, VPos::Top));
+    let names = labelled().map(|((&(_, p), &t), q)| {
+        let (x, style) = if q.dx > 0 {
+            (q.dx, right_of.clone())
+        } else {
+            (-GAP, left_of.clone())
+        };
+        EmptyElement::at(p) + Text::new(t.to_string(), (x, q.dy), style)
+    });
+    chart.draw_series(names).map_err(draw_err)?;
     Ok(())
 }
 
