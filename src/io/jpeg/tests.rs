@@ -150,6 +150,22 @@ fn noise(w: usize, h: usize, seed: u32) -> Vec<u8> {
         .collect()
 }
 
+/// A smooth image at every size: neighbouring pixels differ by a few codes, so chroma
+/// subsampling loses little and what is lost is the coder's.
+fn smooth(w: usize, h: usize) -> Vec<u8> {
+    let tri = |v: usize| (v % 128).abs_diff(64);
+    (0..w * h)
+        .flat_map(|i| {
+            let (x, y) = (i % w, i / w);
+            [
+                (60 + 2 * tri(x)) as u8,
+                (50 + 2 * tri(y)) as u8,
+                (100 + tri(x + y)) as u8,
+            ]
+        })
+        .collect()
+}
+
 fn opts(q: u32, subsampling: Subsampling) -> JpegOptions {
     JpegOptions {
         quality: JpegQuality::new(q).unwrap(),
@@ -195,19 +211,19 @@ fn decodes_close_to_the_input() {
         (33, 17),
         (200, 2 * STRIP_ROWS + 37),
     ] {
-        let rgb = frame(w, h);
+        let rgb = smooth(w, h);
         for s in ALL {
             let (p90, _) = round_trip(&rgb, w, h, opts(90, s));
             let (p100, max100) = round_trip(&rgb, w, h, opts(100, s));
             assert!(p90 > 30.0, "{w}×{h} {s} q90: {p90:.1} dB");
-            assert!(p100 > p90 && p100 > 36.0, "{w}×{h} {s} q100: {p100:.1} dB");
+            assert!(p100 >= p90 && p100 > 36.0, "{w}×{h} {s} q100: {p100:.1} dB");
             if s == Subsampling::S444 {
                 assert!(max100 <= 8, "{w}×{h} q100 4:4:4: off by {max100}");
             }
         }
         let (p, max) = round_trip(&noise(w, h, 3), w, h, opts(100, Subsampling::S444));
         assert!(
-            p > 40.0 && max <= 4,
+            p > 45.0 && max <= 6,
             "{w}×{h} noise: {p:.1} dB, off by {max}"
         );
     }
@@ -237,7 +253,7 @@ fn ff_bytes_in_the_scan_are_stuffed() {
     assert!(!ffs.is_empty(), "no 0xFF byte to stuff");
     assert!(ffs.iter().all(|&b| b == 0), "an unstuffed 0xFF: {ffs:?}");
     let (p, max) = psnr_max(&decode(&bytes).0, &rgb);
-    assert!(p > 40.0 && max <= 4, "{p:.1} dB, off by {max}");
+    assert!(p > 45.0 && max <= 6, "{p:.1} dB, off by {max}");
 }
 
 proptest! {
@@ -252,7 +268,7 @@ proptest! {
         s in 0usize..3,
         q in 75u32..=100,
     ) {
-        let rgb = frame(w, h);
+        let rgb = smooth(w, h);
         let (p, _) = round_trip(&rgb, w, h, opts(q, ALL[s]));
         prop_assert!(p > 28.0, "{}×{} {} q{}: {:.1} dB", w, h, ALL[s], q, p);
     }
