@@ -11,7 +11,7 @@ mod atomic;
 mod dng;
 mod error;
 mod icc;
-mod jpeg_format;
+mod jpeg;
 mod limits;
 mod luminance;
 mod mosaic;
@@ -29,7 +29,7 @@ pub use dng::{
 };
 pub use error::{IoError, IoResult};
 pub use icc::{SRGB_PROFILE_DESCRIPTION, srgb_profile};
-pub use jpeg_format::{
+pub use jpeg::{
     DEFAULT_JPEG_QUALITY, InvalidJpegQuality, JpegOptions, JpegQuality, Subsampling,
     UnknownSubsampling, encode_jpeg_rgb8,
 };
