@@ -12,65 +12,75 @@ use super::tables::NATURAL;
 
 type V = [f32; 8];
 
-#[inline(always)]
-fn add(mut a: V, b: V) -> V {
-    for (x, y) in a.iter_mut().zip(b) {
-        *x += y;
-    }
-    a
+/// Eight `f32` lanes, as the column DCT needs them: the portable arrays here, AVX2 registers
+/// in [`super::dct_avx2`]. One [`dct_columns`] serves both, so the two give the same bits.
+pub(super) trait Lanes: Copy {
+    fn add(self, b: Self) -> Self;
+    fn sub(self, b: Self) -> Self;
+    fn scale(self, k: f32) -> Self;
 }
 
-#[inline(always)]
-fn sub(mut a: V, b: V) -> V {
-    for (x, y) in a.iter_mut().zip(b) {
-        *x -= y;
+impl Lanes for V {
+    #[inline(always)]
+    fn add(mut self, b: V) -> V {
+        for (x, y) in self.iter_mut().zip(b) {
+            *x += y;
+        }
+        self
     }
-    a
-}
 
-#[inline(always)]
-fn mul(mut a: V, k: f32) -> V {
-    for x in &mut a {
-        *x *= k;
+    #[inline(always)]
+    fn sub(mut self, b: V) -> V {
+        for (x, y) in self.iter_mut().zip(b) {
+            *x -= y;
+        }
+        self
     }
-    a
+
+    #[inline(always)]
+    fn scale(mut self, k: f32) -> V {
+        for x in &mut self {
+            *x *= k;
+        }
+        self
+    }
 }
 
 /// Eight DCTs down the columns of `d` (each lane a column), unscaled (AAN).
 #[inline(always)]
-fn dct_columns(d: &mut [V; 8]) {
-    let tmp0 = add(d[0], d[7]);
-    let tmp7 = sub(d[0], d[7]);
-    let tmp1 = add(d[1], d[6]);
-    let tmp6 = sub(d[1], d[6]);
-    let tmp2 = add(d[2], d[5]);
-    let tmp5 = sub(d[2], d[5]);
-    let tmp3 = add(d[3], d[4]);
-    let tmp4 = sub(d[3], d[4]);
+pub(super) fn dct_columns<L: Lanes>(d: &mut [L; 8]) {
+    let tmp0 = d[0].add(d[7]);
+    let tmp7 = d[0].sub(d[7]);
+    let tmp1 = d[1].add(d[6]);
+    let tmp6 = d[1].sub(d[6]);
+    let tmp2 = d[2].add(d[5]);
+    let tmp5 = d[2].sub(d[5]);
+    let tmp3 = d[3].add(d[4]);
+    let tmp4 = d[3].sub(d[4]);
 
-    let tmp10 = add(tmp0, tmp3);
-    let tmp13 = sub(tmp0, tmp3);
-    let tmp11 = add(tmp1, tmp2);
-    let tmp12 = sub(tmp1, tmp2);
-    d[0] = add(tmp10, tmp11);
-    d[4] = sub(tmp10, tmp11);
-    let z1 = mul(add(tmp12, tmp13), std::f32::consts::FRAC_1_SQRT_2);
-    d[2] = add(tmp13, z1);
-    d[6] = sub(tmp13, z1);
+    let tmp10 = tmp0.add(tmp3);
+    let tmp13 = tmp0.sub(tmp3);
+    let tmp11 = tmp1.add(tmp2);
+    let tmp12 = tmp1.sub(tmp2);
+    d[0] = tmp10.add(tmp11);
+    d[4] = tmp10.sub(tmp11);
+    let z1 = tmp12.add(tmp13).scale(std::f32::consts::FRAC_1_SQRT_2);
+    d[2] = tmp13.add(z1);
+    d[6] = tmp13.sub(z1);
 
-    let tmp10 = add(tmp4, tmp5);
-    let tmp11 = add(tmp5, tmp6);
-    let tmp12 = add(tmp6, tmp7);
-    let z5 = mul(sub(tmp10, tmp12), 0.382_683_43);
-    let z2 = add(mul(tmp10, 0.541_196_1), z5);
-    let z4 = add(mul(tmp12, 1.306_563), z5);
-    let z3 = mul(tmp11, std::f32::consts::FRAC_1_SQRT_2);
-    let z11 = add(tmp7, z3);
-    let z13 = sub(tmp7, z3);
-    d[5] = add(z13, z2);
-    d[3] = sub(z13, z2);
-    d[1] = add(z11, z4);
-    d[7] = sub(z11, z4);
+    let tmp10 = tmp4.add(tmp5);
+    let tmp11 = tmp5.add(tmp6);
+    let tmp12 = tmp6.add(tmp7);
+    let z5 = tmp10.sub(tmp12).scale(0.382_683_43);
+    let z2 = tmp10.scale(0.541_196_1).add(z5);
+    let z4 = tmp12.scale(1.306_563).add(z5);
+    let z3 = tmp11.scale(std::f32::consts::FRAC_1_SQRT_2);
+    let z11 = tmp7.add(z3);
+    let z13 = tmp7.sub(z3);
+    d[5] = z13.add(z2);
+    d[3] = z13.sub(z2);
+    d[1] = z11.add(z4);
+    d[7] = z11.sub(z4);
 }
 
 #[inline(always)]

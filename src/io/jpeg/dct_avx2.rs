@@ -1,48 +1,33 @@
-//! [`super::dct::fdct_quantise`] in AVX2 intrinsics: the same operations in the same order on
+//! [`super::dct::fdct_quantise`] in AVX2 intrinsics: the same column DCT ([`super::dct::dct_columns`]
+//! over AVX2 lanes), and the same operations in the same order on
 //! the same lanes, so the same results, bit for bit (a test checks). The compiler does not
 //! vectorise the portable version across its transpose, and this is about half of its time.
 
 use std::arch::x86_64::*;
 
-use super::dct::{Quantised, ROUNDER};
+use super::dct::{Lanes, Quantised, ROUNDER, dct_columns};
 
-/// Eight column DCTs (AAN), as `dct_columns` in [`super::dct`].
-#[target_feature(enable = "avx2")]
-#[inline]
-fn dct_columns(d: &mut [__m256; 8]) {
-    let tmp0 = _mm256_add_ps(d[0], d[7]);
-    let tmp7 = _mm256_sub_ps(d[0], d[7]);
-    let tmp1 = _mm256_add_ps(d[1], d[6]);
-    let tmp6 = _mm256_sub_ps(d[1], d[6]);
-    let tmp2 = _mm256_add_ps(d[2], d[5]);
-    let tmp5 = _mm256_sub_ps(d[2], d[5]);
-    let tmp3 = _mm256_add_ps(d[3], d[4]);
-    let tmp4 = _mm256_sub_ps(d[3], d[4]);
+// The lane operations of the column DCT in AVX2. They are inlined into this file's
+// `#[target_feature(enable = "avx2")]` functions, the only ones that build `__m256` values, and
+// those run only where AVX2 was detected.
+impl Lanes for __m256 {
+    #[inline(always)]
+    fn add(self, b: Self) -> Self {
+        // SAFETY: called only from AVX2 functions on a CPU with AVX2 (see above)
+        unsafe { _mm256_add_ps(self, b) }
+    }
 
-    let tmp10 = _mm256_add_ps(tmp0, tmp3);
-    let tmp13 = _mm256_sub_ps(tmp0, tmp3);
-    let tmp11 = _mm256_add_ps(tmp1, tmp2);
-    let tmp12 = _mm256_sub_ps(tmp1, tmp2);
-    d[0] = _mm256_add_ps(tmp10, tmp11);
-    d[4] = _mm256_sub_ps(tmp10, tmp11);
-    let c707 = _mm256_set1_ps(std::f32::consts::FRAC_1_SQRT_2);
-    let z1 = _mm256_mul_ps(_mm256_add_ps(tmp12, tmp13), c707);
-    d[2] = _mm256_add_ps(tmp13, z1);
-    d[6] = _mm256_sub_ps(tmp13, z1);
+    #[inline(always)]
+    fn sub(self, b: Self) -> Self {
+        // SAFETY: as `add`
+        unsafe { _mm256_sub_ps(self, b) }
+    }
 
-    let tmp10 = _mm256_add_ps(tmp4, tmp5);
-    let tmp11 = _mm256_add_ps(tmp5, tmp6);
-    let tmp12 = _mm256_add_ps(tmp6, tmp7);
-    let z5 = _mm256_mul_ps(_mm256_sub_ps(tmp10, tmp12), _mm256_set1_ps(0.382_683_43));
-    let z2 = _mm256_add_ps(_mm256_mul_ps(tmp10, _mm256_set1_ps(0.541_196_1)), z5);
-    let z4 = _mm256_add_ps(_mm256_mul_ps(tmp12, _mm256_set1_ps(1.306_563)), z5);
-    let z3 = _mm256_mul_ps(tmp11, c707);
-    let z11 = _mm256_add_ps(tmp7, z3);
-    let z13 = _mm256_sub_ps(tmp7, z3);
-    d[5] = _mm256_add_ps(z13, z2);
-    d[3] = _mm256_sub_ps(z13, z2);
-    d[1] = _mm256_add_ps(z11, z4);
-    d[7] = _mm256_sub_ps(z11, z4);
+    #[inline(always)]
+    fn scale(self, k: f32) -> Self {
+        // SAFETY: as `add`
+        unsafe { _mm256_mul_ps(self, _mm256_set1_ps(k)) }
+    }
 }
 
 #[target_feature(enable = "avx2")]

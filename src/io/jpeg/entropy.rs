@@ -85,6 +85,25 @@ impl BitWriter {
         }
     }
 
+    /// A Huffman code (`code`: the code above its length in the low byte) followed by the
+    /// `size` extra bits of a coefficient, `extra`.
+    #[inline(always)]
+    fn put_symbol(
+        out: &mut Vec<u8>,
+        acc: &mut u64,
+        bits: &mut u32,
+        code: u32,
+        (size, extra): (u32, u32),
+    ) {
+        Self::put(
+            out,
+            acc,
+            bits,
+            ((code >> 8) << size) | extra,
+            (code & 0xff) + size,
+        );
+    }
+
     /// Appends the low `len` bits of `value` (`len` ≤ 32, higher bits zero) to the stream
     /// whose unwritten bits are `acc`'s lowest `bits`.
     #[inline(always)]
@@ -134,13 +153,12 @@ impl BitWriter {
         let dc = coef[0];
         let (size, extra) = magnitude(dc - *pred);
         *pred = dc;
-        let code = codes.dc[size as usize];
-        Self::put(
+        Self::put_symbol(
             out,
             &mut acc,
             &mut bits,
-            ((code >> 8) << size) | extra,
-            (code & 0xff) + size,
+            codes.dc[size as usize],
+            (size, extra),
         );
 
         let mut rest = nonzero & !1;
@@ -155,13 +173,7 @@ impl BitWriter {
             }
             let (size, extra) = magnitude(coef[TRANSPOSED[k as usize & 63]]);
             let code = codes.ac[((run << 4) | size) as usize & 255];
-            Self::put(
-                out,
-                &mut acc,
-                &mut bits,
-                ((code >> 8) << size) | extra,
-                (code & 0xff) + size,
-            );
+            Self::put_symbol(out, &mut acc, &mut bits, code, (size, extra));
             last = k;
             rest &= rest - 1;
         }
