@@ -68,7 +68,7 @@ impl RenderPipeline {
     fn chroma_for(&self, mode: ChromaMode, mosaic: &Mosaic<'_>) -> Option<&ChromaStage> {
         self.chroma
             .as_ref()
-            .filter(|c| c.runs(mode, mosaic_sample(mosaic, self.renderer.voltage_swing())))
+            .filter(|c| c.runs_on(mode, mosaic, self.renderer.voltage_swing()))
     }
 
     /// Renders `mosaic` (`width × height`, or its `region`) to XYZ, then the chroma stage
@@ -192,11 +192,10 @@ pub fn render_reference(
     )?;
     let stage = ChromaStage::new(table, &kernels.xyz)?;
     let swing = table.meta.voltage_swing as f32;
-    let xyz =
-        match stage.filter(|c| c.runs(opts.chroma, mosaic_sample(&Mosaic::Volts(volts), swing))) {
-            Some(c) => c.apply(&xyz, width, height)?,
-            None => xyz,
-        };
+    let xyz = match stage.filter(|c| c.runs_on(opts.chroma, &Mosaic::Volts(volts), swing)) {
+        Some(c) => c.apply(&xyz, width, height)?,
+        None => xyz,
+    };
     let wy = if format.needs_white() {
         white_y(&xyz, width, height, opts.white)
     } else {
@@ -219,23 +218,4 @@ pub fn render_reference(
         render_ms: ms(t0, t1),
         encode_ms: ms(t1, Instant::now()),
     })
-}
-
-/// Every 7th value of a mosaic, in volts: what [`ChromaStage::runs`] decides on.
-fn mosaic_sample<'a>(mosaic: &'a Mosaic<'_>, swing: f32) -> impl Iterator<Item = f32> + 'a {
-    const STEP: usize = 7;
-    let (volts, dn) = match *mosaic {
-        Mosaic::Volts(v) => (Some(v), None),
-        Mosaic::Dn { data, black, white } => (None, Some((data, black, white))),
-    };
-    let a = volts
-        .into_iter()
-        .flat_map(|v| v.iter().step_by(STEP).copied());
-    let b = dn.into_iter().flat_map(move |(d, black, white)| {
-        let k = swing / f32::from(white.saturating_sub(black).max(1));
-        d.iter()
-            .step_by(STEP)
-            .map(move |&v| f32::from(v.saturating_sub(black)) * k)
-    });
-    a.chain(b)
 }

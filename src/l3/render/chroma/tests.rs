@@ -112,15 +112,65 @@ fn a_buffer_of_the_wrong_size_is_an_error() {
 #[test]
 fn auto_runs_when_enough_pixels_sit_at_noisy_levels() {
     let s = stage(1e-4);
+    let runs = |mode, v: &[f32]| s.runs_on(mode, &Mosaic::Volts(v), 1.0);
     let dark = vec![0.01f32; 100];
     let bright = vec![0.8f32; 100];
     let mixed: Vec<f32> = (0..100).map(|i| if i < 5 { 0.01 } else { 0.8 }).collect();
-    assert!(s.runs(ChromaMode::Auto, dark.iter().copied()));
-    assert!(!s.runs(ChromaMode::Auto, bright.iter().copied()));
-    assert!(!s.runs(ChromaMode::Auto, mixed.iter().copied()));
-    assert!(s.runs(ChromaMode::On, bright.iter().copied()));
-    assert!(!s.runs(ChromaMode::Off, dark.iter().copied()));
-    assert!(!s.runs(ChromaMode::Auto, std::iter::empty()));
+    assert!(runs(ChromaMode::Auto, &dark));
+    assert!(!runs(ChromaMode::Auto, &bright));
+    assert!(!runs(ChromaMode::Auto, &mixed));
+    assert!(runs(ChromaMode::On, &bright));
+    assert!(!runs(ChromaMode::Off, &dark));
+    assert!(!runs(ChromaMode::Auto, &[]));
+}
+
+/// The decision as first written: every 7th value in volts, one binary search each.
+fn runs_by_search(s: &ChromaStage, volts: impl Iterator<Item = f32>) -> bool {
+    let (mut noisy, mut n) = (0usize, 0usize);
+    for v in volts.step_by(7) {
+        let l = s.edges.partition_point(|&e| e < v.clamp(0.0, s.swing));
+        noisy += usize::from(s.noisy.get(l).copied().unwrap_or(false));
+        n += 1;
+    }
+    n > 0 && noisy as f64 >= AUTO_FRACTION * n as f64
+}
+
+/// The table of codes and the parallel count decide as the search did, on DN mosaics with
+/// any black and white level and on volts outside the swing, around the fraction's edge.
+#[test]
+fn auto_decides_on_dn_and_volts_as_the_search_did() {
+    let mut s = stage(1e-4);
+    s.edges = vec![0.02, 0.07, 0.2, 0.45, 0.7];
+    s.noisy = vec![true, true, false, true, false, false];
+    s.swing = 0.9;
+    let mut rng = ChaCha8Rng::seed_from_u64(11);
+    let mut agreed = [0usize; 2];
+    for case in 0..60 {
+        let n = rng.random_range(0..200_000usize);
+        let (black, white) = match case % 3 {
+            0 => (0, u16::MAX),
+            1 => (rng.random_range(0..2000), rng.random_range(3000..16384)),
+            _ => (rng.random_range(0..70), rng.random_range(0..1024)),
+        };
+        let top = rng.random_range(1..=u16::MAX);
+        let data: Vec<u16> = (0..n).map(|_| rng.random_range(0..=top)).collect();
+        let swing = rng.random_range(0.5f32..1.2);
+        let k = swing / f32::from(white.saturating_sub(black).max(1));
+        let volts = data.iter().map(|&d| f32::from(d.saturating_sub(black)) * k);
+        let want = runs_by_search(&s, volts);
+        let dn = Mosaic::Dn {
+            data: &data,
+            black,
+            white,
+        };
+        assert_eq!(s.runs_on(ChromaMode::Auto, &dn, swing), want, "case {case}");
+        let v: Vec<f32> = (0..n).map(|_| rng.random_range(-0.2f32..1.1)).collect();
+        let want_v = runs_by_search(&s, v.iter().copied());
+        assert_eq!(s.runs_on(ChromaMode::Auto, &Mosaic::Volts(&v), 1.0), want_v);
+        agreed[usize::from(want)] += 1;
+    }
+    // both answers occurred
+    assert!(agreed[0] > 0 && agreed[1] > 0, "{agreed:?}");
 }
 
 #[test]
@@ -130,4 +180,43 @@ fn the_curve_interpolates_between_levels_and_holds_at_the_ends() {
     assert_eq!(s.variance(0, 0.0), 1.0);
     assert!((s.variance(0, 0.055) - 1.5).abs() < 1e-12);
     assert_eq!(s.variance(0, 5.0), 4.0);
+}
+
+/// The segment found from any hint is `partition_point`'s: the curve's value is the same
+/// whichever pixel came before, at the levels, between them, past both ends and at NaN.
+#[test]
+fn the_curve_from_a_hint_is_the_binary_search_s() {
+    let mut s = stage(0.0);
+    s.var = [vec![1.0, 2.0, 4.0], vec![3.0, 0.5, 7.0]];
+    let reference = |s: &ChromaStage, k: usize, y: f64| {
+        let i = s.y.partition_point(|&l| l < y);
+        let var = &s.var[k];
+        if i == 0 {
+            var[0]
+        } else if i >= s.y.len() {
+            var[s.y.len() - 1]
+        } else {
+            let t = (y - s.y[i - 1]) / (s.y[i] - s.y[i - 1]);
+            var[i - 1] + t * (var[i] - var[i - 1])
+        }
+    };
+    let mut rng = ChaCha8Rng::seed_from_u64(3);
+    let top = s.y[s.y.len() - 1];
+    let mut ys: Vec<f64> = (0..2000)
+        .map(|_| rng.random_range(-0.5 * top..1.5 * top))
+        .collect();
+    ys.extend(s.y.clone());
+    ys.extend([f64::NAN, f64::INFINITY, f64::NEG_INFINITY, 0.0]);
+    for k in 0..2 {
+        for &start in &[0, 1, 2, 3, 99] {
+            let mut hint = start;
+            for &y in &ys {
+                let (got, want) = (s.variance_near(k, y, &mut hint), reference(&s, k, y));
+                assert!(
+                    got == want || (got.is_nan() && want.is_nan()),
+                    "y {y}: {got} vs {want}"
+                );
+            }
+        }
+    }
 }
