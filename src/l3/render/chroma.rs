@@ -292,14 +292,17 @@ impl ChromaStage {
                 xyz.len()
             )));
         }
-        let mut out = xyz.to_vec();
         if width == 0 || height == 0 {
-            return Ok(out);
+            return Ok(xyz.to_vec());
         }
+        // (each strip copies its own rows and checks its own output, in parallel: a copy
+        // and a scan of the whole image in one thread were a serial part of every render
+        // that ran the stage)
+        let mut out = vec![0f32; xyz.len()];
         let [kx, _, kz] = D65_WHITE_XYZ.map(|v| v as f32);
         let white = [kx, kz];
         let row = width * 3;
-        out.par_chunks_mut(STRIP * row).enumerate().for_each_init(
+        let finite = out.par_chunks_mut(STRIP * row).enumerate().map_init(
             || {
                 [
                     SelfGuided::new(height, self.radius),
@@ -308,6 +311,7 @@ impl ChromaStage {
             },
             |filters, (strip, o)| {
                 let y0 = strip * STRIP;
+                o.copy_from_slice(&xyz[y0 * row..y0 * row + o.len()]);
                 let rows = y0..y0 + o.len() / row;
                 run_side_by_side(
                     filters,
@@ -334,9 +338,11 @@ impl ChromaStage {
                         }
                     },
                 );
+                o.iter().all(|v| v.is_finite())
             },
         );
-        if out.iter().any(|v| !v.is_finite()) {
+        // (a reduce, not `all`: every strip is filtered)
+        if !finite.reduce(|| true, |a, b| a && b) {
             return Err(RenderError::InvalidInput(
                 "the chroma stage produced a value that is not finite".into(),
             ));
