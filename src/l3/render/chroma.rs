@@ -253,15 +253,10 @@ impl ChromaStage {
             .collect()
     }
 
-    /// The variance of plane `k`'s noise at luminance `y`, linear between levels.
-    #[cfg(test)]
-    fn variance(&self, k: usize, y: f64) -> f64 {
-        self.variance_near(k, y, &mut 0)
-    }
-
-    /// [`Self::variance`], the segment searched for from `hint` (the previous pixel's,
-    /// updated): along a row the luminance moves a level or less from pixel to pixel, so
-    /// a step or two replaces a binary search. The segment is the one `partition_point`
+    /// The variance of plane `k`'s noise at luminance `y`, linear between levels, the
+    /// segment searched for from `hint` (the previous pixel's, updated): along a row the
+    /// luminance moves a level or less from pixel to pixel, so a step or two replaces a
+    /// binary search. The segment is the one `partition_point`
     /// finds (the levels' luminances increase strictly; a NaN `y` gives the first).
     fn variance_near(&self, k: usize, y: f64, hint: &mut usize) -> f64 {
         let (ys, var) = (&self.y, &self.var[k]);

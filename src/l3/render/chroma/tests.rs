@@ -177,9 +177,9 @@ fn auto_decides_on_dn_and_volts_as_the_search_did() {
 fn the_curve_interpolates_between_levels_and_holds_at_the_ends() {
     let mut s = stage(0.0);
     s.var = [vec![1.0, 2.0, 4.0], vec![0.0; 3]];
-    assert_eq!(s.variance(0, 0.0), 1.0);
-    assert!((s.variance(0, 0.055) - 1.5).abs() < 1e-12);
-    assert_eq!(s.variance(0, 5.0), 4.0);
+    assert_eq!(s.variance_near(0, 0.0, &mut 0), 1.0);
+    assert!((s.variance_near(0, 0.055, &mut 2) - 1.5).abs() < 1e-12);
+    assert_eq!(s.variance_near(0, 5.0, &mut 0), 4.0);
 }
 
 /// The segment found from any hint is `partition_point`'s: the curve's value is the same
