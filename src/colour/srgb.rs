@@ -192,8 +192,16 @@ impl SrgbLut {
     /// last entry); branch-free, so loops over it vectorise.
     #[inline(always)]
     pub fn index(&self, linear: f32) -> u32 {
+        self.index_times(linear, self.scale)
+    }
+
+    /// The table index of `linear · gain`, computed as `linear · (gain · scale)`
+    /// where `times` is that product (e.g. a white level folded into the scale:
+    /// one multiply per value).
+    #[inline(always)]
+    pub fn index_times(&self, linear: f32, times: f32) -> u32 {
         // max/min return the non-NaN operand, so NaN becomes 0
-        let x = (linear * self.scale + 0.5).max(0.0).min(self.scale);
+        let x = (linear * times + 0.5).max(0.0).min(self.scale);
         // SAFETY: x is finite and within [0, scale] (scale < MAX_ENTRIES < 2³¹), so it fits an i32;
         // the unchecked conversion lets the loops over it vectorise
         (unsafe { x.to_int_unchecked::<i32>() }) as u32

@@ -160,6 +160,9 @@ pub struct FastRenderer {
     /// The swing as the table holds it (DN conversion is done in f64 as `RawFrame::to_volts` does).
     swing_f64: f64,
     xyz: KernelSet,
+    /// The kernels fused with XYZ → linear sRGB (white Y = 1), for every 8-bit
+    /// render: a frame's white level is applied by the sink.
+    srgb: KernelSet,
     /// Per CFA position, the 4×4 map from phase sums to per-phase channel means,
     /// and the luminance weights of the phase sums (2×2 CFAs only).
     phases: Option<Vec<PhaseMap>>,
@@ -216,6 +219,11 @@ impl FastRenderer {
         let level_lut = LevelLut::new(&geo, table.meta.voltage_swing as f32);
         let n_sat = table.meta.sat_cases.len();
         let xyz = KernelSet::new(kernels.to_vec(), geo.size, n_sat);
+        let srgb = KernelSet::new(
+            fuse_matrix(kernels, &XYZ_TO_LINEAR_SRGB, nf),
+            geo.size,
+            n_sat,
+        );
         Ok(Self {
             n_features: nf,
             n_bands: table.n_bands(),
@@ -242,6 +250,7 @@ impl FastRenderer {
             swing: table.meta.voltage_swing as f32,
             swing_f64: table.meta.voltage_swing,
             xyz,
+            srgb,
             phases,
             uniform_phases,
             level_lut,
@@ -383,14 +392,8 @@ impl FastRenderer {
         cancel: &AtomicBool,
     ) -> Result<(f64, RenderStats), RenderError> {
         let wy = self.white_of(src, white);
-        let k = 1.0 / wy;
-        let m = XYZ_TO_LINEAR_SRGB.map(|r| r.map(|v| v * k));
-        let set = KernelSet::new(
-            fuse_matrix(&self.xyz.flat, &m, self.n_features),
-            self.geo.size,
-            self.sat_cases.len(),
-        );
-        let mut stats = self.run(src, reg, &set, out, Srgb8Sink::shared(), cancel)?;
+        let sink = Srgb8Sink::new((1.0 / wy) as f32);
+        let mut stats = self.run(src, reg, &self.srgb, out, &sink, cancel)?;
         stats.clamped = clamped;
         Ok((wy, stats))
     }

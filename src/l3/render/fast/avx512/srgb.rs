@@ -87,6 +87,9 @@ const INTERLEAVE: [u8; 64] = {
 
 /// The constants of [`srgb8_row`]'s encoder, in registers.
 struct Encoder {
+    /// Linear value → table index.
+    times: __m512,
+    /// The last index.
     scale: __m512,
     half: __m512,
     zero: __m512,
@@ -106,7 +109,7 @@ struct Encoder {
 impl Encoder {
     #[target_feature(enable = "avx512f,avx512vl,avx512bw,avx512dq,avx512vbmi")]
     #[inline]
-    unsafe fn new(scale: f32, table: &[u32], poly: Option<&SrgbPoly>) -> Self {
+    unsafe fn new(scale: f32, times: f32, table: &[u32], poly: Option<&SrgbPoly>) -> Self {
         // the polynomial encoder's constants (unused without it)
         let pc = poly.copied().unwrap_or(SrgbPoly {
             exps: [0.0; 16],
@@ -120,6 +123,7 @@ impl Encoder {
             *v = _mm512_set1_ps(c);
         }
         Self {
+            times: _mm512_set1_ps(times),
             scale: _mm512_set1_ps(scale),
             half: _mm512_set1_ps(0.5),
             zero: _mm512_setzero_ps(),
@@ -141,8 +145,8 @@ impl Encoder {
     #[inline]
     unsafe fn codes(&self, v: __m512) -> __m128i {
         // max/min return the second operand for NaN: NaN → 0, as SrgbLut::index;
-        // v · scale + 0.5 rounded twice (no FMA), as SrgbLut::index
-        let x = _mm512_add_ps(_mm512_mul_ps(v, self.scale), self.half);
+        // v · times + 0.5 rounded twice (no FMA), as SrgbLut::index_times
+        let x = _mm512_add_ps(_mm512_mul_ps(v, self.times), self.half);
         let x = _mm512_min_ps(_mm512_max_ps(x, self.zero), self.scale);
         let idx = _mm512_cvttps_epi32(x);
         if !self.poly {
@@ -167,11 +171,13 @@ impl Encoder {
     }
 }
 
-/// Encode `n` pixels of three linear sRGB planes (white = 1) to interleaved
-/// 8-bit sRGB through `table` (the sRGB table widened to u32, indexed by
-/// `round(v · scale)` clamped to `0..=scale`, as [`SrgbLut::index`](super::super::SrgbLut::index)).
+/// Encode `n` pixels of three linear sRGB planes to interleaved 8-bit sRGB
+/// through `table` (the sRGB table widened to u32, indexed by `round(v · times)`
+/// clamped to `0..=scale`, as [`SrgbLut::index_times`](super::super::SrgbLut::index_times);
+/// `times = scale` puts white at 1).
 ///
-/// Returns `false` (and writes nothing) if a slice is too short or the table does not match `scale`.
+/// Returns `false` (and writes nothing) if a slice is too short, the table does not
+/// match `scale`, or `times` is not finite.
 ///
 /// # Safety
 /// The CPU must have AVX-512 F, VL, BW, DQ and VBMI.
@@ -181,6 +187,7 @@ pub(in super::super) unsafe fn srgb8_row(
     n: usize,
     table: &[u32],
     scale: f32,
+    times: f32,
     poly: Option<&SrgbPoly>,
     out: &mut [u8],
 ) -> bool {
@@ -188,10 +195,11 @@ pub(in super::super) unsafe fn srgb8_row(
     if out.len() < 3 * n
         || planes.iter().any(|p| p.len() < padded)
         || !(scale >= 1.0 && (scale as usize) < table.len())
+        || !times.is_finite()
     {
         return false;
     }
-    let enc = Encoder::new(scale, table, poly);
+    let enc = Encoder::new(scale, times, table, poly);
     let perm = _mm512_loadu_si512(INTERLEAVE.as_ptr().cast());
     let mut i = 0;
     while i < n {
@@ -249,7 +257,7 @@ mod tests {
             let mut out = vec![0u8; 3 * n];
             let planes = [&plane[..], &plane[..], &plane[..]];
             // SAFETY: the CPU has the features (checked above)
-            assert!(unsafe { srgb8_row(planes, n, &wide, lut.scale(), p, &mut out) });
+            assert!(unsafe { srgb8_row(planes, n, &wide, lut.scale(), lut.scale(), p, &mut out) });
             assert_eq!(out, want, "polynomial {}", p.is_some());
         }
     }
