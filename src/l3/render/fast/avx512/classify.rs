@@ -269,7 +269,12 @@ pub(in super::super) unsafe fn classify_row<const P: usize>(
         let band = match &prm.chroma {
             None => lo,
             Some(c) => {
-                let (best, sure) = chroma_classes(c, &m, &chroma_phase, odd_lanes);
+                let (best, sure) = match c.n_channels {
+                    4 => chroma_classes::<4>(c, &m, &chroma_phase, odd_lanes),
+                    3 => chroma_classes::<3>(c, &m, &chroma_phase, odd_lanes),
+                    2 => chroma_classes::<2>(c, &m, &chroma_phase, odd_lanes),
+                    _ => chroma_classes::<1>(c, &m, &chroma_phase, odd_lanes),
+                };
                 exact |= !sure;
                 let band = _mm512_add_epi32(
                     _mm512_mullo_epi32(lo, _mm512_set1_epi32(prm.n_chroma as i32)),
@@ -349,45 +354,52 @@ pub(in super::super) unsafe fn classify_row<const P: usize>(
     })
 }
 
-/// The chroma class of 16 pixels from their phase means `m`, as
+/// The chroma class of 16 pixels from their phase means `m`, scored as
 /// [`PatchGeometry::chroma_of`](super::super::PatchGeometry::chroma_of) scores it
-/// (separate multiplies and adds, in its order), and the lanes whose class is
-/// sure: the runner-up's score is at least the margin above the best's.
-/// `phase[ch]` is the phase holding channel `ch` for the even and odd lanes.
+/// over `NCH` channels, and the lanes whose class is sure: the runner-up's score is
+/// at least the margin above the best's. The scores are fused multiply-adds, so
+/// they round differently from the reference's separate multiplies and adds, by
+/// less than the reference's own rounding: the margin
+/// ([`CHROMA_MARGIN`](super::super::CHROMA_MARGIN)) covers both. `phase[ch]` is
+/// the phase holding channel `ch` for the even and odd lanes.
 #[inline(always)]
-unsafe fn chroma_classes(
+unsafe fn chroma_classes<const NCH: usize>(
     c: &ChromaParams,
     m: &[__m512; 4],
     phase: &[(usize, usize); 4],
     odd_lanes: __mmask16,
 ) -> (__m512i, __mmask16) {
     let zero = _mm512_setzero_ps();
-    let mut cm = [zero; 4];
-    for (ch, v) in cm.iter_mut().enumerate().take(c.n_channels) {
+    let mut cm = [zero; NCH];
+    for (ch, v) in cm.iter_mut().enumerate() {
         let (pe, po) = phase[ch];
         *v = _mm512_max_ps(_mm512_mask_blend_ps(odd_lanes, m[pe & 3], m[po & 3]), zero);
     }
-    let mut scale = zero;
-    for (v, &w) in cm.iter().zip(&c.scale).take(c.n_channels) {
-        scale = _mm512_add_ps(scale, _mm512_mul_ps(_mm512_set1_ps(w), *v));
-    }
+    let scale = score(&c.scale, &cm);
     let inf = _mm512_set1_ps(f32::INFINITY);
     let (mut s1, mut s2, mut best) = (inf, inf, _mm512_setzero_si512());
     for (k, a) in c.coef.iter().enumerate() {
-        let mut score = zero;
-        for (v, &w) in cm.iter().zip(a).take(c.n_channels) {
-            score = _mm512_add_ps(score, _mm512_mul_ps(_mm512_set1_ps(w), *v));
-        }
+        let score = score(a, &cm);
         let lower = _mm512_cmp_ps_mask::<_CMP_LT_OQ>(score, s1);
         s2 = _mm512_min_ps(s2, _mm512_max_ps(s1, score));
         best = _mm512_mask_mov_epi32(best, lower, _mm512_set1_epi32(k as i32));
         s1 = _mm512_min_ps(s1, score);
     }
-    let margin = _mm512_add_ps(
-        _mm512_mul_ps(_mm512_set1_ps(c.margin), scale),
-        _mm512_set1_ps(c.floor),
-    );
+    let margin = _mm512_fmadd_ps(_mm512_set1_ps(c.margin), scale, _mm512_set1_ps(c.floor));
     // (NaN fails)
     let sure = _mm512_cmp_ps_mask::<_CMP_GE_OQ>(_mm512_sub_ps(s2, s1), margin);
     (best, sure)
+}
+
+/// `Σ_ch w[ch] · cm[ch]`, unrolled over the `NCH` channels (a function, not a
+/// closure: closures do not inherit the caller's target features).
+#[inline(always)]
+unsafe fn score<const NCH: usize>(w: &[f32; 4], cm: &[__m512; NCH]) -> __m512 {
+    let mut s = _mm512_mul_ps(_mm512_set1_ps(w[0]), cm[0]);
+    // (an index loop: iterator adapters such as `skip` are not always inlined here)
+    #[allow(clippy::needless_range_loop)]
+    for ch in 1..NCH.min(4) {
+        s = _mm512_fmadd_ps(_mm512_set1_ps(w[ch]), cm[ch], s);
+    }
+    s
 }
