@@ -14,9 +14,10 @@
 //!   Bayer, whose two green phases make one channel), classification, kernels
 //!   and the sRGB encoding run 16 pixels at a time in [`avx512`]; elsewhere
 //!   the AVX2 + FMA or portable loops do;
-//! - the 3×3 output matrix (illuminant correction, XYZ → linear sRGB and the
-//!   white level) is fused into the kernels, so sRGB leaves through a lookup
-//!   table without an XYZ image;
+//! - the 3×3 output matrix (illuminant correction and XYZ → linear sRGB) is
+//!   fused into the kernels once, when the renderer is prepared, and a frame's
+//!   white level is a gain in the sRGB lookup's index, so sRGB leaves through
+//!   a lookup table without an XYZ image and no frame re-fuses the kernels;
 //! - work a tile does not need is skipped: saturation handling where no value
 //!   reaches the threshold, the contrast measure where no level's flat and
 //!   texture kernels differ, and everything outside the requested region.
