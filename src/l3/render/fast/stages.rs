@@ -3,9 +3,10 @@
 #[cfg(target_arch = "x86_64")]
 use super::avx2::row_dot_avx2;
 use super::kernels::KernelSet;
-use super::scratch::{ChromaScratch, resize};
+use super::scratch::{ChromaScratch, RowScratch, resize};
 use super::{
-    FastRenderer, LANES, LUMINANCE_MARGIN, PatchGeometry, RenderStats, dot, sat_case_index,
+    FastRenderer, LANES, LUMINANCE_MARGIN, NO_CLASS, PatchGeometry, RenderStats, dot,
+    sat_case_index,
 };
 
 /// One output row of a tile: the padded input rows under it (from the patch's
@@ -19,6 +20,39 @@ pub(super) struct TileRow<'a> {
 }
 
 impl FastRenderer {
+    /// The reference path's pixels of a tile row (class [`NO_CLASS`] in
+    /// `rs.class`), rendered by [`Self::exact_pixel`] into `rs.lin`. They are
+    /// few and far between, so each 16-pixel chunk is tested whole first (one
+    /// vector compare) rather than pixel by pixel.
+    pub(super) fn exact_pixels(
+        &self,
+        set: &KernelSet,
+        row: &TileRow<'_>,
+        rs: &mut RowScratch,
+        st: &mut RenderStats,
+    ) {
+        let RowScratch {
+            class,
+            lin: [l0, l1, l2],
+            patch,
+            feat,
+            ..
+        } = rs;
+        let tw = row.tw.min(class.len());
+        for (k, chunk) in class[..tw].chunks(16).enumerate() {
+            if !chunk.iter().fold(false, |a, &c| a | (c == NO_CLASS)) {
+                continue;
+            }
+            for (j, _) in chunk.iter().enumerate().filter(|(_, c)| **c == NO_CLASS) {
+                let i = k * 16 + j;
+                let v = self.exact_pixel(set, row, i, (&mut patch[..], &mut feat[..]), st);
+                l0[i] = v[0];
+                l1[i] = v[1];
+                l2[i] = v[2];
+            }
+        }
+    }
+
     /// The reference classification of a gathered patch: (class, sat case, fell back, texture).
     #[inline]
     pub(super) fn classify_exact(

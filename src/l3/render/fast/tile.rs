@@ -233,17 +233,8 @@ impl<S> TileCtx<'_, S> {
             row: rs,
             ..
         } = sc;
-        let RowScratch {
-            sat,
-            class,
-            offsets,
-            lin,
-            patch,
-            feat,
-            ..
-        } = rs;
         let rows = &buf[y * stride..];
-        let sat = run.any_sat.then_some(&sat[..]);
+        let sat = run.any_sat.then_some(&rs.sat[..]);
         let (he, ho) = (&he[y * tw8..], &ho[y * tw8..]);
         let (rpar, cpar) = (r % 2, run.tile.c0 % 2);
         let classify = avx512::ClassifyRow {
@@ -259,12 +250,13 @@ impl<S> TileCtx<'_, S> {
         };
         // SAFETY: `wide` is only set in `tile_avx512`, which runs when the CPU has
         // the features; the kernels check the lengths of what they touch.
-        let counts = unsafe { avx512::classify_row::<P>(&classify, prm, class, offsets) };
-        let [l0, l1, l2] = lin;
+        let counts =
+            unsafe { avx512::classify_row::<P>(&classify, prm, &mut rs.class, &mut rs.offsets) };
+        let [l0, l1, l2] = &mut rs.lin;
         let kernels = avx512::KernelRow {
             buf: rows,
             stride,
-            offsets,
+            offsets: &rs.offsets,
             tw,
             kernels: self.set.paired(),
             kstride: self.set.pstride,
@@ -286,23 +278,10 @@ impl<S> TileCtx<'_, S> {
                 r,
                 c0: run.tile.c0,
             };
-            // a whole-chunk test first (one vector compare): the reference
-            // path's pixels are few and far between
-            for (k, chunk) in class[..tw].chunks(16).enumerate() {
-                if chunk.iter().fold(false, |a, &c| a | (c == NO_CLASS)) {
-                    for (j, _) in chunk.iter().enumerate().filter(|(_, c)| **c == NO_CLASS) {
-                        let i = k * 16 + j;
-                        let px = (&mut patch[..], &mut feat[..]);
-                        let v = self.fr.exact_pixel(self.set, &row, i, px, st);
-                        l0[i] = v[0];
-                        l1[i] = v[1];
-                        l2[i] = v[2];
-                    }
-                }
-            }
+            self.fr.exact_pixels(self.set, &row, rs, st);
         }
         // SAFETY: as above
-        unsafe { self.sink.finish_row_wide(out_row, lin, tw) };
+        unsafe { self.sink.finish_row_wide(out_row, &rs.lin, tw) };
         st.pixels += tw as u64;
         true
     }

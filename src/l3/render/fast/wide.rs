@@ -32,8 +32,6 @@ impl FastRenderer {
             class,
             offsets,
             lin,
-            patch,
-            feat,
             ..
         } = rs;
         let mut texture = 0u64;
@@ -66,12 +64,7 @@ impl FastRenderer {
             return false;
         }
         st.texture += texture;
-        for i in (0..tw).filter(|&i| class[i] == NO_CLASS) {
-            let v = self.exact_pixel(set, row, i, (&mut patch[..], &mut feat[..]), st);
-            l0[i] = v[0];
-            l1[i] = v[1];
-            l2[i] = v[2];
-        }
+        self.exact_pixels(set, row, rs, st);
         true
     }
 
