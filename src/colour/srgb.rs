@@ -294,4 +294,25 @@ mod tests {
         lut.encode_slice(&[0.0, 0.5, 1.0], &mut out);
         assert_eq!(out, [0, 188, 255]);
     }
+
+    #[test]
+    fn a_gain_in_the_index_is_the_gain_on_the_value() {
+        let lut = SrgbLut::new();
+        // at the table's own scale, the plain index
+        for i in 0..=4096 {
+            let v = i as f32 / 4000.0;
+            assert_eq!(lut.index_times(v, lut.scale()), lut.index(v));
+        }
+        // a white level of 0.5 (gain 2): half of white encodes as white, a quarter
+        // as the code of half, within the table's one-code bound
+        let times = 2.0 * lut.scale();
+        assert_eq!(lut.at(lut.index_times(0.5, times)), 255);
+        let half = lut.at(lut.index_times(0.25, times));
+        assert!(half.abs_diff(encode_srgb8(0.5)) <= 1, "{half}");
+        // past white, negatives, NaN and a gain of 0 clamp as the plain index does
+        assert_eq!(lut.index_times(3.0, times), lut.scale() as u32);
+        assert_eq!(lut.index_times(-1.0, times), 0);
+        assert_eq!(lut.index_times(f32::NAN, times), 0);
+        assert_eq!(lut.index_times(0.7, 0.0), 0);
+    }
 }

@@ -260,5 +260,28 @@ mod tests {
             assert!(unsafe { srgb8_row(planes, n, &wide, lut.scale(), lut.scale(), p, &mut out) });
             assert_eq!(out, want, "polynomial {}", p.is_some());
         }
+        // a white level as a gain: the codes of `v · gain` through the same index
+        // arithmetic as the scalar sink's, for gains that push values past white,
+        // keep them below, and one that is not finite (refused, nothing written)
+        for gain in [0.37f32, 1.0, 2.5] {
+            let times = gain * lut.scale();
+            let want: Vec<u8> = plane[..n]
+                .iter()
+                .flat_map(|&v| [lut.at(lut.index_times(v, times)); 3])
+                .collect();
+            for p in [poly.as_ref(), None] {
+                let mut out = vec![0u8; 3 * n];
+                let planes = [&plane[..], &plane[..], &plane[..]];
+                // SAFETY: as above
+                assert!(unsafe { srgb8_row(planes, n, &wide, lut.scale(), times, p, &mut out) });
+                assert_eq!(out, want, "gain {gain}, polynomial {}", p.is_some());
+            }
+        }
+        let mut out = vec![9u8; 3 * n];
+        let planes = [&plane[..], &plane[..], &plane[..]];
+        // SAFETY: as above
+        let refused =
+            unsafe { srgb8_row(planes, n, &wide, lut.scale(), f32::INFINITY, None, &mut out) };
+        assert!(!refused && out.iter().all(|&b| b == 9));
     }
 }
