@@ -27,6 +27,7 @@
 //! than 2×2 take the reference classification, so both renderers put every
 //! pixel in the same class; outputs then differ by float rounding only.
 
+use std::sync::OnceLock;
 use std::sync::atomic::AtomicBool;
 
 use rayon::prelude::*;
@@ -162,8 +163,9 @@ pub struct FastRenderer {
     swing_f64: f64,
     xyz: KernelSet,
     /// The kernels fused with XYZ → linear sRGB (white Y = 1), for every 8-bit
-    /// render: a frame's white level is applied by the sink.
-    srgb: KernelSet,
+    /// render: a frame's white level is applied by the sink. Built by the first
+    /// 8-bit render, so renderers that only give XYZ never pay for them.
+    srgb: OnceLock<KernelSet>,
     /// Per CFA position, the 4×4 map from phase sums to per-phase channel means,
     /// and the luminance weights of the phase sums (2×2 CFAs only).
     phases: Option<Vec<PhaseMap>>,
@@ -220,11 +222,6 @@ impl FastRenderer {
         let level_lut = LevelLut::new(&geo, table.meta.voltage_swing as f32);
         let n_sat = table.meta.sat_cases.len();
         let xyz = KernelSet::new(kernels.to_vec(), geo.size, n_sat);
-        let srgb = KernelSet::new(
-            fuse_matrix(kernels, &XYZ_TO_LINEAR_SRGB, nf),
-            geo.size,
-            n_sat,
-        );
         Ok(Self {
             n_features: nf,
             n_bands: table.n_bands(),
@@ -251,7 +248,7 @@ impl FastRenderer {
             swing: table.meta.voltage_swing as f32,
             swing_f64: table.meta.voltage_swing,
             xyz,
-            srgb,
+            srgb: OnceLock::new(),
             phases,
             uniform_phases,
             level_lut,
@@ -394,9 +391,17 @@ impl FastRenderer {
     ) -> Result<(f64, RenderStats), RenderError> {
         let wy = self.white_of(src, white);
         let sink = Srgb8Sink::new((1.0 / wy) as f32);
-        let mut stats = self.run(src, reg, &self.srgb, out, &sink, cancel)?;
+        let mut stats = self.run(src, reg, self.srgb_kernels(), out, &sink, cancel)?;
         stats.clamped = clamped;
         Ok((wy, stats))
+    }
+
+    /// The sRGB-fused kernels (the `srgb` field), built on first use.
+    fn srgb_kernels(&self) -> &KernelSet {
+        self.srgb.get_or_init(|| {
+            let fused = fuse_matrix(&self.xyz.flat, &XYZ_TO_LINEAR_SRGB, self.n_features);
+            KernelSet::new(fused, self.geo.size, self.sat_cases.len())
+        })
     }
 
     /// The white level of a frame: `Y(v)` as is, or the 99th percentile of the
