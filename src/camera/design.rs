@@ -605,6 +605,16 @@ impl SensorDesign {
                 self.rows, self.cols
             ));
         }
+        self.validate_channels(name)?;
+        self.ir_cut.validate(&format!("'{name}': ir_cut"))?;
+        self.qe.validate(&format!("'{name}': qe"))?;
+        Ok(())
+    }
+
+    /// The CFA is valid, every CFA channel has a filter and every filter a CFA channel,
+    /// and every filter's parameters are valid; `name` names the design in errors.
+    fn validate_channels(&self, name: &str) -> Result<(), CameraError> {
+        let invalid = |msg: String| CameraError::InvalidDesign(format!("'{name}': {msg}"));
         // The CFA came through `Cfa::parse` when deserialised; re-check in case
         // it was built by hand.
         if let Err(e) = Cfa::new(
@@ -613,27 +623,25 @@ impl SensorDesign {
             self.cfa.pattern.clone(),
             self.cfa.channel_names.clone(),
         ) {
-            return err(e.to_string());
+            return Err(invalid(e.to_string()));
         }
         for ch in &self.cfa.channel_names {
             if !self.filters.contains_key(ch) {
-                return err(format!(
+                return Err(invalid(format!(
                     "CFA channel '{ch}' has no entry in [filters] (defined: {})",
                     self.filters.keys().cloned().collect::<Vec<_>>().join(", ")
-                ));
+                )));
             }
         }
         for (ch, f) in &self.filters {
             if self.cfa.channel_index(ch).is_none() {
-                return err(format!(
+                return Err(invalid(format!(
                     "filter '{ch}' is not used by the CFA \"{}\"",
                     self.cfa
-                ));
+                )));
             }
             f.validate(&format!("'{name}': filter '{ch}'"))?;
         }
-        self.ir_cut.validate(&format!("'{name}': ir_cut"))?;
-        self.qe.validate(&format!("'{name}': qe"))?;
         Ok(())
     }
 
@@ -702,261 +710,4 @@ impl SensorDesign {
 }
 
 #[cfg(test)]
-mod tests {
-    use super::*;
-
-    fn config_path(name: &str) -> std::path::PathBuf {
-        Path::new(env!("CARGO_MANIFEST_DIR"))
-            .join("config/sensors")
-            .join(name)
-    }
-
-    #[test]
-    fn paper_default_is_valid_and_matches_figure_2() {
-        let d = SensorDesign::paper_default();
-        d.validate().unwrap();
-        assert_eq!(d.cfa.to_string(), "RG/WB");
-        assert_eq!((d.rows, d.cols), (204, 240));
-        assert!((d.conversion_gain_v() - 200e-6).abs() < 1e-18);
-        // Full well in volts equals the swing for the paper's sensor.
-        assert!((d.well_capacity_e * d.conversion_gain_v() - d.voltage_swing_v).abs() < 1e-12);
-        let curves = d.resolve_curves(&WavelengthGrid::default(), None).unwrap();
-        assert_eq!(curves.len(), 4);
-        // W (index 2) is the largest at every band.
-        for b in 0..31 {
-            for c in [0, 1, 3] {
-                assert!(curves[2].values()[b] >= curves[c].values()[b]);
-            }
-        }
-    }
-
-    #[test]
-    fn toml_round_trip() {
-        let d = SensorDesign::paper_default();
-        let text = d.to_toml_string().unwrap();
-        let back = SensorDesign::from_toml_str(&text).unwrap();
-        assert_eq!(back, d);
-        let mut csv = d.clone();
-        csv.adc_bits = Some(10);
-        csv.filters.insert(
-            "W".into(),
-            FilterSpec::Csv {
-                path: "/abs/w.csv".into(),
-                column: "w".into(),
-                scale: 0.5,
-            },
-        );
-        let back = SensorDesign::from_toml_str(&csv.to_toml_string().unwrap()).unwrap();
-        assert_eq!(back, csv);
-    }
-
-    #[test]
-    fn shipped_paper_config_equals_default() {
-        let d = SensorDesign::load(config_path("rgbw-paper.toml"), None).unwrap();
-        assert_eq!(d, SensorDesign::paper_default());
-    }
-
-    #[test]
-    fn shipped_bayer_config_is_rggb() {
-        let d = SensorDesign::load(config_path("bayer-paper.toml"), None).unwrap();
-        assert_eq!(d.cfa.to_string(), "RG/GB");
-        assert_eq!(d.cfa.channel_names, vec!["R", "G", "B"]);
-        assert_eq!(d.filters["R"], parametric::RED);
-        assert_eq!(d.filters["G"], parametric::GREEN);
-        assert_eq!(d.filters["B"], parametric::BLUE);
-        assert_eq!(
-            d.resolve_curves(&WavelengthGrid::default(), None)
-                .unwrap()
-                .len(),
-            3
-        );
-    }
-
-    #[test]
-    fn ar0132at_config_loads_from_its_csv() {
-        let d = SensorDesign::load(config_path("rgbw-ar0132at.toml"), None).unwrap();
-        assert_eq!(d.cfa.to_string(), "RG/WB");
-        let grid = WavelengthGrid::default();
-        let curves = d.resolve_curves(&grid, None).unwrap();
-        // Compare with the CSV, band-averaged by hand at 550 nm (band 15):
-        // the mean of the 1-nm piecewise-linear curve over 545–555 nm.
-        let t = IsetData::built_in()
-            .table("sensor/colorfilters/auto/ar0132atRGBW.csv")
-            .unwrap();
-        let g = t.samples("gAR0132").unwrap();
-        let manual = g.integrate(545.0, 555.0, Extrapolation::Zero) / 10.0;
-        let gi = d.cfa.channel_index("G").unwrap();
-        assert!((curves[gi].values()[15] - manual).abs() < 1e-12);
-        assert!(manual > 0.9, "G peaks near 550 nm: {manual}");
-        // A path that is in neither the ISET directory nor the built-in data
-        // says where it looked.
-        let mut missing = d.clone();
-        if let Some(f) = missing.filters.values_mut().next() {
-            *f = FilterSpec::Csv {
-                path: "sensor/none.csv".into(),
-                column: "x".into(),
-                scale: 1.0,
-            };
-        }
-        let e = missing.resolve_curves(&grid, None).unwrap_err().to_string();
-        assert!(e.contains("ISET") && e.contains("built in"), "{e}");
-    }
-
-    #[test]
-    fn validation_errors_are_clear() {
-        let check = |edit: &dyn Fn(&mut SensorDesign), needle: &str| {
-            let mut d = SensorDesign::paper_default();
-            edit(&mut d);
-            let e = d.validate().unwrap_err().to_string();
-            assert!(e.contains(needle), "expected '{needle}' in: {e}");
-        };
-        check(&|d| d.fill_factor = 1.5, "fill_factor = 1.5");
-        check(&|d| d.fill_factor = 0.0, "fill_factor");
-        check(&|d| d.pixel_size_um = f64::NAN, "pixel_size_um");
-        check(&|d| d.voltage_swing_v = -1.0, "voltage_swing_v");
-        check(&|d| d.read_noise_mv = f64::INFINITY, "read_noise_mv");
-        check(&|d| d.prnu_percent = -0.1, "prnu_percent");
-        check(&|d| d.optics.f_number = 0.0, "f_number");
-        check(&|d| d.adc_bits = Some(40), "adc_bits");
-        check(&|d| d.offset_v = 2.0, "offset_v");
-        check(&|d| d.rows = 0, "size");
-        check(&|d| d.name = String::new(), "name is empty");
-        check(
-            &|d| d.cfa = Cfa::parse("RG/YB").unwrap(),
-            "'Y' has no entry",
-        );
-        check(&|d| d.cfa = Cfa::parse("RG/GB").unwrap(), "'W' is not used");
-        check(
-            &|d| {
-                d.filters.insert(
-                    "R".into(),
-                    FilterSpec::Gaussian {
-                        center_nm: 600.0,
-                        sigma_nm: 0.0,
-                        peak: 1.0,
-                    },
-                );
-            },
-            "filter 'R': sigma_nm",
-        );
-        check(&|d| d.qe = FilterSpec::Constant(1.2), "qe: constant = 1.2");
-        check(&|d| d.cfa.pattern = vec![0, 1, 2, 7], "out of range");
-    }
-
-    #[test]
-    fn toml_errors_are_clear() {
-        let e = |t: &str| SensorDesign::from_toml_str(t).unwrap_err().to_string();
-        assert!(e("fill_factr = 0.4").contains("fill_factr"));
-        assert!(e("cfa = \"RG/W\"").contains("rectangular"));
-        assert!(e("fill_factor = \"a\"").contains("fill_factor"));
-        let both = "[qe]\nconstant = 1.0\ngaussian = { center_nm = 500.0, sigma_nm = 10.0 }";
-        assert!(e(both).contains("exactly one"));
-        assert!(e("[qe]\ncsv = \"x.csv\"").contains("column"));
-        assert!(e("[qe]\nconstant = 1.0\ncolumn = \"x\"").contains("only go with"));
-        // Omitted fields take the paper defaults.
-        let d = SensorDesign::from_toml_str("name = \"x\"\nread_noise_mv = 2.0").unwrap();
-        assert_eq!(d.read_noise_mv, 2.0);
-        assert_eq!(d.well_capacity_e, 9000.0);
-    }
-
-    #[test]
-    fn csv_values_out_of_range_are_rejected() {
-        let dir = tempfile::tempdir().unwrap();
-        let p = dir.path().join("qe.csv");
-        std::fs::write(&p, "wavelength_nm,qe\n380,40\n780,60\n").unwrap();
-        let spec = FilterSpec::Csv {
-            path: p.display().to_string(),
-            column: "qe".into(),
-            scale: 1.0,
-        };
-        let g = WavelengthGrid::default();
-        let e = spec.resolve(&g, None, "qe").unwrap_err().to_string();
-        assert!(e.contains("outside [0, 1]"), "{e}");
-        let pct = FilterSpec::Csv {
-            path: p.display().to_string(),
-            column: "qe".into(),
-            scale: 0.01,
-        };
-        let s = pct.resolve(&g, None, "qe").unwrap();
-        assert!((s.values()[10] - (0.4 + 0.2 * (500.0 - 380.0) / 400.0)).abs() < 1e-12);
-    }
-
-    /// Mean CIELAB ΔE76 of the best linear map from channel responses to XYZ
-    /// over the 99 CES reflectances under `illuminant` (noise-free, the
-    /// sensor's colorimetric floor).
-    fn linear_floor(curves: &[Spectrum], illuminant: &str) -> f64 {
-        use crate::spectral::{ces_reflectances, cie_illuminant, cie1931_cmfs};
-        use nalgebra::DMatrix;
-        let grid = *curves[0].grid();
-        let ill = cie_illuminant(illuminant)
-            .unwrap()
-            .resample(&grid, Extrapolation::Zero);
-        let cmfs = cie1931_cmfs().map(|c| c.resample(&grid, Extrapolation::Zero));
-        let quanta = Spectrum::from_fn(grid, |l| l);
-        let refl = ces_reflectances();
-        let (n, c) = (refl.len(), curves.len());
-        let mut a = DMatrix::<f64>::zeros(n, c);
-        let mut y = DMatrix::<f64>::zeros(n, 3);
-        let white: Vec<f64> = (0..3)
-            .map(|k| cmfs[k].integral_of_product(&ill).unwrap())
-            .collect();
-        for (i, (_, r)) in refl.iter().enumerate() {
-            let e = r
-                .resample(&grid, Extrapolation::Hold)
-                .product(&ill)
-                .unwrap();
-            for j in 0..c {
-                let q = curves[j].product(&quanta).unwrap();
-                a[(i, j)] = q.integral_of_product(&e).unwrap();
-            }
-            for k in 0..3 {
-                y[(i, k)] = cmfs[k].integral_of_product(&e).unwrap() / white[k];
-            }
-        }
-        let m = (a.transpose() * &a).try_inverse().unwrap() * a.transpose() * &y;
-        let p = &a * m;
-        let f = |t: f64| {
-            if t > 216.0 / 24389.0 {
-                t.cbrt()
-            } else {
-                (24389.0 / 27.0 * t + 16.0) / 116.0
-            }
-        };
-        let lab = |x: f64, yy: f64, z: f64| {
-            let (fx, fy, fz) = (f(x), f(yy), f(z));
-            [116.0 * fy - 16.0, 500.0 * (fx - fy), 200.0 * (fy - fz)]
-        };
-        (0..n)
-            .map(|i| {
-                let t = lab(y[(i, 0)], y[(i, 1)], y[(i, 2)]);
-                let e = lab(p[(i, 0)], p[(i, 1)], p[(i, 2)]);
-                (0..3).map(|k| (t[k] - e[k]).powi(2)).sum::<f64>().sqrt()
-            })
-            .sum::<f64>()
-            / n as f64
-    }
-
-    #[test]
-    fn parametric_filters_are_near_colorimetric() {
-        let g = WavelengthGrid::default();
-        let rgbw = SensorDesign::paper_default()
-            .resolve_curves(&g, None)
-            .unwrap();
-        let bayer = SensorDesign::load(config_path("bayer-paper.toml"), None)
-            .unwrap()
-            .resolve_curves(&g, None)
-            .unwrap();
-        for ill in ["D65", "A"] {
-            let (f4, f3) = (linear_floor(&rgbw, ill), linear_floor(&bayer, ill));
-            println!("linear floor under {ill}: RGBW {f4:.3}, RGB {f3:.3} mean ΔE76 (CES)");
-            assert!(f4 < 0.8 && f3 < 0.9, "{ill}: {f4} {f3}");
-        }
-        let ar = SensorDesign::load(config_path("rgbw-ar0132at.toml"), None)
-            .unwrap()
-            .resolve_curves(&g, None)
-            .unwrap();
-        let fa = linear_floor(&ar, "A");
-        println!("linear floor under A: AR0132AT RGBW {fa:.3}");
-        assert!(fa > linear_floor(&rgbw, "A"));
-    }
-}
+mod tests;
