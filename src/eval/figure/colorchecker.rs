@@ -193,6 +193,21 @@ fn chart(s: &mut String, patches: &[ColorCheckerPatch]) -> fmt::Result {
     Ok(())
 }
 
+/// Panel (b)'s value axis: ΔE2000 from 0 to `xmax` over `width` pixels from `left`.
+struct BarAxis {
+    left: f64,
+    width: f64,
+    xmax: f64,
+}
+
+impl BarAxis {
+    /// The x of ΔE `v` (0 for a value that is not finite).
+    fn px(&self, v: f64) -> f64 {
+        let v = if v.is_finite() { v } else { 0.0 };
+        self.left + (v / self.xmax).clamp(0.0, 1.0) * self.width
+    }
+}
+
 /// Panel (b): one horizontal bar per patch, in the patch's reference colour.
 fn bars(s: &mut String, r: &ColorCheckerReport) -> fmt::Result {
     let (left, top, width) = (820.0, 122.0, 330.0);
@@ -205,20 +220,23 @@ fn bars(s: &mut String, r: &ColorCheckerReport) -> fmt::Result {
         .iter()
         .flat_map(|p| [finite(p.delta_e), finite(p.references_delta_e)])
         .fold(1.0f64, f64::max);
-    let xmax = nice_ceil(top_v * 1.08);
-    let px = |v: f64| left + (finite(v) / xmax).clamp(0.0, 1.0) * width;
-    let (tk, dec) = ticks(0.0, xmax, 5);
+    let axis = BarAxis {
+        left,
+        width,
+        xmax: nice_ceil(top_v * 1.08),
+    };
+    let (tk, dec) = ticks(0.0, axis.xmax, 5);
     for v in &tk {
         writeln!(
             s,
             r#"<line x1="{x}" y1="{}" x2="{x}" y2="{}" stroke="{GRID}"/>"#,
             N(top),
             N(top + height),
-            x = N(px(*v))
+            x = N(axis.px(*v))
         )?;
         text(
             s,
-            px(*v),
+            axis.px(*v),
             top + height + 16.0,
             11.0,
             "middle",
@@ -236,43 +254,7 @@ fn bars(s: &mut String, r: &ColorCheckerReport) -> fmt::Result {
         "ΔE2000",
     )?;
     for (i, p) in r.patches.iter().enumerate() {
-        let y = top + i as f64 * row_h;
-        writeln!(s, r#"<g class="cc-bar" data-index="{}">"#, p.index)?;
-        text(
-            s,
-            left - 8.0,
-            y + row_h - 5.0,
-            11.0,
-            "end",
-            "",
-            &format!("{} {}", p.index, clip_chars(&p.name, 17)),
-        )?;
-        writeln!(
-            s,
-            r#"<rect x="{}" y="{}" width="{}" height="{}" fill="{}" stroke="{AXIS}" stroke-width="0.6"/>"#,
-            N(left),
-            N(y + 2.5),
-            N(px(p.delta_e) - left),
-            N(row_h - 5.0),
-            fill(p.reference_xyz)
-        )?;
-        let m = px(p.references_delta_e);
-        writeln!(
-            s,
-            r#"<path class="references" d="M{} {}l4 4l-4 4l-4 -4z" fill="{REF_MARK}"/>"#,
-            N(m),
-            N(y + row_h / 2.0 - 4.0)
-        )?;
-        text(
-            s,
-            px(p.delta_e).max(m + 4.0) + 6.0,
-            y + row_h - 5.0,
-            10.5,
-            "start",
-            "",
-            &de(p.delta_e),
-        )?;
-        writeln!(s, "</g>")?;
+        bar_row(s, p, &axis, top + i as f64 * row_h, row_h)?;
     }
     writeln!(
         s,
@@ -281,6 +263,64 @@ fn bars(s: &mut String, r: &ColorCheckerReport) -> fmt::Result {
         t = N(top),
         b = N(top + height)
     )?;
+    bar_legend(s, r, &axis, top, height)
+}
+
+/// One patch's bar in panel (b), its row's top at `y`.
+fn bar_row(
+    s: &mut String,
+    p: &ColorCheckerPatch,
+    axis: &BarAxis,
+    y: f64,
+    row_h: f64,
+) -> fmt::Result {
+    writeln!(s, r#"<g class="cc-bar" data-index="{}">"#, p.index)?;
+    text(
+        s,
+        axis.left - 8.0,
+        y + row_h - 5.0,
+        11.0,
+        "end",
+        "",
+        &format!("{} {}", p.index, clip_chars(&p.name, 17)),
+    )?;
+    writeln!(
+        s,
+        r#"<rect x="{}" y="{}" width="{}" height="{}" fill="{}" stroke="{AXIS}" stroke-width="0.6"/>"#,
+        N(axis.left),
+        N(y + 2.5),
+        N(axis.px(p.delta_e) - axis.left),
+        N(row_h - 5.0),
+        fill(p.reference_xyz)
+    )?;
+    let m = axis.px(p.references_delta_e);
+    writeln!(
+        s,
+        r#"<path class="references" d="M{} {}l4 4l-4 4l-4 -4z" fill="{REF_MARK}"/>"#,
+        N(m),
+        N(y + row_h / 2.0 - 4.0)
+    )?;
+    text(
+        s,
+        axis.px(p.delta_e).max(m + 4.0) + 6.0,
+        y + row_h - 5.0,
+        10.5,
+        "start",
+        "",
+        &de(p.delta_e),
+    )?;
+    writeln!(s, "</g>")
+}
+
+/// Panel (b)'s mean and p90 lines over the bars (`top`, `height`), and the key to the
+/// references' marks below them.
+fn bar_legend(
+    s: &mut String,
+    r: &ColorCheckerReport,
+    axis: &BarAxis,
+    top: f64,
+    height: f64,
+) -> fmt::Result {
     for (v, colour, name) in [(r.summary.mean, MEAN, "mean"), (r.summary.p90, P90, "p90")] {
         if !v.is_finite() {
             continue;
@@ -290,11 +330,11 @@ fn bars(s: &mut String, r: &ColorCheckerReport) -> fmt::Result {
             r#"<line x1="{x}" y1="{}" x2="{x}" y2="{}" stroke="{colour}" stroke-width="1.5" stroke-dasharray="5 3"/>"#,
             N(top - 4.0),
             N(top + height),
-            x = N(px(v))
+            x = N(axis.px(v))
         )?;
         text(
             s,
-            px(v),
+            axis.px(v),
             top + height + 50.0 + if name == "p90" { 14.0 } else { 0.0 },
             11.0,
             "middle",

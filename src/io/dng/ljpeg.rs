@@ -433,15 +433,11 @@ struct Scan {
 }
 
 impl Scan {
-    fn decode(
-        &self,
-        entropy: &[u8],
-        tables: &[Option<Huffman>; 4],
-        max_samples: usize,
-    ) -> IoResult<Ljpeg> {
+    /// The scan's samples (width × height × components), checked against `max_samples` and
+    /// against what `entropy_len` bytes can code, and its rows per restart interval.
+    fn checked_size(&self, entropy_len: usize, max_samples: usize) -> IoResult<(usize, usize)> {
         let nc = self.comps.len();
-        let row_len = self.width * nc;
-        let total = row_len as u128 * self.height as u128;
+        let total = (self.width * nc) as u128 * self.height as u128;
         if total > max_samples as u128 {
             return Err(dng_err(format!(
                 "lossless JPEG: a {}×{} frame of {nc} components is {total} samples; at most {max_samples} fit the tile",
@@ -449,11 +445,10 @@ impl Scan {
             )));
         }
         // every sample takes at least one bit of entropy-coded data
-        let bound = (entropy.len() as u128 + u128::from(MAX_PADDING)) * 8;
+        let bound = (entropy_len as u128 + u128::from(MAX_PADDING)) * 8;
         if total > bound {
             return Err(dng_err(format!(
-                "lossless JPEG: {total} samples cannot fit in {} bytes of data",
-                entropy.len()
+                "lossless JPEG: {total} samples cannot fit in {entropy_len} bytes of data"
             )));
         }
         if self.restart != 0 && !self.restart.is_multiple_of(self.width) {
@@ -467,6 +462,47 @@ impl Scan {
         } else {
             self.restart / self.width
         };
+        // (`total` ≤ `max_samples`, a usize)
+        Ok((total as usize, rows_per_interval))
+    }
+
+    /// The prediction of sample `i` (column `col`) from the samples decoded before it in
+    /// `out` (T.81 H.1.2.1); `first_row`: the first row of an image or restart interval.
+    fn predict(&self, out: &[u16], i: usize, col: usize, first_row: bool) -> i32 {
+        let nc = self.comps.len();
+        let row_len = self.width * nc;
+        let at = |back: usize| i32::from(out.get(i.wrapping_sub(back)).copied().unwrap_or(0));
+        if first_row {
+            if col == 0 {
+                1i32 << (self.precision - self.pt - 1)
+            } else {
+                at(nc)
+            }
+        } else if col == 0 {
+            at(row_len)
+        } else {
+            let (a, b, c) = (at(nc), at(row_len), at(row_len + nc));
+            match self.predictor {
+                1 => a,
+                2 => b,
+                3 => c,
+                4 => a + b - c,
+                5 => a + ((b - c) >> 1),
+                6 => b + ((a - c) >> 1),
+                _ => (a + b) >> 1,
+            }
+        }
+    }
+
+    fn decode(
+        &self,
+        entropy: &[u8],
+        tables: &[Option<Huffman>; 4],
+        max_samples: usize,
+    ) -> IoResult<Ljpeg> {
+        let (total, rows_per_interval) = self.checked_size(entropy.len(), max_samples)?;
+        let nc = self.comps.len();
+        let row_len = self.width * nc;
         let huff: Vec<&Huffman> = self
             .comps
             .iter()
@@ -477,7 +513,7 @@ impl Scan {
                     .ok_or_else(|| dng_err("lossless JPEG: a Huffman table is missing"))
             })
             .collect::<IoResult<_>>()?;
-        let mut out = vec![0u16; total as usize];
+        let mut out = vec![0u16; total];
         let mut bits = Bits {
             data: entropy,
             pos: 0,
@@ -485,7 +521,6 @@ impl Scan {
             n: 0,
             padding: 0,
         };
-        let initial = 1i32 << (self.precision - self.pt - 1);
         let mut rst = 0u8;
         let mut first_row = true;
         for row in 0..self.height {
@@ -498,26 +533,7 @@ impl Scan {
             for col in 0..self.width {
                 for (c, h) in huff.iter().enumerate() {
                     let i = base + col * nc + c;
-                    let left = || i32::from(out.get(i.wrapping_sub(nc)).copied().unwrap_or(0));
-                    let up = || i32::from(out.get(i.wrapping_sub(row_len)).copied().unwrap_or(0));
-                    let diag =
-                        || i32::from(out.get(i.wrapping_sub(row_len + nc)).copied().unwrap_or(0));
-                    let pred = if first_row {
-                        if col == 0 { initial } else { left() }
-                    } else if col == 0 {
-                        up()
-                    } else {
-                        let (a, b, c) = (left(), up(), diag());
-                        match self.predictor {
-                            1 => a,
-                            2 => b,
-                            3 => c,
-                            4 => a + b - c,
-                            5 => a + ((b - c) >> 1),
-                            6 => b + ((a - c) >> 1),
-                            _ => (a + b) >> 1,
-                        }
-                    };
+                    let pred = self.predict(&out, i, col, first_row);
                     let d = bits.diff(h)?;
                     if let Some(o) = out.get_mut(i) {
                         *o = (pred + d) as u16;

@@ -76,6 +76,26 @@ pub struct TrainingRun {
     run_key: String,
 }
 
+/// The spec's training lights, named and on `grid`, and D65 on `grid`.
+fn training_lights(
+    spec: &TrainingSpec,
+    iset: Option<&IsetData>,
+    grid: WavelengthGrid,
+) -> Result<(Vec<(String, Spectrum)>, Spectrum), LearnError> {
+    let illuminants = spec
+        .illuminants
+        .iter()
+        .map(|s| {
+            let named = IlluminantSpec::parse(s)?.resolve(iset)?;
+            Ok((named.name, named.spd.resample(&grid, Extrapolation::Zero)))
+        })
+        .collect::<Result<Vec<_>, LearnError>>()?;
+    let d65 = cie_illuminant("D65")
+        .ok_or_else(|| LearnError::Invalid("D65 missing".into()))?
+        .resample(&grid, Extrapolation::Zero);
+    Ok((illuminants, d65))
+}
+
 impl TrainingRun {
     /// Check `spec` and prepare everything its batches are simulated from.
     pub fn new(
@@ -96,17 +116,7 @@ impl TrainingRun {
             &params.levels,
             sat_threshold,
         )?;
-        let illuminants = spec
-            .illuminants
-            .iter()
-            .map(|s| {
-                let named = IlluminantSpec::parse(s)?.resolve(iset)?;
-                Ok((named.name, named.spd.resample(&grid, Extrapolation::Zero)))
-            })
-            .collect::<Result<Vec<_>, LearnError>>()?;
-        let d65 = cie_illuminant("D65")
-            .ok_or_else(|| LearnError::Invalid("D65 missing".into()))?
-            .resample(&grid, Extrapolation::Zero);
+        let (illuminants, d65) = training_lights(spec, iset, grid)?;
         let white = Spectrum::constant(grid, 1.0);
         let neutrals = illuminants
             .iter()
