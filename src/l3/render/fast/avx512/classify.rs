@@ -96,25 +96,14 @@ pub(in super::super) struct ClassifyRow<'a> {
     pub cpar: usize,
 }
 
-/// Classify pixels `0..tw` of one output row.
-///
-/// - `class`: receives [`NO_CLASS`] where the reference code must decide, 0
-///   elsewhere;
-/// - `offsets`: receives where each pixel's kernels start in the AVX-512 layout
-///   (class 0's for the reference path's pixels), for the kernel step
-///   ([`apply_kernels`](super::apply_kernels)).
-///
-/// Returns `None` (and writes nothing) if a slice is too short.
-///
-/// # Safety
-/// The CPU must have AVX-512 F, VL, BW and DQ, AVX2 and FMA.
-#[target_feature(enable = "avx512f,avx512vl,avx512bw,avx512dq,avx2,fma")]
-pub(in super::super) unsafe fn classify_row<const P: usize>(
+/// Whether [`classify_row`]'s slices and parameters fit each other: every read and write
+/// in bounds.
+fn args_ok<const P: usize>(
     row: &ClassifyRow<'_>,
     prm: &ClassParams,
-    class: &mut [u32],
-    offsets: &mut [u32],
-) -> Option<RowCounts> {
+    class: &[u32],
+    offsets: &[u32],
+) -> bool {
     let ClassifyRow {
         he,
         ho,
@@ -123,11 +112,9 @@ pub(in super::super) unsafe fn classify_row<const P: usize>(
         stride,
         sat,
         tw,
-        rpar,
-        cpar,
+        ..
     } = *row;
-    let rad = P / 2;
-    if P == 0
+    !(P == 0
         || tw > tw_pad
         || !tw_pad.is_multiple_of(WIDE)
         || he.len() < P * tw_pad
@@ -148,111 +135,153 @@ pub(in super::super) unsafe fn classify_row<const P: usize>(
                     .any(|&ch| ch as usize >= c.n_channels)
                 || c.thresholds.len() < 4 * (prm.n_levels * prm.n_chroma) as usize
         })
-        || (prm.n_chroma > 1) != prm.chroma.is_some()
-    {
-        return None;
-    }
-    let (hp, op, bp) = (he.as_ptr(), ho.as_ptr(), buf.as_ptr());
-    // positions of even and odd lanes in this row
-    let pos_even = rpar * 2 + cpar;
-    let pos_odd = rpar * 2 + (1 - cpar);
-    let odd_lanes: __mmask16 = 0xAAAA;
-    // the phase maps of this row's even and odd lanes, one register per coefficient
-    let lanes = |even: f32, odd: f32| {
-        _mm512_mask_blend_ps(odd_lanes, _mm512_set1_ps(even), _mm512_set1_ps(odd))
-    };
-    let (mut to_mean, mut lw) = ([[_mm512_setzero_ps(); 4]; 4], [_mm512_setzero_ps(); 4]);
-    for p in 0..4 {
-        lw[p] = lanes(prm.lum[pos_even][p], prm.lum[pos_odd][p]);
-        for q in 0..4 {
-            to_mean[p][q] = lanes(prm.to_mean[pos_even][p][q], prm.to_mean[pos_odd][p][q]);
+        || (prm.n_chroma > 1) != prm.chroma.is_some())
+}
+
+/// A row's per-lane constants for [`classify_row`]: its even and odd lanes sit at two
+/// CFA positions, so every per-position parameter is a blend of the two.
+struct RowLanes {
+    /// The phase maps of the row's even and odd lanes, one register per coefficient.
+    to_mean: [[__m512; 4]; 4],
+    lum: [__m512; 4],
+    /// The level edges and bottoms ([`ClassParams::edges`], [`ClassParams::below`]), each
+    /// in two registers.
+    edges: (__m512, __m512),
+    below: (__m512, __m512),
+    /// The contrast thresholds of the even and the odd lanes' positions, two registers each.
+    thr_even: (__m512, __m512),
+    thr_odd: (__m512, __m512),
+    /// Each lane's CFA position.
+    pos: __m512i,
+    /// Where each lane's position's kernels start, and the step per band.
+    base: __m512i,
+    per_level: __m512i,
+    /// Per channel, the phase that holds it for the even and the odd lanes (the last
+    /// such phase, as the AVX2 path writes them).
+    chroma_phase: [(usize, usize); 4],
+    /// Per phase, its values in the patch.
+    count: [__m512; 4],
+}
+
+/// The odd lanes of a 16-lane register.
+const ODD_LANES: __mmask16 = 0xAAAA;
+
+/// `even` in the even lanes, `odd` in the odd ones. (Functions, not closures, here and
+/// below: a closure does not inherit its caller's target features.)
+#[inline(always)]
+unsafe fn lanes(even: f32, odd: f32) -> __m512 {
+    _mm512_mask_blend_ps(ODD_LANES, _mm512_set1_ps(even), _mm512_set1_ps(odd))
+}
+
+/// A 32-entry table in two registers.
+#[inline(always)]
+unsafe fn pair(v: &[f32; MAX_LEVELS]) -> (__m512, __m512) {
+    (
+        _mm512_loadu_ps(v.as_ptr()),
+        _mm512_loadu_ps(v.as_ptr().add(16)),
+    )
+}
+
+impl RowLanes {
+    /// The constants of a row of parity `rpar` whose first column has parity `cpar`.
+    #[inline(always)]
+    unsafe fn new(prm: &ClassParams, rpar: usize, cpar: usize) -> Self {
+        // positions of even and odd lanes in this row
+        let pos_even = rpar * 2 + cpar;
+        let pos_odd = rpar * 2 + (1 - cpar);
+        let (mut to_mean, mut lum) = ([[_mm512_setzero_ps(); 4]; 4], [_mm512_setzero_ps(); 4]);
+        for p in 0..4 {
+            lum[p] = lanes(prm.lum[pos_even][p], prm.lum[pos_odd][p]);
+            for q in 0..4 {
+                to_mean[p][q] = lanes(prm.to_mean[pos_even][p][q], prm.to_mean[pos_odd][p][q]);
+            }
+        }
+        let pos = _mm512_mask_blend_epi32(
+            ODD_LANES,
+            _mm512_set1_epi32(pos_even as i32),
+            _mm512_set1_epi32(pos_odd as i32),
+        );
+        // kernel offsets: class = ((pos · levels + level) · n_sat + 0) · 2 + texture
+        let per_level = 2 * prm.n_sat * prm.kstride;
+        let n_bands = prm.n_levels * prm.n_chroma;
+        let mut chroma_phase = [(0usize, 0usize); 4];
+        if let Some(c) = &prm.chroma {
+            for (p, (&ce, &co)) in c.phase_channels[pos_even]
+                .iter()
+                .zip(&c.phase_channels[pos_odd])
+                .enumerate()
+            {
+                chroma_phase[ce as usize].0 = p;
+                chroma_phase[co as usize].1 = p;
+            }
+        }
+        let mut count = [_mm512_setzero_ps(); 4];
+        for (c, &n) in count.iter_mut().zip(&prm.count) {
+            *c = _mm512_set1_ps(n);
+        }
+        Self {
+            to_mean,
+            lum,
+            edges: pair(&prm.edges),
+            below: pair(&prm.below),
+            thr_even: pair(&prm.thresholds[pos_even]),
+            thr_odd: pair(&prm.thresholds[pos_odd]),
+            pos,
+            base: _mm512_mullo_epi32(pos, _mm512_set1_epi32((n_bands * per_level) as i32)),
+            per_level: _mm512_set1_epi32(per_level as i32),
+            chroma_phase,
+            count,
         }
     }
-    let inv_area = _mm512_set1_ps(prm.inv_area);
-    let e0 = _mm512_loadu_ps(prm.edges.as_ptr());
-    let e1 = _mm512_loadu_ps(prm.edges.as_ptr().add(16));
-    let b0 = _mm512_loadu_ps(prm.below.as_ptr());
-    let b1 = _mm512_loadu_ps(prm.below.as_ptr().add(16));
-    let t_even = &prm.thresholds[pos_even];
-    let t_odd = &prm.thresholds[pos_odd];
-    let (te0, te1) = (
-        _mm512_loadu_ps(t_even.as_ptr()),
-        _mm512_loadu_ps(t_even.as_ptr().add(16)),
-    );
-    let (to0, to1) = (
-        _mm512_loadu_ps(t_odd.as_ptr()),
-        _mm512_loadu_ps(t_odd.as_ptr().add(16)),
-    );
-    let pos = _mm512_mask_blend_epi32(
-        odd_lanes,
-        _mm512_set1_epi32(pos_even as i32),
-        _mm512_set1_epi32(pos_odd as i32),
-    );
-    // kernel offsets: class = ((pos · levels + level) · n_sat + 0) · 2 + texture
-    let per_level = 2 * prm.n_sat * prm.kstride;
-    let n_bands = prm.n_levels * prm.n_chroma;
-    let base = _mm512_mullo_epi32(pos, _mm512_set1_epi32((n_bands * per_level) as i32));
-    // chroma: per channel, the phase that holds it for the even and the odd lanes
-    // (the last such phase, as the AVX2 path writes them)
-    let mut chroma_phase = [(0usize, 0usize); 4];
-    if let Some(c) = &prm.chroma {
-        for (p, (&ce, &co)) in c.phase_channels[pos_even]
-            .iter()
-            .zip(&c.phase_channels[pos_odd])
-            .enumerate()
-        {
-            chroma_phase[ce as usize].0 = p;
-            chroma_phase[co as usize].1 = p;
-        }
-    }
-    let per_level = _mm512_set1_epi32(per_level as i32);
-    let per_texture = _mm512_set1_epi32(prm.kstride as i32);
-    let last = _mm512_set1_epi32(((prm.n_classes - 1) * prm.kstride) as i32);
-    let mut count = [_mm512_setzero_ps(); 4];
-    for (c, &n) in count.iter_mut().zip(&prm.count) {
-        *c = _mm512_set1_ps(n);
-    }
-    let two = _mm512_set1_ps(2.0);
-    let one = _mm512_set1_ps(1.0);
-    let margin = _mm512_set1_ps(LUMINANCE_MARGIN);
-    let cmargin = _mm512_set1_ps(CONTRAST_MARGIN);
-    let abs_mask = _mm512_set1_epi32(0x7fff_ffff);
-    let no_class = _mm512_set1_epi32(NO_CLASS as i32);
-    // per-lane counts of texture and reference-path pixels, summed after the row
-    let (mut n_texture, mut n_exact) = (_mm512_setzero_si512(), _mm512_setzero_si512());
-    let one_i = _mm512_set1_epi32(1);
-    let mut i = 0;
-    while i < tw {
-        // phase sums over the patch rows
+
+    /// The phase sums `s`, phase means `m` and luminance of 16 pixels from their patches'
+    /// `P` rows of horizontal sums (`he`, `ho`, rows `tw_pad` apart, from the pixels').
+    #[inline(always)]
+    unsafe fn means<const P: usize>(
+        &self,
+        he: *const f32,
+        ho: *const f32,
+        tw_pad: usize,
+        diagonal: bool,
+    ) -> ([__m512; 4], [__m512; 4], __m512) {
+        let rad = P / 2;
         let mut s = [_mm512_setzero_ps(); 4];
         for dy in 0..P {
-            let e = _mm512_loadu_ps(hp.add(dy * tw_pad + i));
-            let o = _mm512_loadu_ps(op.add(dy * tw_pad + i));
+            let e = _mm512_loadu_ps(he.add(dy * tw_pad));
+            let o = _mm512_loadu_ps(ho.add(dy * tw_pad));
             let base = 2 * ((dy + rad) % 2);
             s[base] = _mm512_add_ps(s[base], e);
             s[base + 1] = _mm512_add_ps(s[base + 1], o);
         }
         let mut m = [_mm512_setzero_ps(); 4];
-        if prm.diagonal {
+        if diagonal {
             for k in 0..4 {
-                m[k] = _mm512_mul_ps(s[k], to_mean[k][k]);
+                m[k] = _mm512_mul_ps(s[k], self.to_mean[k][k]);
             }
         } else {
             // the same order of operations as the AVX2 path's
             // `t[0]·q[0] + t[1]·q[1] + t[2]·q[2] + t[3]·q[3]`
             for k in 0..4 {
-                let t = &to_mean[k];
+                let t = &self.to_mean[k];
                 let a = _mm512_add_ps(_mm512_mul_ps(t[0], s[0]), _mm512_mul_ps(t[1], s[1]));
                 let a = _mm512_add_ps(a, _mm512_mul_ps(t[2], s[2]));
                 m[k] = _mm512_add_ps(a, _mm512_mul_ps(t[3], s[3]));
             }
         }
+        let lw = &self.lum;
         let lum = _mm512_add_ps(
             _mm512_add_ps(_mm512_mul_ps(s[0], lw[0]), _mm512_mul_ps(s[1], lw[1])),
             _mm512_add_ps(_mm512_mul_ps(s[2], lw[2]), _mm512_mul_ps(s[3], lw[3])),
         );
-        // level: the number of edges below the luminance (a binary search over the
-        // edges held in two registers), exact only if no edge lies within the margin
+        (s, m, lum)
+    }
+
+    /// The luminance level of 16 pixels: the number of level edges below `lum`, by a
+    /// binary search over the two registers; and the lanes with an edge within the
+    /// margin (or a NaN luminance), which the reference decides.
+    #[inline(always)]
+    unsafe fn level(&self, lum: __m512) -> (__m512i, __mmask16) {
+        let (e0, e1) = self.edges;
         let mut lo = _mm512_setzero_si512();
         for step in [16, 8, 4, 2, 1] {
             let probe = _mm512_add_epi32(lo, _mm512_set1_epi32(step - 1));
@@ -261,19 +290,122 @@ pub(in super::super) unsafe fn classify_row<const P: usize>(
             lo = _mm512_mask_add_epi32(lo, k, lo, _mm512_set1_epi32(step));
         }
         let top = _mm512_permutex2var_ps(e0, lo, e1);
-        let bottom = _mm512_permutex2var_ps(b0, lo, b1);
+        let bottom = _mm512_permutex2var_ps(self.below.0, lo, self.below.1);
+        let margin = _mm512_set1_ps(LUMINANCE_MARGIN);
         // (NaN luminance fails both tests)
-        let mut exact = _mm512_cmp_ps_mask::<_CMP_NGT_UQ>(_mm512_sub_ps(lum, bottom), margin)
+        let near = _mm512_cmp_ps_mask::<_CMP_NGT_UQ>(_mm512_sub_ps(lum, bottom), margin)
             | _mm512_cmp_ps_mask::<_CMP_NGE_UQ>(_mm512_sub_ps(top, lum), margin);
+        (lo, near)
+    }
+
+    /// The contrast of 16 pixels (the mean absolute deviation from their phases' means
+    /// over the patch) against the threshold of their class (`lo`: level; `band`: the
+    /// level's chroma class when the table has them): the texture lanes, and those
+    /// near the threshold (or NaN), which the reference decides.
+    #[inline(always)]
+    unsafe fn texture<const P: usize>(
+        &self,
+        prm: &ClassParams,
+        patch: *const f32,
+        stride: usize,
+        (s, m): (&[__m512; 4], &[__m512; 4]),
+        (lo, band): (__m512i, __m512i),
+    ) -> (__mmask16, __mmask16) {
+        // Σ |v − m_k| = Σ (2 · max(v, m_k) − v − m_k) = 2 · Σ max(v, m_k) − Σ_k (S_k + n_k · m_k):
+        // two operations per value instead of three.
+        let sum = sum_of_max::<P>(patch, stride, m);
+        let mut rest = _mm512_add_ps(_mm512_add_ps(s[0], s[1]), _mm512_add_ps(s[2], s[3]));
+        for k in 0..4 {
+            rest = _mm512_fmadd_ps(self.count[k], m[k], rest);
+        }
+        let cv = _mm512_mul_ps(
+            _mm512_fmsub_ps(sum, _mm512_set1_ps(2.0), rest),
+            _mm512_set1_ps(prm.inv_area),
+        );
+        let t = match &prm.chroma {
+            None => _mm512_mask_blend_ps(
+                ODD_LANES,
+                _mm512_permutex2var_ps(self.thr_even.0, lo, self.thr_even.1),
+                _mm512_permutex2var_ps(self.thr_odd.0, lo, self.thr_odd.1),
+            ),
+            // (checked: 4 × bands thresholds; the band is clamped below the bands)
+            Some(c) => _mm512_i32gather_ps::<4>(
+                _mm512_add_epi32(
+                    _mm512_mullo_epi32(
+                        self.pos,
+                        _mm512_set1_epi32((prm.n_levels * prm.n_chroma) as i32),
+                    ),
+                    band,
+                ),
+                c.thresholds.as_ptr(),
+            ),
+        };
+        let gap = _mm512_castsi512_ps(_mm512_and_si512(
+            _mm512_castps_si512(_mm512_sub_ps(cv, t)),
+            _mm512_set1_epi32(0x7fff_ffff),
+        ));
+        (
+            _mm512_cmp_ps_mask::<_CMP_GT_OQ>(cv, t),
+            _mm512_cmp_ps_mask::<_CMP_NGE_UQ>(gap, _mm512_set1_ps(CONTRAST_MARGIN)),
+        )
+    }
+}
+
+/// Classify pixels `0..tw` of one output row.
+///
+/// - `class`: receives [`NO_CLASS`] where the reference code must decide, 0
+///   elsewhere;
+/// - `offsets`: receives where each pixel's kernels start in the AVX-512 layout
+///   (class 0's for the reference path's pixels), for the kernel step
+///   ([`apply_kernels`](super::apply_kernels)).
+///
+/// Returns `None` (and writes nothing) if a slice is too short.
+///
+/// # Safety
+/// The CPU must have AVX-512 F, VL, BW and DQ, AVX2 and FMA.
+#[target_feature(enable = "avx512f,avx512vl,avx512bw,avx512dq,avx2,fma")]
+pub(in super::super) unsafe fn classify_row<const P: usize>(
+    row: &ClassifyRow<'_>,
+    prm: &ClassParams,
+    class: &mut [u32],
+    offsets: &mut [u32],
+) -> Option<RowCounts> {
+    if !args_ok::<P>(row, prm, class, offsets) {
+        return None;
+    }
+    let ClassifyRow {
+        he,
+        ho,
+        tw_pad,
+        buf,
+        stride,
+        sat,
+        tw,
+        rpar,
+        cpar,
+    } = *row;
+    let l = RowLanes::new(prm, rpar, cpar);
+    let n_bands = prm.n_levels * prm.n_chroma;
+    let per_texture = _mm512_set1_epi32(prm.kstride as i32);
+    let last = _mm512_set1_epi32(((prm.n_classes - 1) * prm.kstride) as i32);
+    let no_class = _mm512_set1_epi32(NO_CLASS as i32);
+    // per-lane counts of texture and reference-path pixels, summed after the row
+    let (mut n_texture, mut n_exact) = (_mm512_setzero_si512(), _mm512_setzero_si512());
+    let one_i = _mm512_set1_epi32(1);
+    let mut i = 0;
+    while i < tw {
+        let (s, m, lum) =
+            l.means::<P>(he.as_ptr().add(i), ho.as_ptr().add(i), tw_pad, prm.diagonal);
+        let (lo, mut exact) = l.level(lum);
         // the band: the level, or the level's chroma class
         let band = match &prm.chroma {
             None => lo,
             Some(c) => {
                 let (best, sure) = match c.n_channels {
-                    4 => chroma_classes::<4>(c, &m, &chroma_phase, odd_lanes),
-                    3 => chroma_classes::<3>(c, &m, &chroma_phase, odd_lanes),
-                    2 => chroma_classes::<2>(c, &m, &chroma_phase, odd_lanes),
-                    _ => chroma_classes::<1>(c, &m, &chroma_phase, odd_lanes),
+                    4 => chroma_classes::<4>(c, &m, &l.chroma_phase, ODD_LANES),
+                    3 => chroma_classes::<3>(c, &m, &l.chroma_phase, ODD_LANES),
+                    2 => chroma_classes::<2>(c, &m, &l.chroma_phase, ODD_LANES),
+                    _ => chroma_classes::<1>(c, &m, &l.chroma_phase, ODD_LANES),
                 };
                 exact |= !sure;
                 let band = _mm512_add_epi32(
@@ -285,51 +417,9 @@ pub(in super::super) unsafe fn classify_row<const P: usize>(
         };
         let mut texture: __mmask16 = 0;
         if prm.use_contrast {
-            // Σ |v − m_k| = Σ (2 · max(v, m_k) − v − m_k) = 2 · Σ max(v, m_k) − Σ_k (S_k + n_k · m_k):
-            // two operations per value instead of three. One accumulator per patch row,
-            // so the adds do not wait on each other.
-            let mut acc = [_mm512_setzero_ps(); P];
-            for (dy, a) in acc.iter_mut().enumerate() {
-                let pr = (dy + rad) % 2;
-                let row = bp.add(dy * stride + i);
-                for dx in 0..P {
-                    let v = _mm512_loadu_ps(row.add(dx));
-                    // (the max takes an adder; the accumulation an FMA unit, which is
-                    // otherwise idle here)
-                    *a = _mm512_fmadd_ps(_mm512_max_ps(v, m[2 * pr + (dx + rad) % 2]), one, *a);
-                }
-            }
-            let mut sum = acc[0];
-            for a in &acc[1..] {
-                sum = _mm512_add_ps(sum, *a);
-            }
-            let mut rest = _mm512_add_ps(_mm512_add_ps(s[0], s[1]), _mm512_add_ps(s[2], s[3]));
-            for k in 0..4 {
-                rest = _mm512_fmadd_ps(count[k], m[k], rest);
-            }
-            let cv = _mm512_mul_ps(_mm512_fmsub_ps(sum, two, rest), inv_area);
-            let t = match &prm.chroma {
-                None => _mm512_mask_blend_ps(
-                    odd_lanes,
-                    _mm512_permutex2var_ps(te0, lo, te1),
-                    _mm512_permutex2var_ps(to0, lo, to1),
-                ),
-                // (checked: 4 × bands thresholds; the band is clamped below the bands)
-                Some(c) => _mm512_i32gather_ps::<4>(
-                    _mm512_add_epi32(
-                        _mm512_mullo_epi32(pos, _mm512_set1_epi32(n_bands as i32)),
-                        band,
-                    ),
-                    c.thresholds.as_ptr(),
-                ),
-            };
-            let gap = _mm512_castsi512_ps(_mm512_and_si512(
-                _mm512_castps_si512(_mm512_sub_ps(cv, t)),
-                abs_mask,
-            ));
-            // near the threshold (or NaN): the reference decides
-            exact |= _mm512_cmp_ps_mask::<_CMP_NGE_UQ>(gap, cmargin);
-            texture = _mm512_cmp_ps_mask::<_CMP_GT_OQ>(cv, t);
+            let (t, near) = l.texture::<P>(prm, buf.as_ptr().add(i), stride, (&s, &m), (lo, band));
+            texture = t;
+            exact |= near;
         }
         if let Some(sat) = sat {
             let b = _mm_loadu_si128(sat.as_ptr().add(i).cast());
@@ -338,7 +428,7 @@ pub(in super::super) unsafe fn classify_row<const P: usize>(
         let valid = tail_mask(i, tw);
         exact &= valid;
         // where each pixel's kernels start (class 0's for the reference path's pixels)
-        let off = _mm512_add_epi32(base, _mm512_mullo_epi32(band, per_level));
+        let off = _mm512_add_epi32(l.base, _mm512_mullo_epi32(band, l.per_level));
         let off = _mm512_mask_add_epi32(off, texture, off, per_texture);
         let off = _mm512_maskz_mov_epi32(!exact, _mm512_min_epu32(off, last));
         _mm512_storeu_si512(offsets.as_mut_ptr().add(i).cast(), off);
@@ -352,6 +442,31 @@ pub(in super::super) unsafe fn classify_row<const P: usize>(
         texture: u64::from(_mm512_reduce_add_epi32(n_texture) as u32),
         exact: u64::from(_mm512_reduce_add_epi32(n_exact) as u32),
     })
+}
+
+/// `Σ max(v, m_k)` over the `P × P` patches of 16 pixels whose patches' top-left values
+/// start at `top` (rows `stride` apart), `m_k` the mean of the value's phase `k`.
+#[inline(always)]
+unsafe fn sum_of_max<const P: usize>(top: *const f32, stride: usize, m: &[__m512; 4]) -> __m512 {
+    let rad = P / 2;
+    let one = _mm512_set1_ps(1.0);
+    // one accumulator per patch row, so the adds do not wait on each other
+    let mut acc = [_mm512_setzero_ps(); P];
+    for (dy, a) in acc.iter_mut().enumerate() {
+        let pr = (dy + rad) % 2;
+        let row = top.add(dy * stride);
+        for dx in 0..P {
+            let v = _mm512_loadu_ps(row.add(dx));
+            // (the max takes an adder; the accumulation an FMA unit, which is
+            // otherwise idle here)
+            *a = _mm512_fmadd_ps(_mm512_max_ps(v, m[2 * pr + (dx + rad) % 2]), one, *a);
+        }
+    }
+    let mut sum = acc[0];
+    for a in &acc[1..] {
+        sum = _mm512_add_ps(sum, *a);
+    }
+    sum
 }
 
 /// The chroma class of 16 pixels from their phase means `m`, scored as
