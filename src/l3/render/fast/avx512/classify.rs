@@ -104,16 +104,8 @@ fn args_ok<const P: usize>(
     class: &[u32],
     offsets: &[u32],
 ) -> bool {
-    let ClassifyRow {
-        he,
-        ho,
-        tw_pad,
-        buf,
-        stride,
-        sat,
-        tw,
-        ..
-    } = *row;
+    let (tw_pad, stride) = (row.tw_pad, row.stride);
+    let (he, ho, buf, sat, tw) = (row.he, row.ho, row.buf, row.sat, row.tw);
     !(P == 0
         || tw > tw_pad
         || !tw_pad.is_multiple_of(WIDE)
