@@ -1,0 +1,501 @@
+//! Hostile input: bad sizes, images, parameters, bodies and routes each get a clear 4xx.
+
+use l3::service::Server;
+
+use crate::service_support::*;
+
+const RAW: &str = "application/octet-stream";
+
+/// The server (64 KiB bodies, 100000 pixels at most) the hostile requests go to, and its client.
+struct Hostile<'a> {
+    server: &'a Server,
+    c: reqwest::Client,
+}
+
+impl Hostile<'_> {
+    /// A render with query `q`, content type `ctype` (none when `None`) and `body`.
+    async fn render(
+        &self,
+        q: &str,
+        ctype: Option<&str>,
+        body: Vec<u8>,
+    ) -> reqwest::Result<reqwest::Response> {
+        let mut r = self
+            .c
+            .post(url(self.server, &format!("/v1/render?{q}")))
+            .body(body);
+        if let Some(t) = ctype {
+            r = r.header("content-type", t);
+        }
+        r.send().await
+    }
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn hostile_input_gets_a_clear_4xx() {
+    let data = tempfile::tempdir().unwrap();
+    let mut cfg = test_config(data.path());
+    cfg.server.max_body_bytes = 64 * 1024;
+    cfg.server.max_pixels = 100_000;
+    let (server, _) = server_with_table(data.path(), Some(cfg)).await;
+    let h = Hostile {
+        server: &server,
+        c: client(),
+    };
+    hostile_raw_sizes(&h).await;
+    hostile_images(&h).await;
+    hostile_nan_in_float_input(&h).await;
+    hostile_illuminants(&h).await;
+    hostile_other_parameters(&h).await;
+    hostile_size_types_and_negotiation(&h).await;
+    hostile_job_json(&h).await;
+    hostile_evaluation_and_illuminant_bodies(&h).await;
+    hostile_routes_and_methods(&h).await;
+    server.shutdown().await.unwrap();
+}
+
+/// Raw frames of the wrong length, size or pixel count, and bad or unknown size parameters.
+async fn hostile_raw_sizes(h: &Hostile<'_>) {
+    let d = problem(
+        h.render("width=32&height=32", Some(RAW), vec![0; 1000])
+            .await
+            .unwrap(),
+        400,
+        "invalid_image",
+    )
+    .await;
+    assert!(
+        d.contains("1000 bytes") && d.contains("2048 expected"),
+        "{d}"
+    );
+    let d = problem(
+        h.render("width=0&height=32", Some(RAW), vec![0; 64])
+            .await
+            .unwrap(),
+        400,
+        "invalid_image",
+    )
+    .await;
+    assert!(d.contains("at least 1"), "{d}");
+    let d = problem(
+        h.render("width=100000&height=100000", Some(RAW), vec![0; 64])
+            .await
+            .unwrap(),
+        400,
+        "invalid_image",
+    )
+    .await;
+    assert!(d.contains("at most"), "{d}");
+    let d = problem(
+        h.render("width=1000&height=1000", Some(RAW), vec![0; 64])
+            .await
+            .unwrap(),
+        400,
+        "invalid_image",
+    )
+    .await;
+    assert!(d.contains("100000 pixels"), "{d}");
+    let d = problem(
+        h.render("width=-3&height=2", Some(RAW), vec![0; 64])
+            .await
+            .unwrap(),
+        400,
+        "bad_request",
+    )
+    .await;
+    assert!(d.contains("width"), "{d}");
+    let d = problem(
+        h.render("", Some(RAW), vec![0; 64]).await.unwrap(),
+        400,
+        "bad_request",
+    )
+    .await;
+    assert!(d.contains("width and height"), "{d}");
+    let d = problem(
+        h.render("width=2&height=2&bogus=1", Some(RAW), vec![0; 8])
+            .await
+            .unwrap(),
+        400,
+        "bad_request",
+    )
+    .await;
+    assert!(d.contains("bogus"), "{d}");
+}
+
+/// Truncated and garbage PNG / TIFF / PGM, a non-image and a size the image contradicts.
+async fn hostile_images(h: &Hostile<'_>) {
+    // images: truncated and garbage PNG / TIFF / PGM
+    let frame =
+        l3::io::RawFrame::new(32, 32, (0..1024).map(|i| (i * 50) as u16).collect()).unwrap();
+    let png = l3::io::encode_png_gray16(&frame, l3::io::PngCompression::Fast).unwrap();
+    let tiff = l3::io::encode_tiff_gray16(&frame).unwrap();
+    let mut pgm = b"P5\n32 32\n65535\n".to_vec();
+    pgm.extend(frame.data.iter().flat_map(|v| v.to_be_bytes()));
+    for (ctype, good) in [
+        ("image/png", &png),
+        ("image/tiff", &tiff),
+        ("image/x-portable-graymap", &pgm),
+    ] {
+        let ok = h.render("", Some(ctype), good.clone()).await.unwrap();
+        assert_eq!(ok.status(), 200, "{ctype} valid input");
+        let d = problem(
+            h.render("", Some(ctype), good[..good.len() / 2].to_vec())
+                .await
+                .unwrap(),
+            400,
+            "invalid_image",
+        )
+        .await;
+        assert!(!d.is_empty(), "{ctype} truncated");
+        let mut garbage = good[..8.min(good.len())].to_vec();
+        garbage.extend((0..500u32).map(|i| (i.wrapping_mul(2654435761) >> 13) as u8));
+        problem(
+            h.render("", Some(ctype), garbage).await.unwrap(),
+            400,
+            "invalid_image",
+        )
+        .await;
+    }
+    let d = problem(
+        h.render("", Some("image/png"), b"hello world, not an image".to_vec())
+            .await
+            .unwrap(),
+        400,
+        "invalid_image",
+    )
+    .await;
+    assert!(d.contains("unrecognised image format"), "{d}");
+    let d = problem(
+        h.render("width=5&height=5", Some("image/png"), png.clone())
+            .await
+            .unwrap(),
+        400,
+        "invalid_image",
+    )
+    .await;
+    assert!(d.contains("32×32"), "{d}");
+}
+
+/// A NaN in a float TIFF, named by position.
+async fn hostile_nan_in_float_input(h: &Hostile<'_>) {
+    // NaN in float input
+    // (the encoder refuses NaN, so a marker value is patched to NaN in the encoded file)
+    let mut f = vec![0.1f32; 32 * 32];
+    f[37] = 0.123_456_7;
+    let mut ftiff = l3::io::encode_tiff_gray_f32(32, 32, &f).unwrap();
+    let marker = 0.123_456_7f32.to_le_bytes();
+    let pos = ftiff
+        .windows(4)
+        .position(|w| w == marker)
+        .expect("marker in the TIFF");
+    ftiff[pos..pos + 4].copy_from_slice(&f32::NAN.to_le_bytes());
+    let d = problem(
+        h.render("", Some("image/tiff"), ftiff).await.unwrap(),
+        400,
+        "invalid_image",
+    )
+    .await;
+    assert!(
+        d.contains("finite") && d.contains("x=5") && d.contains("y=1"),
+        "{d}"
+    );
+}
+
+/// Unknown illuminants, a file path and an impossible chromaticity.
+async fn hostile_illuminants(h: &Hostile<'_>) {
+    // illuminants
+    let d = problem(
+        h.render(
+            "width=32&height=32&illuminant=Moonlight",
+            Some(RAW),
+            vec![0; 2048],
+        )
+        .await
+        .unwrap(),
+        400,
+        "unknown_illuminant",
+    )
+    .await;
+    assert!(d.contains("Moonlight"), "{d}");
+    problem(
+        h.render(
+            "width=32&height=32&illuminant=csv:/etc/passwd",
+            Some(RAW),
+            vec![0; 2048],
+        )
+        .await
+        .unwrap(),
+        400,
+        "unknown_illuminant",
+    )
+    .await;
+    problem(
+        h.render(
+            "width=32&height=32&illuminant=xy:2,3",
+            Some(RAW),
+            vec![0; 2048],
+        )
+        .await
+        .unwrap(),
+        400,
+        "unknown_illuminant",
+    )
+    .await;
+}
+
+/// A CFA, levels, region and preview the frame cannot have.
+async fn hostile_other_parameters(h: &Hostile<'_>) {
+    // other parameters
+    problem(
+        h.render("width=32&height=32&cfa=RG/GB", Some(RAW), vec![0; 2048])
+            .await
+            .unwrap(),
+        422,
+        "cfa_mismatch",
+    )
+    .await;
+    problem(
+        h.render("width=32&height=32&white=-1", Some(RAW), vec![0; 2048])
+            .await
+            .unwrap(),
+        400,
+        "bad_request",
+    )
+    .await;
+    problem(
+        h.render(
+            "width=32&height=32&region=30,30,8,8",
+            Some(RAW),
+            vec![0; 2048],
+        )
+        .await
+        .unwrap(),
+        400,
+        "bad_request",
+    )
+    .await;
+    problem(
+        h.render("width=32&height=32&preview=99", Some(RAW), vec![0; 2048])
+            .await
+            .unwrap(),
+        400,
+        "bad_request",
+    )
+    .await;
+    problem(
+        h.render(
+            "width=32&height=32&black_level=70000",
+            Some(RAW),
+            vec![0; 2048],
+        )
+        .await
+        .unwrap(),
+        400,
+        "bad_request",
+    )
+    .await;
+    let d = problem(
+        h.render(
+            "width=32&height=32&black_level=9&white_level=9",
+            Some(RAW),
+            vec![0; 2048],
+        )
+        .await
+        .unwrap(),
+        400,
+        "invalid_image",
+    )
+    .await;
+    assert!(d.contains("black_level"), "{d}");
+}
+
+/// A body over the limit, unsupported or missing content types, an empty body and an output
+/// nobody can produce.
+async fn hostile_size_types_and_negotiation(h: &Hostile<'_>) {
+    let (server, c) = (h.server, &h.c);
+    // size, types, negotiation
+    let d = problem(
+        h.render("width=256&height=256", Some(RAW), vec![0; 256 * 256 * 2])
+            .await
+            .unwrap(),
+        413,
+        "payload_too_large",
+    )
+    .await;
+    assert!(d.contains("65536"), "{d}");
+    problem(
+        h.render("width=32&height=32", Some("text/plain"), vec![0; 2048])
+            .await
+            .unwrap(),
+        415,
+        "unsupported_media_type",
+    )
+    .await;
+    problem(
+        h.render("width=32&height=32", None, vec![0; 2048])
+            .await
+            .unwrap(),
+        415,
+        "unsupported_media_type",
+    )
+    .await;
+    problem(
+        h.render("width=32&height=32", Some(RAW), vec![])
+            .await
+            .unwrap(),
+        400,
+        "invalid_image",
+    )
+    .await;
+    let r = c
+        .post(url(server, "/v1/render?width=32&height=32"))
+        .header("content-type", RAW)
+        .header("accept", "image/webp, text/html")
+        .body(vec![0u8; 2048])
+        .send()
+        .await
+        .unwrap();
+    let detail = problem(r, 406, "not_acceptable").await;
+    assert!(detail.contains("image/jpeg"), "{detail}");
+}
+
+/// Malformed training-job JSON and a job that is not JSON.
+async fn hostile_job_json(h: &Hostile<'_>) {
+    let (server, c) = (h.server, &h.c);
+    // malformed job JSON
+    let job = |body: &'static str, ctype: &'static str| {
+        c.post(url(server, "/v1/training-jobs"))
+            .header("content-type", ctype)
+            .body(body)
+            .send()
+    };
+    let d = problem(
+        job("{\"levels\": ", "application/json").await.unwrap(),
+        400,
+        "invalid_json",
+    )
+    .await;
+    assert!(d.contains("not valid JSON"), "{d}");
+    let d = problem(
+        job("{\"levles\": 5}", "application/json").await.unwrap(),
+        400,
+        "invalid_json",
+    )
+    .await;
+    assert!(d.contains("levles"), "{d}");
+    let d = problem(
+        job("{\"levels\": 1}", "application/json").await.unwrap(),
+        400,
+        "bad_request",
+    )
+    .await;
+    assert!(d.contains("levels 1"), "{d}");
+    let d = problem(
+        job("{\"illuminants\": [\"Moonlight\"]}", "application/json")
+            .await
+            .unwrap(),
+        400,
+        "bad_request",
+    )
+    .await;
+    assert!(d.contains("Moonlight"), "{d}");
+    problem(
+        job("{}", "text/plain").await.unwrap(),
+        415,
+        "unsupported_media_type",
+    )
+    .await;
+}
+
+/// Malformed evaluation and illuminant bodies, and a built-in illuminant's name.
+async fn hostile_evaluation_and_illuminant_bodies(h: &Hostile<'_>) {
+    let (server, c) = (h.server, &h.c);
+    // malformed evaluation and illuminant bodies
+    let r = c
+        .post(url(server, "/v1/evaluations"))
+        .header("content-type", "application/json")
+        .body("{\"method\": 3}")
+        .send()
+        .await
+        .unwrap();
+    problem(r, 400, "invalid_json").await;
+    // an array is not a request object (serde alone would read one field by field)
+    let r = c
+        .post(url(server, "/v1/evaluations"))
+        .header("content-type", "application/json")
+        .body("[null]")
+        .send()
+        .await
+        .unwrap();
+    problem(r, 400, "invalid_json").await;
+    let r = c
+        .post(url(server, "/v1/evaluations"))
+        .json(&serde_json::json!({"method": "magic"}))
+        .send()
+        .await
+        .unwrap();
+    problem(r, 400, "bad_request").await;
+    let r = c
+        .put(url(server, "/v1/illuminants/Bad"))
+        .json(&serde_json::json!({"matrix": [[0,0,0],[0,0,0],[0,0,0]]}))
+        .send()
+        .await
+        .unwrap();
+    let d = problem(r, 400, "bad_request").await;
+    assert!(d.contains("singular"), "{d}");
+    let r = c
+        .put(url(server, "/v1/illuminants/Bad"))
+        .json(&serde_json::json!({"cct": 3000, "matrix": [[1,0,0],[0,1,0],[0,0,1]]}))
+        .send()
+        .await
+        .unwrap();
+    problem(r, 400, "bad_request").await;
+    let r = c
+        .put(url(server, "/v1/illuminants/Bad"))
+        .json(&serde_json::json!({"spd": {"wavelengths_nm": [400], "values": [1, 2]}}))
+        .send()
+        .await
+        .unwrap();
+    problem(r, 400, "bad_request").await;
+    let r = c
+        .put(url(server, "/v1/illuminants/bad%20name"))
+        .json(&serde_json::json!({"cct": 3000}))
+        .send()
+        .await
+        .unwrap();
+    problem(r, 400, "bad_request").await;
+    let r = c
+        .put(url(server, "/v1/illuminants/D65"))
+        .json(&serde_json::json!({"cct": 3000}))
+        .send()
+        .await
+        .unwrap();
+    problem(r, 409, "conflict").await;
+}
+
+/// Unknown routes and methods; after all that the service is still healthy.
+async fn hostile_routes_and_methods(h: &Hostile<'_>) {
+    let (server, c) = (h.server, &h.c);
+    // unknown routes and methods
+    problem(
+        c.get(url(server, "/v2/nothing")).send().await.unwrap(),
+        404,
+        "not_found",
+    )
+    .await;
+    problem(
+        c.get(url(server, "/v1/render")).send().await.unwrap(),
+        405,
+        "method_not_allowed",
+    )
+    .await;
+    // the service is still healthy
+    assert_eq!(
+        c.get(url(server, "/healthz"))
+            .send()
+            .await
+            .unwrap()
+            .status(),
+        200
+    );
+}

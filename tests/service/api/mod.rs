@@ -1,0 +1,36 @@
+//! The render service end to end on a real listener: render parity with `l3 render`, every
+//! table / illuminant / evaluation / health endpoint, limits, auth and hostile input.
+//!
+//! By topic: renders equal to `l3 render`'s, DNG input and the light a frame's metadata names
+//! (`render`), the read endpoints for tables, illuminants, evaluations and metrics (`reads`),
+//! hostile input (`hostile`), backpressure, auth, readiness, an injected panic and the time
+//! limit (`limits`), and concurrent illuminant changes (`concurrency`).
+
+use std::path::Path;
+use std::process::Command;
+
+mod concurrency;
+mod hostile;
+mod limits;
+mod reads;
+mod render;
+
+fn l3_cli(args: &[&str], dir: &Path) {
+    let out = Command::new(env!("CARGO_BIN_EXE_l3"))
+        .args(args)
+        .current_dir(dir)
+        .output()
+        .expect("run l3");
+    assert!(
+        out.status.success(),
+        "l3 {args:?} failed: {}{}",
+        String::from_utf8_lossy(&out.stdout),
+        String::from_utf8_lossy(&out.stderr)
+    );
+}
+
+fn decode_png(bytes: &[u8]) -> image::RgbImage {
+    image::load_from_memory_with_format(bytes, image::ImageFormat::Png)
+        .expect("png")
+        .to_rgb8()
+}
