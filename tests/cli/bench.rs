@@ -2,7 +2,10 @@
 //! parses with its schema, the markdown and the SVG plot exist, and every
 //! number is finite and positive.
 
+use std::path::Path;
 use std::process::Command;
+
+use l3::bench::{BenchReport, ConfigResult};
 
 fn numbers(v: &serde_json::Value, path: &str, out: &mut Vec<(String, f64)>) {
     match v {
@@ -44,11 +47,21 @@ fn quick_bench_writes_json_markdown_and_plot() {
     let out_dir = tmp.path().join("bench");
     let stdout = quick_bench(&[], &out_dir);
 
+    let (json, report) = read_the_report(&out_dir);
+    low_light_errors_grow(&report);
+    let isp = the_strong_isp_beside_the_baselines(&report);
+    every_number_is_finite(&json);
+    skips_and_encoders(&report);
+    markdown_and_plot(&out_dir, &stdout, &isp);
+}
+
+/// bench.json with its schema, read as a report: the configurations and the acquisitions.
+fn read_the_report(out_dir: &Path) -> (serde_json::Value, BenchReport) {
     let json: serde_json::Value =
         serde_json::from_slice(&std::fs::read(out_dir.join("bench.json")).unwrap()).unwrap();
     assert_eq!(json["schema"], "l3.bench.v1");
     assert!(json["renderer"].as_str().is_some_and(|s| !s.is_empty()));
-    let report: l3::bench::BenchReport = serde_json::from_value(json.clone()).unwrap();
+    let report: BenchReport = serde_json::from_value(json.clone()).unwrap();
     // 2 configurations + 3 baselines + 2 strong ISPs + copy
     assert_eq!(report.configs.len(), 8);
     assert_eq!(report.acquisitions, ["Tungsten", "Fluorescent"]);
@@ -59,7 +72,11 @@ fn quick_bench_writes_json_markdown_and_plot() {
         assert_eq!(c.one_thread.runs, 2);
         assert_eq!(c.one_thread.threads, 1);
     }
-    // a tenth of the light: every conventional pipeline's per-pixel error grows
+    (json, report)
+}
+
+/// A tenth of the light: every conventional pipeline's per-pixel error grows.
+fn low_light_errors_grow(report: &BenchReport) {
     use l3::bench::ConfigKind::{Baseline, Isp};
     for c in report
         .configs
@@ -71,8 +88,12 @@ fn quick_bench_writes_json_markdown_and_plot() {
             assert!(low > col.pixel_mean, "{} {}: {low}", c.name, col.illuminant);
         }
     }
-    // the strong ISP beside the baselines, with its own light's matrix and with D65's then T,
-    // every metric measured at both exposures
+}
+
+/// The strong ISP beside the baselines, with its own light's matrix and with D65's then T,
+/// every metric measured at both exposures; returns its configurations.
+fn the_strong_isp_beside_the_baselines(report: &BenchReport) -> Vec<&ConfigResult> {
+    use l3::bench::ConfigKind::Isp;
     let isp: Vec<_> = report.configs.iter().filter(|c| c.kind == Isp).collect();
     assert_eq!(isp.len(), 2);
     let labels: Vec<&str> = isp.iter().map(|c| c.colour[0].method.as_str()).collect();
@@ -102,8 +123,13 @@ fn quick_bench_writes_json_markdown_and_plot() {
             );
         }
     }
+    isp
+}
+
+/// Every number of the JSON is finite and positive (some may be zero).
+fn every_number_is_finite(json: &serde_json::Value) {
     let mut nums = Vec::new();
-    numbers(&json, "", &mut nums);
+    numbers(json, "", &mut nums);
     assert!(nums.len() > 50);
     for (path, v) in &nums {
         // seeds, output differences of skips (0 when identical) and false colour (0 where
@@ -115,6 +141,10 @@ fn quick_bench_writes_json_markdown_and_plot() {
         }
         assert!(v.is_finite() && *v > 0.0, "{path} = {v}");
     }
+}
+
+/// The skips' measurements, the encoders' sizes and the Pareto front.
+fn skips_and_encoders(report: &BenchReport) {
     // every skip measured where it applies and where it does not, outputs (nearly) equal
     assert!(report.skips.len() >= 10, "{} skips", report.skips.len());
     assert!(report.skips.iter().any(|k| k.applies) && report.skips.iter().any(|k| !k.applies));
@@ -152,7 +182,11 @@ fn quick_bench_writes_json_markdown_and_plot() {
         .expect("JPEG encoder timed");
     assert!(jpeg.bytes < png.bytes, "{} vs {}", jpeg.bytes, png.bytes);
     assert!(!report.pareto.is_empty() && report.pareto.iter().all(|f| !f.names.is_empty()));
+}
 
+/// bench.md (and the printed table) with the plain copy and the strong ISP; the SVG plot
+/// with its Pareto front and an ISP point.
+fn markdown_and_plot(out_dir: &Path, stdout: &str, isp: &[&ConfigResult]) {
     let md = std::fs::read_to_string(out_dir.join("bench.md")).unwrap();
     assert!(md.contains("| configuration |") && md.contains("plain copy"));
     assert!(md.contains(&format!("| *{}* |", isp[1].name)), "{md}");

@@ -3,7 +3,7 @@
 //! evaluation of the same frame (`l3 eval --frame … --chart macbeth`), under D65 and under
 //! tungsten; against ISET's bare reflectances, up to the lens's blur and flare.
 
-use std::path::Path;
+use std::path::{Path, PathBuf};
 use std::process::Command;
 
 use crate::support::{l3, train_small_si};
@@ -77,25 +77,58 @@ fn colorchecker_agrees_with_the_chart_evaluation() {
     train_small_si(d, &table, &["--chroma-classes", "1"]);
     let table = table.to_str().unwrap();
     for light in ["D65", "Tungsten"] {
-        let sim = d.join(format!("sim-{light}"));
-        let (ok, out, err) = l3(
-            &[
-                "simulate",
-                "--scene",
-                "macbeth",
-                "--illuminant",
-                light,
-                "--seed",
-                "5",
-                "--out",
-                sim.to_str().unwrap(),
-            ],
-            d,
-        );
-        assert!(ok, "simulate failed: {out}{err}");
+        let sim = simulate_macbeth(d, light);
         let frame = sim.join("mosaic.raw");
         let frame = frame.to_str().unwrap();
-        // the chart evaluation of the frame, against the simulator's truth
+        let capture = Capture {
+            d,
+            light,
+            sim: &sim,
+            frame,
+            table,
+        };
+        let chart = capture.chart_evaluation();
+        let chart_patches = chart["patches"].as_array().unwrap();
+        let cc_path = capture.against_the_truth(chart_patches);
+        capture.against_iset(chart_patches, &cc_path);
+        capture.published_values_by_default();
+    }
+}
+
+/// `l3 simulate --scene macbeth` under `light` (seed 5) in `d`; its output directory.
+fn simulate_macbeth(d: &Path, light: &str) -> PathBuf {
+    let sim = d.join(format!("sim-{light}"));
+    let (ok, out, err) = l3(
+        &[
+            "simulate",
+            "--scene",
+            "macbeth",
+            "--illuminant",
+            light,
+            "--seed",
+            "5",
+            "--out",
+            sim.to_str().unwrap(),
+        ],
+        d,
+    );
+    assert!(ok, "simulate failed: {out}{err}");
+    sim
+}
+
+/// A simulated ColorChecker capture under one light, and the table that renders it.
+struct Capture<'a> {
+    d: &'a Path,
+    light: &'a str,
+    sim: &'a Path,
+    frame: &'a str,
+    table: &'a str,
+}
+
+impl Capture<'_> {
+    /// The chart evaluation of the frame, against the simulator's truth.
+    fn chart_evaluation(&self) -> serde_json::Value {
+        let (d, light, frame, table) = (self.d, self.light, self.frame, self.table);
         let chart = d.join(format!("chart-{light}.json"));
         let (ok, out, err) = l3(
             &[
@@ -115,10 +148,15 @@ fn colorchecker_agrees_with_the_chart_evaluation() {
         assert!(out.contains(&format!("illuminant {light}")), "{out}");
         let chart = read_json(&chart);
         assert_eq!(chart["chart"], "macbeth");
-        let chart_patches = chart["patches"].as_array().unwrap();
-        // the same frame as a ColorChecker capture, rendered with the same correction (T),
-        // against the simulator's truth (the reference the chart evaluation scores against)
-        let truth = sim.join("truth.csv");
+        chart
+    }
+
+    /// The same frame as a ColorChecker capture, rendered with the same correction (T),
+    /// against the simulator's truth: every patch within 0.3 of the chart evaluation's.
+    /// Returns the report's path.
+    fn against_the_truth(&self, chart_patches: &[serde_json::Value]) -> PathBuf {
+        let (d, light, frame, table) = (self.d, self.light, self.frame, self.table);
+        let truth = self.sim.join("truth.csv");
         let cc_path = d.join(format!("cc-{light}.json"));
         let cc = colorchecker(d, frame, table, truth.to_str().unwrap(), &cc_path);
         assert_eq!(cc["reference"], "measured");
@@ -151,6 +189,12 @@ fn colorchecker_agrees_with_the_chart_evaluation() {
             "{light}: against truth.csv, per-patch |difference| mean {mean:.3}, max {worst:.3}"
         );
         assert!(worst <= 0.3, "{light}: per-patch differences {diffs:?}");
+        cc_path
+    }
+
+    /// Against ISET's bare reflectances, up to the lens's blur and flare; the figure at `cc_path`.
+    fn against_iset(&self, chart_patches: &[serde_json::Value], cc_path: &Path) {
+        let (d, light, frame, table) = (self.d, self.light, self.frame, self.table);
         // Against ISET's bare reflectances, as a real capture is scored, the lens's blur and
         // flare (in the chart evaluation's truth, not in the reflectances) add up to 0.5.
         let iset_path = d.join(format!("cc-iset-{light}.json"));
@@ -163,8 +207,11 @@ fn colorchecker_agrees_with_the_chart_evaluation() {
         let svg = std::fs::read_to_string(cc_path.with_extension("svg")).unwrap();
         assert!(svg.starts_with("<?xml") && svg.trim_end().ends_with("</svg>"));
         assert_eq!(svg.matches("class=\"cc-patch\"").count(), 24);
+    }
 
-        // the published values by default, with the references' own difference
+    /// The published values by default, with the references' own difference.
+    fn published_values_by_default(&self) {
+        let (d, light, frame, table) = (self.d, self.light, self.frame, self.table);
         let x_path = d.join(format!("cc-xrite-{light}.json"));
         let (ok, out, err) = l3(
             &[

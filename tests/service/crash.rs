@@ -242,16 +242,27 @@ async fn kill9_during_a_training_job_then_the_restart_finishes_it() {
     assert!(temp_files(&data.path().join("tables")).is_empty());
 }
 
+/// The debug pause before the rename of a table file and before the switch to it (runs 2, 3).
+const PAUSE_MS: u64 = 4000;
+/// The log line of the pause before the rename.
+const BEFORE_RENAME: &str = "pausing 4000 ms before the rename";
+/// The log line of the pause before the switch is recorded.
+const BEFORE_SWITCH: &str = "pausing 4000 ms before recording it as active";
+
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn kill9_while_storing_and_switching_tables_then_a_corrupt_table_file() {
     let data = tempfile::tempdir().unwrap();
     let tables = data.path().join("tables");
-    const PAUSE_MS: u64 = 4000;
-    const BEFORE_RENAME: &str = "pausing 4000 ms before the rename";
-    const BEFORE_SWITCH: &str = "pausing 4000 ms before recording it as active";
+    let a = run1_table_a_trained_and_active(data.path()).await;
+    let b_job = run2_killed_before_the_rename(data.path(), &tables, &a).await;
+    run3_killed_before_the_switch(data.path(), &tables, &a).await;
+    let b = run4_job_b_runs_again(data.path(), &tables, &a, &b_job).await;
+    run5_a_corrupt_active_table_file(data.path(), &tables, &a, &b).await;
+}
 
-    // run 1: table A trained and active
-    let s = Service::start(data.path(), 0).await;
+/// Run 1: table A trained and active; returns A.
+async fn run1_table_a_trained_and_active(data: &Path) -> String {
+    let s = Service::start(data, 0).await;
     let (_, job) = s.post("/v1/training-jobs", &job_body(1, 4, true)).await;
     let a_job = job["id"].as_str().unwrap().to_string();
     let done = s
@@ -263,42 +274,51 @@ async fn kill9_while_storing_and_switching_tables_then_a_corrupt_table_file() {
     let a = done["table_id"].as_str().unwrap().to_string();
     assert_eq!(s.ready_table().await.as_deref(), Some(a.as_str()));
     s.kill9();
+    a
+}
 
-    // run 2: job B (activate) killed after its temporary file is written, before the rename
-    let s = Service::start(data.path(), PAUSE_MS).await;
-    assert_eq!(s.ready_table().await.as_deref(), Some(a.as_str()));
+/// Run 2: job B (activate) killed after its temporary file is written, before the rename;
+/// returns B's job id.
+async fn run2_killed_before_the_rename(data: &Path, tables: &Path, a: &str) -> String {
+    let s = Service::start(data, PAUSE_MS).await;
+    assert_eq!(s.ready_table().await.as_deref(), Some(a));
     let (_, job) = s.post("/v1/training-jobs", &job_body(2, 4, true)).await;
     let b_job = job["id"].as_str().unwrap().to_string();
     s.wait_log(BEFORE_RENAME, 1, 120).await;
     assert_eq!(
-        temp_files(&tables).len(),
+        temp_files(tables).len(),
         1,
         "the window holds a temporary file"
     );
     s.kill9();
+    b_job
+}
 
-    // run 3: the temporary file is cleaned at start, A still serves, B runs again and is
-    // killed after its file is stored and verified, before the switch to it is recorded
-    let s = Service::start(data.path(), PAUSE_MS).await;
+/// Run 3: the temporary file is cleaned at start, A still serves, B runs again and is killed
+/// after its file is stored and verified, before the switch to it is recorded.
+async fn run3_killed_before_the_switch(data: &Path, tables: &Path, a: &str) {
+    let s = Service::start(data, PAUSE_MS).await;
     assert!(
-        temp_files(&tables).is_empty(),
+        temp_files(tables).is_empty(),
         "orphan temporary file remains"
     );
     s.wait_log("left half-written", 1, 10).await;
-    assert_eq!(s.ready_table().await.as_deref(), Some(a.as_str()));
+    assert_eq!(s.ready_table().await.as_deref(), Some(a));
     s.wait_log(BEFORE_SWITCH, 1, 120).await;
     let (_, list) = s.get("/v1/tables").await;
     assert_eq!(list["items"].as_array().unwrap().len(), 2, "{list}");
     s.kill9();
+}
 
-    // run 4: A is still the active table (the switch was never recorded); every file agrees
-    // with the database; job B is not lost: it runs a third time and activates B
-    let s = Service::start(data.path(), 0).await;
-    assert_eq!(s.ready_table().await.as_deref(), Some(a.as_str()));
-    let ids = check_tables_agree(&s, &tables).await;
+/// Run 4: A is still the active table (the switch was never recorded); every file agrees with
+/// the database; job B is not lost: it runs a third time and activates B, which it returns.
+async fn run4_job_b_runs_again(data: &Path, tables: &Path, a: &str, b_job: &str) -> String {
+    let s = Service::start(data, 0).await;
+    assert_eq!(s.ready_table().await.as_deref(), Some(a));
+    let ids = check_tables_agree(&s, tables).await;
     assert_eq!(ids.len(), 2);
     let done = s
-        .wait_job(&b_job, 120, |j| {
+        .wait_job(b_job, 120, |j| {
             j["status"] == "succeeded" || j["status"] == "failed"
         })
         .await;
@@ -309,14 +329,17 @@ async fn kill9_while_storing_and_switching_tables_then_a_corrupt_table_file() {
     assert_eq!(s.ready_table().await.as_deref(), Some(b.as_str()));
     // the interrupted attempt's table stays stored (a table records its training time, so the
     // re-run's file is a new table); all of them agree with their files
-    let ids = check_tables_agree(&s, &tables).await;
-    assert!(ids.contains(&a) && ids.contains(&b), "{ids:?}");
+    let ids = check_tables_agree(&s, tables).await;
+    assert!(ids.contains(&a.to_string()) && ids.contains(&b), "{ids:?}");
     let (_, jobs) = s.get("/v1/training-jobs").await;
     assert_eq!(jobs["items"].as_array().unwrap().len(), 2);
     s.kill9();
+    b
+}
 
-    // run 5: the active table's file is corrupted on disk: a clear message at start, the
-    // service stays up on the last good table (A), and /v1/tables reports B as corrupt
+/// Run 5: the active table's file is corrupted on disk: a clear message at start, the service
+/// stays up on the last good table (A), refuses B; restoring the file makes B usable again.
+async fn run5_a_corrupt_active_table_file(data: &Path, tables: &Path, a: &str, b: &str) {
     let b_path = tables.join(format!("{b}.safetensors"));
     let mut bytes = std::fs::read(&b_path).unwrap();
     let mid = bytes.len() / 2;
@@ -324,23 +347,45 @@ async fn kill9_while_storing_and_switching_tables_then_a_corrupt_table_file() {
         *x ^= 0xA5;
     }
     std::fs::write(&b_path, &bytes).unwrap();
-    let s = Service::start(data.path(), 0).await;
-    assert_eq!(s.ready_table().await.as_deref(), Some(a.as_str()));
+    let s = Service::start(data, 0).await;
+    b_is_reported_corrupt(&s, a, b).await;
+    the_corrupt_table_is_refused(&s, a, b).await;
+    // restoring the file makes the table usable again
+    for x in &mut bytes[mid..mid + 16] {
+        *x ^= 0xA5;
+    }
+    std::fs::write(&b_path, &bytes).unwrap();
+    let (st, t) = s
+        .post(&format!("/v1/tables/{b}/activate"), &json!({}))
+        .await;
+    assert_eq!(st, 200, "{t}");
+    assert_eq!(t["status"], "ok");
+    assert_eq!(s.ready_table().await.as_deref(), Some(b));
+    s.kill9();
+}
+
+/// A serves, the start logs that the active table B is unusable, and /v1/tables reports B as
+/// corrupt.
+async fn b_is_reported_corrupt(s: &Service, a: &str, b: &str) {
+    assert_eq!(s.ready_table().await.as_deref(), Some(a));
     s.wait_log(&format!("the recorded active table {b} is unusable"), 1, 10)
         .await;
     assert!(s.log_count("is corrupt") >= 1);
     let (_, list) = s.get("/v1/tables").await;
-    assert_eq!(list["active_table_id"], a.as_str());
+    assert_eq!(list["active_table_id"], a);
     for t in list["items"].as_array().unwrap() {
-        if t["id"] == b.as_str() {
+        if t["id"] == b {
             assert_eq!(t["status"], "corrupt", "{t}");
             assert!(t["status_detail"].as_str().unwrap().contains("SHA-256"));
         } else {
             assert_eq!(t["status"], "ok", "{t}");
-            assert_eq!(t["active"], t["id"] == a.as_str());
+            assert_eq!(t["active"], t["id"] == a);
         }
     }
-    // the corrupt table is refused (409), never served; renders still work on A
+}
+
+/// The corrupt table is refused (409), never served; renders still work on A.
+async fn the_corrupt_table_is_refused(s: &Service, a: &str, b: &str) {
     let (st, p) = s
         .post(&format!("/v1/tables/{b}/activate"), &json!({}))
         .await;
@@ -362,17 +407,5 @@ async fn kill9_while_storing_and_switching_tables_then_a_corrupt_table_file() {
         .await
         .unwrap();
     assert_eq!(r.status(), 200);
-    assert_eq!(r.headers()["x-l3-table"], a.as_str());
-    // restoring the file makes the table usable again
-    for x in &mut bytes[mid..mid + 16] {
-        *x ^= 0xA5;
-    }
-    std::fs::write(&b_path, &bytes).unwrap();
-    let (st, t) = s
-        .post(&format!("/v1/tables/{b}/activate"), &json!({}))
-        .await;
-    assert_eq!(st, 200, "{t}");
-    assert_eq!(t["status"], "ok");
-    assert_eq!(s.ready_table().await.as_deref(), Some(b.as_str()));
-    s.kill9();
+    assert_eq!(r.headers()["x-l3-table"], a);
 }
