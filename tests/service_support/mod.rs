@@ -140,6 +140,12 @@ pub async fn problem(resp: reqwest::Response, status: u16, code: &str) -> String
     d
 }
 
+/// [`problem`], and its detail names every one of `needles`.
+pub async fn problem_naming(resp: reqwest::Response, status: u16, code: &str, needles: &[&str]) {
+    let d = problem(resp, status, code).await;
+    assert!(needles.iter().all(|n| d.contains(n)), "{d}");
+}
+
 /// Polls a job until `done(job)` or the timeout (seconds); returns the last job JSON.
 pub async fn wait_job(
     server: &Server,
