@@ -62,11 +62,38 @@ fn train_in_shards_gives_the_same_table_file() {
     );
     assert_ne!(transfer(&one), transfer(&avg48));
     assert_ne!(one.kernels, load("avg0.safetensors").kernels);
-    // its colour maps are aimed through D65's and tungsten's T; it keeps, per
-    // level, maps aimed at XYZ under the light for the lights it was not
-    // trained on, and these differ where tungsten's T errs
-    let table = &one;
-    let transfer = transfer(table);
+    check_transfer_maps(&one);
+    assert!(stdout.contains("accumulation shard 2/2"), "{stdout}");
+    assert!(d.join("parts/sums-2-of-2.l3p").is_file());
+    // one step per process, as on separate machines: surveys, then sums
+    // (shards in any order), then the merge
+    let steps: [&[&str]; 5] = [
+        &["--phase", "survey", "--shard", "2"],
+        &["--phase", "survey", "--shard", "1"],
+        &["--phase", "accumulate", "--shard", "2"],
+        &["--phase", "accumulate", "--shard", "1"],
+        &["--phase", "merge"],
+    ];
+    for step in steps {
+        let args = [&["--shards", "2", "--shard-dir", "steps"][..], step].concat();
+        train("steps.safetensors", &args);
+    }
+    assert_eq!(
+        std::fs::read(d.join("steps.safetensors")).unwrap(),
+        one_bytes
+    );
+    // more shards than batches is a clear error
+    let (ok, _, err) = l3(&["train", "--shards", "6", "--scenes", "5"], d);
+    assert!(!ok && err.contains("6 shards for 5 batches"), "{err}");
+}
+
+/// The transfer maps of the D65 + tungsten table of [`train_in_shards_gives_the_same_table_file`].
+///
+/// Its colour maps are aimed through D65's and tungsten's T. Per level, it keeps maps aimed
+/// at XYZ under the light for the lights it was not trained on, and these differ where
+/// tungsten's T errs.
+fn check_transfer_maps(table: &l3::l3::L3Table) {
+    let transfer = table.meta.params.transfer_maps.clone().unwrap();
     assert_eq!(transfer.len(), 6);
     assert!(table.transfers_to("Fluorescent") && !table.transfers_to("tungsten"));
     let top = table.colour_map_at(table.n_bands() - 1).unwrap();
@@ -107,28 +134,6 @@ fn train_in_shards_gives_the_same_table_file() {
     let best = (0..scores.len()).fold(0, |b, i| if scores[i] < scores[b] { i } else { b });
     assert_eq!(choice["fit"], candidates[best]["fit"], "{choice}");
     assert_eq!(choice["lights"], candidates[best]["lights"], "{choice}");
-    assert!(stdout.contains("accumulation shard 2/2"), "{stdout}");
-    assert!(d.join("parts/sums-2-of-2.l3p").is_file());
-    // one step per process, as on separate machines: surveys, then sums
-    // (shards in any order), then the merge
-    let steps: [&[&str]; 5] = [
-        &["--phase", "survey", "--shard", "2"],
-        &["--phase", "survey", "--shard", "1"],
-        &["--phase", "accumulate", "--shard", "2"],
-        &["--phase", "accumulate", "--shard", "1"],
-        &["--phase", "merge"],
-    ];
-    for step in steps {
-        let args = [&["--shards", "2", "--shard-dir", "steps"][..], step].concat();
-        train("steps.safetensors", &args);
-    }
-    assert_eq!(
-        std::fs::read(d.join("steps.safetensors")).unwrap(),
-        one_bytes
-    );
-    // more shards than batches is a clear error
-    let (ok, _, err) = l3(&["train", "--shards", "6", "--scenes", "5"], d);
-    assert!(!ok && err.contains("6 shards for 5 batches"), "{err}");
 }
 
 /// `l3 train --chroma-classes K` trains a table whose levels are split by
