@@ -148,7 +148,7 @@ impl CameraCase<'_> {
         assert_eq!(one["design"]["name"], "bayer-sony-ilce-9");
         assert_eq!(one["table_id"], sony_id);
         let r = c.get(url(server, "/v1/sensors/bayer-sony-ilce-10"));
-        problem(r.send().await.unwrap(), 404, "not_found").await;
+        problem_of(r, 404, "not_found").await;
     }
 
     /// The DNG renders with the camera's table; returns the render.

@@ -70,12 +70,9 @@ async fn evaluation_figure_is_served_as_svg() {
     }
 
     // errors stay problem+json
-    problem(
+    problem_of(
         c.get(url(&server, "/v1/evaluations/eval_nope"))
-            .header("accept", "image/svg+xml")
-            .send()
-            .await
-            .unwrap(),
+            .header("accept", "image/svg+xml"),
         404,
         "not_found",
     )

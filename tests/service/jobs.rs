@@ -120,20 +120,14 @@ impl Jobs<'_> {
         )
         .await;
         assert!(v["items"].as_array().unwrap().is_empty());
-        problem(
-            c.get(url(server, "/v1/training-jobs?status=lost"))
-                .send()
-                .await
-                .unwrap(),
+        problem_of(
+            c.get(url(server, "/v1/training-jobs?status=lost")),
             400,
             "bad_request",
         )
         .await;
-        problem(
-            c.get(url(server, "/v1/training-jobs/job_nope"))
-                .send()
-                .await
-                .unwrap(),
+        problem_of(
+            c.get(url(server, "/v1/training-jobs/job_nope")),
             404,
             "not_found",
         )
@@ -151,11 +145,8 @@ impl Jobs<'_> {
             "{text}"
         );
         // a finished job cannot be canceled
-        problem(
-            c.post(url(server, &format!("/v1/training-jobs/{id}/cancel")))
-                .send()
-                .await
-                .unwrap(),
+        problem_of(
+            c.post(url(server, &format!("/v1/training-jobs/{id}/cancel"))),
             409,
             "conflict",
         )

@@ -140,6 +140,11 @@ pub async fn problem(resp: reqwest::Response, status: u16, code: &str) -> String
     d
 }
 
+/// [`problem`] of the answer to `request`.
+pub async fn problem_of(request: reqwest::RequestBuilder, status: u16, code: &str) -> String {
+    problem(request.send().await.unwrap(), status, code).await
+}
+
 /// [`problem`], and its detail names every one of `needles`.
 pub async fn problem_naming(resp: reqwest::Response, status: u16, code: &str, needles: &[&str]) {
     let d = problem(resp, status, code).await;

@@ -346,18 +346,8 @@ async fn hostile_evaluation_and_illuminant_bodies(h: &Hostile<'_>) {
 async fn hostile_routes_and_methods(h: &Hostile<'_>) {
     let (server, c) = (h.server, &h.c);
     // unknown routes and methods
-    problem(
-        c.get(url(server, "/v2/nothing")).send().await.unwrap(),
-        404,
-        "not_found",
-    )
-    .await;
-    problem(
-        c.get(url(server, "/v1/render")).send().await.unwrap(),
-        405,
-        "method_not_allowed",
-    )
-    .await;
+    problem_of(c.get(url(server, "/v2/nothing")), 404, "not_found").await;
+    problem_of(c.get(url(server, "/v1/render")), 405, "method_not_allowed").await;
     // the service is still healthy
     assert_eq!(
         c.get(url(server, "/healthz"))

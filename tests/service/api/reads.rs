@@ -122,20 +122,9 @@ async fn tables(rd: &Reads<'_>) {
         .await
         .unwrap();
     assert_eq!(r.status(), 200);
-    problem(
-        c.get(url(server, "/v1/tables/tbl_nope"))
-            .send()
-            .await
-            .unwrap(),
-        404,
-        "not_found",
-    )
-    .await;
-    problem(
-        c.post(url(server, "/v1/tables/tbl_nope/activate"))
-            .send()
-            .await
-            .unwrap(),
+    problem_of(c.get(url(server, "/v1/tables/tbl_nope")), 404, "not_found").await;
+    problem_of(
+        c.post(url(server, "/v1/tables/tbl_nope/activate")),
         404,
         "not_found",
     )
@@ -218,57 +207,27 @@ async fn illuminants_replaced_used_and_deleted(rd: &Reads<'_>) {
         .unwrap();
     assert_eq!(r.status(), 200);
     assert_eq!(r.headers()["x-l3-illuminant"], "Studio");
-    problem(
-        c.delete(url(server, "/v1/illuminants/D65"))
-            .send()
-            .await
-            .unwrap(),
+    problem_of(
+        c.delete(url(server, "/v1/illuminants/D65")),
         409,
         "conflict",
     )
     .await;
-    problem(
-        c.delete(url(server, "/v1/illuminants/A"))
-            .send()
-            .await
-            .unwrap(),
-        409,
-        "conflict",
-    )
-    .await;
-    problem(
-        c.delete(url(server, "/v1/illuminants/Nope"))
-            .send()
-            .await
-            .unwrap(),
+    problem_of(c.delete(url(server, "/v1/illuminants/A")), 409, "conflict").await;
+    problem_of(
+        c.delete(url(server, "/v1/illuminants/Nope")),
         404,
         "not_found",
     )
     .await;
-    problem(
-        c.get(url(server, "/v1/illuminants/Nope"))
-            .send()
-            .await
-            .unwrap(),
-        404,
-        "not_found",
-    )
-    .await;
+    problem_of(c.get(url(server, "/v1/illuminants/Nope")), 404, "not_found").await;
     let r = c
         .delete(url(server, "/v1/illuminants/Flat"))
         .send()
         .await
         .unwrap();
     assert_eq!(r.status(), 204);
-    problem(
-        c.get(url(server, "/v1/illuminants/Flat"))
-            .send()
-            .await
-            .unwrap(),
-        404,
-        "not_found",
-    )
-    .await;
+    problem_of(c.get(url(server, "/v1/illuminants/Flat")), 404, "not_found").await;
 }
 
 /// An evaluation: its fields, its report's and the list's. The evaluation.
@@ -371,22 +330,15 @@ async fn evaluations_at_light_levels_and_bad_ones(rd: &Reads<'_>, v: &serde_json
         serde_json::json!({"scene_luminance": -3}),
         serde_json::json!({"exposure_factor": 0.5, "scene_luminance": 10}),
     ] {
-        problem(
-            c.post(url(server, "/v1/evaluations"))
-                .json(&bad)
-                .send()
-                .await
-                .unwrap(),
+        problem_of(
+            c.post(url(server, "/v1/evaluations")).json(&bad),
             400,
             "bad_request",
         )
         .await;
     }
-    problem(
-        c.get(url(server, "/v1/evaluations/eval_nope"))
-            .send()
-            .await
-            .unwrap(),
+    problem_of(
+        c.get(url(server, "/v1/evaluations/eval_nope")),
         404,
         "not_found",
     )
