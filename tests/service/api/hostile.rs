@@ -239,36 +239,18 @@ async fn hostile_job_json(h: &Hostile<'_>) {
             .body(body)
             .send()
     };
-    problem_naming(
-        job("{\"levels\": ", "application/json").await.unwrap(),
-        400,
-        "invalid_json",
-        &["not valid JSON"],
-    )
-    .await;
-    problem_naming(
-        job("{\"levles\": 5}", "application/json").await.unwrap(),
-        400,
-        "invalid_json",
-        &["levles"],
-    )
-    .await;
-    problem_naming(
-        job("{\"levels\": 1}", "application/json").await.unwrap(),
-        400,
-        "bad_request",
-        &["levels 1"],
-    )
-    .await;
-    problem_naming(
-        job("{\"illuminants\": [\"Moonlight\"]}", "application/json")
-            .await
-            .unwrap(),
-        400,
-        "bad_request",
-        &["Moonlight"],
-    )
-    .await;
+    // (body, code, what the detail names)
+    #[rustfmt::skip]
+    let cases: [(&str, &str, &str); 4] = [
+        ("{\"levels\": ", "invalid_json", "not valid JSON"),
+        ("{\"levles\": 5}", "invalid_json", "levles"),
+        ("{\"levels\": 1}", "bad_request", "levels 1"),
+        ("{\"illuminants\": [\"Moonlight\"]}", "bad_request", "Moonlight"),
+    ];
+    for (body, code, needle) in cases {
+        let r = job(body, "application/json").await.unwrap();
+        problem_naming(r, 400, code, &[needle]).await;
+    }
     problem(
         job("{}", "text/plain").await.unwrap(),
         415,

@@ -29,6 +29,23 @@ fn l3_cli(args: &[&str], dir: &Path) {
     );
 }
 
+/// `l3 render` of the simulated frame `sim/mosaic.raw` in `dir` with `table.safetensors`
+/// under tungsten, with the options `extra`, to `out`.
+fn cli_render(dir: &Path, extra: &[&str], out: &str) {
+    let mut args = vec![
+        "render",
+        "--table",
+        "table.safetensors",
+        "--in",
+        "sim/mosaic.raw",
+        "--illuminant",
+        "Tungsten",
+    ];
+    args.extend_from_slice(extra);
+    args.extend_from_slice(&["--out", out]);
+    l3_cli(&args, dir);
+}
+
 fn decode_png(bytes: &[u8]) -> image::RgbImage {
     image::load_from_memory_with_format(bytes, image::ImageFormat::Png)
         .expect("png")

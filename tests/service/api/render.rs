@@ -4,7 +4,7 @@ use std::path::Path;
 
 use l3::service::Server;
 
-use super::{decode_png, l3_cli};
+use super::{cli_render, decode_png, l3_cli};
 use crate::service_support::*;
 
 /// The Macbeth frame `l3 simulate` wrote under tungsten, with the CLI's renders of it beside
@@ -102,20 +102,7 @@ fn simulate_and_render_with_the_cli(d: &Path) -> serde_json::Value {
     let table_path = d.join("table.safetensors");
     tiny_table().save(&table_path).unwrap();
     for out in ["cli.tiff", "cli.raw", "cli.png", "cli.ppm", "cli.jpg"] {
-        l3_cli(
-            &[
-                "render",
-                "--table",
-                "table.safetensors",
-                "--in",
-                "sim/mosaic.raw",
-                "--illuminant",
-                "Tungsten",
-                "--out",
-                out,
-            ],
-            d,
-        );
+        cli_render(d, &[], out);
     }
     serde_json::from_slice(&std::fs::read(d.join("sim/mosaic.json")).unwrap()).unwrap()
 }
@@ -202,22 +189,7 @@ async fn png_output_and_its_compressions(p: &Parity<'_>) -> image::RgbImage {
     let mut sizes = Vec::new();
     for level in ["fast", "default", "best"] {
         let out = format!("cli-{level}.png");
-        l3_cli(
-            &[
-                "render",
-                "--table",
-                "table.safetensors",
-                "--in",
-                "sim/mosaic.raw",
-                "--illuminant",
-                "Tungsten",
-                "--png-compression",
-                level,
-                "--out",
-                &out,
-            ],
-            d,
-        );
+        cli_render(d, &["--png-compression", level], &out);
         let r = p
             .post_png(format!("{q}&png_compression={level}"))
             .await
@@ -246,23 +218,10 @@ async fn png_output_and_its_compressions(p: &Parity<'_>) -> image::RgbImage {
 /// JPEG quality and subsampling: the CLI's bytes for the same options; bad ones are 400.
 async fn jpeg_quality_and_subsampling(p: &Parity<'_>) {
     let (d, server, c, q) = (p.d, p.server, &p.c, &p.q);
-    l3_cli(
-        &[
-            "render",
-            "--table",
-            "table.safetensors",
-            "--in",
-            "sim/mosaic.raw",
-            "--illuminant",
-            "Tungsten",
-            "--quality",
-            "60",
-            "--subsampling",
-            "444",
-            "--out",
-            "cli-q60.jpg",
-        ],
+    cli_render(
         d,
+        &["--quality", "60", "--subsampling", "444"],
+        "cli-q60.jpg",
     );
     let post_jpeg = |q: String| {
         c.post(url(server, &q))
@@ -295,22 +254,7 @@ async fn jpeg_quality_and_subsampling(p: &Parity<'_>) {
 /// has no noise model and the stage cannot run (tests/cli/spatial.rs has it running).
 async fn chroma_denoise_on_request(p: &Parity<'_>) {
     let (d, q) = (p.d, &p.q);
-    l3_cli(
-        &[
-            "render",
-            "--table",
-            "table.safetensors",
-            "--in",
-            "sim/mosaic.raw",
-            "--illuminant",
-            "Tungsten",
-            "--chroma-denoise",
-            "on",
-            "--out",
-            "cli-cd.png",
-        ],
-        d,
-    );
+    cli_render(d, &["--chroma-denoise", "on"], "cli-cd.png");
     let r = p.post_png(format!("{q}&chroma_denoise=on")).await.unwrap();
     assert_eq!(r.status(), 200);
     let body = r.bytes().await.unwrap();
@@ -327,22 +271,7 @@ async fn correction_camera_or_colorimetric(p: &Parity<'_>, ours: &image::RgbImag
     let (d, q) = (p.d, &p.q);
     let r = p.post_png(q.clone()).await.unwrap();
     assert_eq!(r.headers()["x-l3-correction"], "camera");
-    l3_cli(
-        &[
-            "render",
-            "--table",
-            "table.safetensors",
-            "--in",
-            "sim/mosaic.raw",
-            "--illuminant",
-            "Tungsten",
-            "--correction",
-            "colorimetric",
-            "--out",
-            "cli-t.png",
-        ],
-        d,
-    );
+    cli_render(d, &["--correction", "colorimetric"], "cli-t.png");
     let r = p
         .post_png(format!("{q}&correction=colorimetric"))
         .await
