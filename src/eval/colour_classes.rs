@@ -27,7 +27,7 @@
 //!   strip excluded).
 //!
 //! With one class it predicts the trained I_Tun within 0.04 on four
-//! sensors (README). Flare, demosaicking and the kernels' spatial weights
+//! sensors (`docs/research/chroma-classes.md`). Flare, demosaicking and the kernels' spatial weights
 //! are not modelled: the prediction is for the colour maps.
 
 use rand::SeedableRng;

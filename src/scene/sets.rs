@@ -70,7 +70,7 @@ pub fn training_reflectances(
 /// alone costs 1.30 ΔE2000 with this set against 1.72 with Munsell + CES;
 /// with the colour maps' CIEDE2000 weights, a cross-illuminant table on ISET's
 /// RGBW gives 2.86 on one capture against 3.55 when its maps were fitted on
-/// the training reflectances (16 captures; see the README).
+/// the training reflectances (16 captures; `docs/research/colour-map-loss.md`).
 pub fn natural_reflectances(
     grid: &WavelengthGrid,
     iset: Option<&IsetData>,

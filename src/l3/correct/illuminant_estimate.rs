@@ -12,9 +12,8 @@
 //! - **bright tiles**: the channel sums over the brightest [`BRIGHT_FRACTION`] of tiles, a
 //!   robust "white patch" (the brightest surfaces are taken as white).
 //!
-//! Which one works better, and how well either does, is measured by the
-//! `illuminant_estimation` benchmark (`cargo bench --bench illuminant_estimation`) and reported
-//! in the README.
+//! Which one works better, and how well either does, is measured by
+//! `l3 eval --estimate-illuminant` and reported in `docs/research/illuminant-estimation.md`.
 
 use super::CorrectError;
 use crate::camera::Cfa;

@@ -31,8 +31,8 @@ pub enum ColourTarget<'a> {
     /// sample's error is weighed after T ([`ColourSamples::judged_through`]).
     /// The paper fits the table to XYZ under the light and lets T's own
     /// error stand; aiming through T lets the table's colour maps absorb it
-    /// wherever the sensor's channels tell apart what T confuses (see the
-    /// README, "Same-illuminant tables aimed through T").
+    /// wherever the sensor's channels tell apart what T confuses
+    /// (`docs/research/aim-through-t.md`).
     ThroughCorrection(&'a [Mat3]),
 }
 

@@ -38,7 +38,8 @@
 //!   (`scene::natural_reflectances`, no Munsell chips): on ISET's RGBW under
 //!   tungsten a cross table's one-capture error went from 3.55 (ΔE76 on the
 //!   training reflectances) to 2.86, where either change alone made it
-//!   worse (3.56 with ΔE00, 3.81 with the natural set; see the README);
+//!   worse (3.56 with ΔE00, 3.81 with the natural set;
+//!   `docs/research/colour-map-loss.md`);
 //! - the loss is every light's *mean* error, not the sum of squares
 //!   ([`ColourLoss::MeanDeltaE`]): the evaluation reports a mean ΔE2000, and
 //!   a squared loss lets a few surfaces no linear map can render (saturated
