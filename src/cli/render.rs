@@ -88,6 +88,10 @@ pub struct RenderArgs {
     /// or `off` (as the service's `chroma_denoise`; docs/accuracy.md).
     #[arg(long, default_value_t = ChromaMode::default())]
     pub chroma_denoise: ChromaMode,
+    /// Largest frame read (width × height, stored pixels of a DNG); the default takes every
+    /// catalogue camera (the largest, the Fujifilm GFX 100, stores 102 MP).
+    #[arg(long, value_name = "PIXELS", default_value_t = Limits::default().max_pixels)]
+    pub max_pixels: usize,
 }
 
 /// A failure of `l3 render`: the pipeline's (shown with the input's path where it is about
@@ -241,7 +245,7 @@ fn render_request(
         renderer,
         // the light estimate reads volts, as it always has here
         scaling: Scaling::Upfront,
-        limits: Limits::default(),
+        limits: Limits::with_max_pixels(a.max_pixels),
     })
 }
 
@@ -253,7 +257,7 @@ pub fn run(cli: &Cli, a: &RenderArgs) -> Result<(), CliError> {
         None => None,
     };
     let white: WhiteLevel = a.white_level.parse()?;
-    let loaded = read_mosaic(&a.input, &Limits::default())?;
+    let loaded = read_mosaic(&a.input, &Limits::with_max_pixels(a.max_pixels))?;
     let request = render_request(a, white, loaded)?;
     let (table_path, table) = match given {
         Some(t) => t,
