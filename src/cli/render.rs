@@ -40,9 +40,10 @@ pub struct RenderArgs {
     #[arg(long, value_name = "ID", conflicts_with = "table")]
     pub table_id: Option<String>,
     /// Acquisition illuminant: a registry name (D65, D50, A, F2, F11, Tungsten,
-    /// Fluorescent), cct:K, xy:x,y (a chromaticity), or any illuminant spec. Default: the sidecar's `illuminant`, else
-    /// a DNG's AsShotNeutral (matched to a colour temperature through the table's sensor),
-    /// else D65.
+    /// Fluorescent), cct:K, xy:x,y (a chromaticity), or any illuminant spec. Default: the
+    /// sidecar's `illuminant`, else a DNG's AsShotNeutral (matched to a colour temperature
+    /// through the table's sensor) or AsShotWhiteXY (as xy:x,y), else an estimate from the
+    /// frame's pixels, else (too little unclipped signal to estimate) D65.
     #[arg(long)]
     pub illuminant: Option<String>,
     /// Input mosaic: .raw (+ .json sidecar), DNG, 16-bit PNG, TIFF or PGM.

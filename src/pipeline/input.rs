@@ -70,7 +70,8 @@ pub struct DecodedFrame {
     pub samples: Samples,
     pub width: usize,
     pub height: usize,
-    /// A sidecar's `illuminant` (never a DNG's).
+    /// A sidecar's `illuminant`, or a DNG's AsShotWhiteXY as `xy:x,y` (when the DNG has no
+    /// AsShotNeutral).
     pub illuminant: Option<String>,
     /// A DNG's AsShotNeutral per channel.
     pub neutral: Option<Vec<(String, f64)>>,
@@ -191,9 +192,10 @@ pub fn decode(
         white = levels.white.unwrap_or(meta.white_level);
     }
     let neutral = dng.as_ref().and_then(|d| d.neutral());
+    // a sidecar's illuminant; a DNG's AsShotWhiteXY when it has no AsShotNeutral
     let illuminant = match &dng {
         None => meta.and_then(|m| m.illuminant),
-        Some(_) => None,
+        Some(d) => d.white_xy_light(),
     };
     let (width, height) = mosaic.dims();
     if declared.0.is_some_and(|w| w != width) || declared.1.is_some_and(|h| h != height) {

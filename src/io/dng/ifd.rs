@@ -85,6 +85,7 @@ pub(super) fn tag_name(tag: u16) -> String {
         50721 => "ColorMatrix1",
         50722 => "ColorMatrix2",
         50728 => "AsShotNeutral",
+        50729 => "AsShotWhiteXY",
         50778 => "CalibrationIlluminant1",
         50779 => "CalibrationIlluminant2",
         50829 => "ActiveArea",

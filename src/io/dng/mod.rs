@@ -69,7 +69,7 @@ fn code_name(code: u64) -> &'static str {
 }
 
 /// What a DNG says besides the pixels.
-#[derive(Debug, Clone, PartialEq)]
+#[derive(Debug, Clone, Default, PartialEq)]
 pub struct DngInfo {
     /// DNGVersion, e.g. `[1, 4, 0, 0]`.
     pub version: [u8; 4],
@@ -86,6 +86,9 @@ pub struct DngInfo {
     /// AsShotNeutral: the camera's response to white under the scene light, one value per
     /// plane (in `plane_colors` order), usually with a maximum of 1.
     pub as_shot_neutral: Option<Vec<f64>>,
+    /// AsShotWhiteXY: the scene light's white as a CIE 1931 chromaticity (x, y); the DNG
+    /// alternative to AsShotNeutral.
+    pub as_shot_white_xy: Option<[f64; 2]>,
     /// CalibrationIlluminant1/2 as EXIF LightSource codes.
     pub calibration_illuminants: [Option<u16>; 2],
     /// ColorMatrix1/2 (XYZ → camera), row-major, `planes × 3` values.
@@ -121,6 +124,16 @@ impl DngInfo {
             make: self.make.clone(),
             model: self.model.clone(),
         }
+    }
+
+    /// The light AsShotWhiteXY names, as an illuminant spec (`xy:x,y`), when the file has no
+    /// AsShotNeutral (which then says the light instead).
+    pub fn white_xy_light(&self) -> Option<String> {
+        if self.as_shot_neutral.is_some() {
+            return None;
+        }
+        self.as_shot_white_xy
+            .map(|[x, y]| format!("xy:{x:.6},{y:.6}"))
     }
 
     /// AsShotNeutral as (channel letter, value) pairs.

@@ -40,8 +40,10 @@ const TAG_CROP_ORIGIN: u16 = 50719;
 const TAG_CROP_SIZE: u16 = 50720;
 const TAG_COLOR_MATRIX: [u16; 2] = [50721, 50722];
 const TAG_AS_SHOT_NEUTRAL: u16 = 50728;
+const TAG_AS_SHOT_WHITE_XY: u16 = 50729;
 const TAG_CALIBRATION_ILLUMINANT: [u16; 2] = [50778, 50779];
 const TAG_ACTIVE_AREA: u16 = 50829;
+const TAG_OPCODE_LISTS: [u16; 3] = [51008, 51009, 51022];
 
 const PHOTOMETRIC_CFA: u64 = 32803;
 const PHOTOMETRIC_LINEAR_RAW: u64 = 34892;
@@ -87,9 +89,11 @@ fn find_raw(t: &Tiff<'_>, ifd0: &Ifd) -> IoResult<Ifd> {
     }))
 }
 
+/// A crop coordinate or size rounded to the nearest integer, as the DNG SDK rounds
+/// DefaultCropOrigin and DefaultCropSize rationals.
 fn to_usize(v: f64) -> usize {
     if v.is_finite() && v > 0.0 {
-        v.floor().min(usize::MAX as f64) as usize
+        v.round().min(usize::MAX as f64) as usize
     } else {
         0
     }
@@ -143,6 +147,7 @@ pub(super) fn decode(bytes: &[u8], limits: &Limits) -> IoResult<DngImage> {
             plane_colors: cfa.plane_colors,
             black_levels: levels.blacks,
             as_shot_neutral: cam.as_shot_neutral,
+            as_shot_white_xy: cam.as_shot_white_xy,
             calibration_illuminants: cam.calibration_illuminants,
             color_matrices: cam.color_matrices,
             unique_camera_model: cam.unique_camera_model,
@@ -585,6 +590,7 @@ fn crop_and_level(
 /// The camera metadata of IFD0.
 struct CameraMetadata {
     as_shot_neutral: Option<Vec<f64>>,
+    as_shot_white_xy: Option<[f64; 2]>,
     calibration_illuminants: [Option<u16>; 2],
     color_matrices: [Option<Vec<f64>>; 2],
     unique_camera_model: Option<String>,
@@ -631,6 +637,15 @@ fn camera_metadata(t: &Tiff<'_>, ifd0: &Ifd, cfa: &CfaPattern) -> IoResult<Camer
             )));
         }
     };
+    let as_shot_white_xy = match t.reals(ifd0, TAG_AS_SHOT_WHITE_XY, 2)?.as_deref() {
+        None => None,
+        Some(&[x, y]) if x > 0.0 && y > 0.0 => Some([x, y]),
+        Some(v) => {
+            return Err(dng_err(format!(
+                "AsShotWhiteXY holds {v:?}; two positive values (a chromaticity x, y) are expected"
+            )));
+        }
+    };
     let mut calibration_illuminants = [None, None];
     let mut color_matrices = [None, None];
     for k in 0..2 {
@@ -652,6 +667,7 @@ fn camera_metadata(t: &Tiff<'_>, ifd0: &Ifd, cfa: &CfaPattern) -> IoResult<Camer
     let names = camera_names(t, ifd0)?;
     Ok(CameraMetadata {
         as_shot_neutral,
+        as_shot_white_xy,
         calibration_illuminants,
         color_matrices,
         unique_camera_model: names.unique_camera_model,

@@ -1,6 +1,7 @@
 use super::*;
 
 mod leniency;
+mod metadata;
 
 /// Builds little- or big-endian TIFF/DNG files: data blocks and IFDs appended in order.
 struct Builder {
