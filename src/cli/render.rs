@@ -17,9 +17,10 @@ use crate::l3::correct::{IlluminantEntry, IlluminantRegistry};
 use crate::l3::render::{ChromaMode, WhiteLevel};
 use crate::l3::table::TableKind;
 use crate::pipeline::{
-    CorrectionMode, DecodedFrame, Input, Levels, LightChoice, LightOrigin, OutputFormat,
-    PipelineError, RenderContext, RenderOptions, RenderOutcome, RenderRequest, Renderer, Scaling,
-    StoredTables, TableChoice, check_preview, choose_table, decode, parse_region,
+    CorrectionMode, DecodedFrame, FrameNotes, Input, Levels, LightChoice, LightOrigin,
+    OutputFormat, PipelineError, RenderContext, RenderOptions, RenderOutcome, RenderRequest,
+    Renderer, Scaling, StoredTables, TableChoice, check_preview, choose_table, decode,
+    parse_region,
 };
 use crate::spectral::IsetData;
 
@@ -174,6 +175,7 @@ pub(crate) fn frame_and_light(
     let input = Input::Decoded(Box::new(read_mosaic(path, &limits)?));
     let frame = decode(input, Levels::default(), table, Scaling::Upfront, &limits)
         .map_err(|e| input_error(e, path))?;
+    warn_of(&frame.notes, path);
     let (spec, origin) = match named {
         Some(s) => (s.to_string(), LightOrigin::Named),
         None => {
@@ -265,10 +267,25 @@ pub fn run(cli: &Cli, a: &RenderArgs) -> Result<(), CliError> {
         None => table_of(a, &request.input)?,
     };
     let out = run_request(request, &table, iset.as_ref(), &a.input)?;
+    warn_of(&out.notes, &a.input);
     let summary = summary(a, &table_path, &out);
     write_file(&a.out, &out.rendered.output.into_vec())?;
     println!("{summary}");
     Ok(())
+}
+
+/// `warning:` lines for what a render of the DNG `input` left undone or moved.
+pub(crate) fn warn_of(notes: &FrameNotes, input: &Path) {
+    if !notes.skipped_opcodes.is_empty() {
+        eprintln!(
+            "warning: {}: DNG opcodes not applied: {}",
+            input.display(),
+            notes.skipped_opcodes.join(", ")
+        );
+    }
+    if let Some(shift) = &notes.cfa_shift {
+        eprintln!("warning: {}: {}", input.display(), shift.describe());
+    }
 }
 
 /// Runs `request` with `table`, lights from a registry of the built-in illuminants (and

@@ -21,6 +21,7 @@
 mod chunks;
 mod ifd;
 mod ljpeg;
+mod opcodes;
 mod read;
 
 use std::io::Cursor;
@@ -99,6 +100,10 @@ pub struct DngInfo {
     /// Make (271) and Model (272) of IFD0, trimmed of NULs and spaces.
     pub make: Option<String>,
     pub model: Option<String>,
+    /// The opcodes of OpcodeList1, 2 and 3 the reader did not apply (it applies
+    /// FixBadPixelsConstant in OpcodeList1 and GainMap in OpcodeList2), e.g.
+    /// `"WarpRectilinear (OpcodeList3, optional)"`.
+    pub skipped_opcodes: Vec<String>,
 }
 
 /// What a DNG says of its camera: UniqueCameraModel, Make and Model of IFD0 (each trimmed of

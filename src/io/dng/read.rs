@@ -3,6 +3,7 @@
 
 use super::chunks::{check_chunks, decode_chunks, layout};
 use super::ifd::{Ifd, Tiff, dng_err, required, tag_name};
+use super::opcodes::{Lists, MAX_LIST_BYTES, Placement, fix_bad_pixels};
 use super::{DngCamera, DngImage, DngInfo, cfa_letter};
 use crate::io::IoResult;
 use crate::io::limits::Limits;
@@ -112,21 +113,36 @@ pub(super) fn decode(bytes: &[u8], limits: &Limits) -> IoResult<DngImage> {
     // --- decode
     let lay = layout(&t, &raw, w, h, limits)?;
     check_chunks(&t, &lay, s.compression, s.bits, w, h)?;
+    let ops = opcode_lists(&t, &raw)?;
     let mut img = crate::buffers::zeroed::<u16>(w * h);
     decode_chunks(&t, &lay, s.compression, s.bits, w, h, &mut img)?;
 
-    // --- linearization, areas, levels
-    let lin = linearization(&t, &raw)?;
+    // --- OpcodeList1, linearization, areas, levels, OpcodeList2
     let area = active_area(&t, &raw, w, h)?;
+    for &constant in &ops.bad_pixel_constants {
+        fix_bad_pixels(&mut img, w, constant, |r, c| cfa.colour_at(r, c, &area));
+    }
+    let lin = linearization(&t, &raw)?;
     let crop = default_crop(&t, &raw, &area)?;
     limits.check(crop.width, crop.height)?;
     let levels = levels(&t, &raw, s.bits, &area)?;
-    let data = crop_and_level(&img, w, lin.as_deref(), &area, &crop, &levels);
+    let mut data = crop_and_level(&img, w, lin.as_deref(), &area, &crop, &levels);
     if levels.black_level >= levels.white_level {
         return Err(dng_err(format!(
             "black level {} is not below the white level {}",
             levels.black_level, levels.white_level
         )));
+    }
+    let placement = Placement {
+        x: crop.x,
+        y: crop.y,
+        area_width: area.width,
+        area_height: area.height,
+        black: levels.black_level,
+        white: levels.white_level,
+    };
+    for map in &ops.gain_maps {
+        map.apply(&mut data, crop.width, &placement);
     }
 
     let cam = camera_metadata(&t, &ifd0, &cfa)?;
@@ -153,8 +169,19 @@ pub(super) fn decode(bytes: &[u8], limits: &Limits) -> IoResult<DngImage> {
             unique_camera_model: cam.unique_camera_model,
             make: cam.make,
             model: cam.model,
+            skipped_opcodes: ops.skipped,
         },
     })
+}
+
+/// OpcodeList1, 2 and 3 of the raw image.
+fn opcode_lists(t: &Tiff<'_>, raw: &Ifd) -> IoResult<Lists> {
+    let [l1, l2, l3] = TAG_OPCODE_LISTS;
+    Lists::new(
+        t.bytes(raw, l1, MAX_LIST_BYTES)?,
+        t.bytes(raw, l2, MAX_LIST_BYTES)?,
+        t.bytes(raw, l3, MAX_LIST_BYTES)?,
+    )
 }
 
 /// DNGVersion of IFD0, which a DNG must have.
@@ -237,6 +264,16 @@ struct CfaPattern {
 }
 
 impl CfaPattern {
+    /// The colour of stored pixel (`r`, `c`): the pattern repeats from the active area's
+    /// origin.
+    fn colour_at(&self, r: usize, c: usize, area: &ActiveArea) -> char {
+        let (rows, cols) = (self.rows.max(1), self.cols.max(1));
+        // (r − top) mod rows, without going below zero
+        let rr = (r + rows * area.top - area.top) % rows;
+        let cc = (c + cols * area.left - area.left) % cols;
+        self.pattern.get(rr * cols + cc).copied().unwrap_or('?')
+    }
+
     /// The CFA seen from pixel (`x`, `y`), rows separated by '/'.
     fn seen_from(&self, x: usize, y: usize) -> String {
         let (rows, cols) = (self.rows, self.cols);

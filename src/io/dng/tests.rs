@@ -2,6 +2,7 @@ use super::*;
 
 mod leniency;
 mod metadata;
+mod opcodes;
 
 /// Builds little- or big-endian TIFF/DNG files: data blocks and IFDs appended in order.
 struct Builder {
