@@ -6,7 +6,9 @@
 //! the IFDs itself (bounded, never panicking: [`ifd`]), decodes uncompressed and lossless
 //! JPEG (compression 7, [`ljpeg`]) strips or tiles of 8–16 bits, in IFD0 or in a SubIFD with
 //! NewSubFileType 0, and applies LinearizationTable, ActiveArea, BlackLevel (scalar, per
-//! CFA position with BlackLevelRepeatDim, and BlackLevelDeltaH/V) and DefaultCrop. The result
+//! CFA position with BlackLevelRepeatDim, and BlackLevelDeltaH/V), DefaultCrop and the
+//! opcodes it supports ([`opcodes`]: FixBadPixelsConstant, GainMap; others are reported in
+//! [`DngInfo::skipped_opcodes`]). The result
 //! is what the `.raw` + JSON sidecar path gives for the same mosaic: a [`RawFrame`] and a
 //! [`RawMeta`] with the CFA (`"RG/WB"`), one black level and the white level, so a DNG renders
 //! exactly as its raw twin does.
