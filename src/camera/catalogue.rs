@@ -362,18 +362,39 @@ fn lookup(make: &str, model: &str) -> Option<(Vec<&'static str>, String, String,
         ))
     };
     // a model often repeats its maker ("Canon EOS 5D Mark II", "NIKON D5100")
-    let model = model
-        .strip_prefix(&format!("{make}-"))
-        .unwrap_or(model)
-        .to_string();
-    if let Some((s, mk, mo)) = direct(make, &model) {
-        return Some((s, mk, mo, false));
+    let model = model.strip_prefix(&format!("{make}-")).unwrap_or(model);
+    for model in model_spellings(model) {
+        if let Some((s, mk, mo)) = direct(make, &model) {
+            return Some((s, mk, mo, false));
+        }
+        let alias = aliases()
+            .models
+            .iter()
+            .find(|((am, amo), _)| am == make && *amo == model);
+        if let Some((_, (tm, tmo))) = alias {
+            return direct(tm, tmo).map(|(s, mk, mo)| (s, mk, mo, true));
+        }
     }
-    let (_, (tm, tmo)) = aliases()
-        .models
-        .iter()
-        .find(|((am, amo), _)| am == make && *amo == model)?;
-    direct(tm, tmo).map(|(s, mk, mo)| (s, mk, mo, true))
+    None
+}
+
+/// The spellings of an EXIF model (kebab case, its maker removed) to look up, as written
+/// first. Canon's EXIF models of the 2000s end in `DIGITAL` ("Canon EOS 400D DIGITAL") or
+/// put it after EOS ("Canon EOS DIGITAL REBEL XTi", "Canon EOS Kiss Digital X"), where
+/// rawtoaces names the camera "EOS 400D", "Digital Rebel XTi" and "Kiss Digital X": the
+/// model without its trailing `digital`, and without a leading `eos` before `digital` or
+/// `kiss`, are the same camera. Nothing else is guessed.
+fn model_spellings(model: &str) -> Vec<String> {
+    let mut v = vec![model.to_string()];
+    if let Some(m) = model.strip_suffix("-digital") {
+        v.push(m.to_string());
+    }
+    if let Some(m) = model.strip_prefix("eos-")
+        && (m.starts_with("digital-") || m.starts_with("kiss-"))
+    {
+        v.push(m.to_string());
+    }
+    v
 }
 
 /// The catalogue sensors of the camera `id` describes: UniqueCameraModel first (split into
@@ -494,11 +515,12 @@ mod tests {
         );
         let m = match_camera(&id(None, Some("Canon"), Some("Canon EOS 5D Mark II"))).unwrap();
         assert_eq!(m.sensors[0], "bayer-canon-eos-5d-mark-ii");
-        let m = match_camera(&id(None, Some("Canon"), Some("Canon EOS 400D DIGITAL"))).is_none();
-        assert!(m, "a model the catalogue lacks is not guessed");
         let m = match_camera(&id(None, Some("Canon"), Some("Canon EOS 400D"))).unwrap();
         assert_eq!(m.sensors, ["bayer-canon-digital-rebel-xti"]);
         assert_eq!(m.by, "make_model+alias");
+        let m = match_camera(&id(None, Some("Canon"), Some("Canon EOS 4000D"))).is_none();
+        assert!(m, "a model the catalogue lacks is not guessed");
+        assert!(match_camera(&id(None, Some("Canon"), Some("Canon EOS 4000D DIGITAL"))).is_none());
         let m = match_camera(&id(Some("Fujifilm GFX100S"), None, None)).unwrap();
         assert_eq!(m.sensors, ["bayer-fujifilm-gfx-100"]);
         // UniqueCameraModel that names no catalogue camera falls back to Make + Model
@@ -506,6 +528,29 @@ mod tests {
         assert_eq!(m.sensors, ["bayer-sony-ilce-7m4"]);
         assert!(match_camera(&id(Some("Nokia N900"), Some("Nokia"), Some("N900"))).is_none());
         assert!(match_camera(&CameraId::default()).is_none());
+    }
+
+    /// The 400D's EXIF models: "DIGITAL" after the model (Europe), the Rebel name after
+    /// "EOS DIGITAL" (America), the Kiss name (Japan); in Make + Model and UniqueCameraModel.
+    #[test]
+    fn canon_models_with_digital_and_regional_names() {
+        let xti = ["bayer-canon-digital-rebel-xti"];
+        for (model, by) in [
+            ("Canon EOS 400D DIGITAL", "make_model+alias"),
+            ("Canon EOS DIGITAL REBEL XTi", "make_model"),
+            ("Canon EOS Kiss Digital X", "make_model+alias"),
+        ] {
+            let m = match_camera(&id(None, Some("Canon"), Some(model))).unwrap();
+            assert_eq!(
+                (m.sensors.as_slice(), m.by.as_str()),
+                (&xti[..], by),
+                "{model}"
+            );
+            let u = match_camera(&id(Some(model), None, None)).unwrap();
+            assert_eq!(u.sensors, xti, "UniqueCameraModel {model}");
+        }
+        assert_eq!(model_spellings("eos-5d"), ["eos-5d"]);
+        assert_eq!(model_spellings("eos-digital"), ["eos-digital", "eos"]);
     }
 
     #[test]

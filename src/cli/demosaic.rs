@@ -39,6 +39,10 @@ pub struct DemosaicArgs {
     /// only; otherwise one grey float TIFF per channel, `<stem>-<channel>.tiff`.
     #[arg(long)]
     pub out: PathBuf,
+    /// Largest frame read (width × height, stored pixels of a DNG); the default takes every
+    /// catalogue camera (the largest, the Fujifilm GFX 100, stores 102 MP).
+    #[arg(long, value_name = "PIXELS", default_value_t = Limits::default().max_pixels)]
+    pub max_pixels: usize,
 }
 
 /// The strong ISP's options (`l3 eval --method isp`, `l3 demosaic --method isp`).
@@ -97,7 +101,7 @@ impl IspArgs {
 pub fn run(cli: &super::Cli, a: &DemosaicArgs) -> Result<(), CliError> {
     let iset = iset(&cli.iset_dir)?;
     let design = load_sensor(&a.sensor, iset.as_ref())?;
-    let loaded = read_mosaic(&a.input, &Limits::default())?;
+    let loaded = read_mosaic(&a.input, &Limits::with_max_pixels(a.max_pixels))?;
     let (width, height) = loaded.mosaic.dims();
     let volts: Vec<f32> = match (&loaded.mosaic, &loaded.meta) {
         (DecodedMosaic::U16(f), Some(meta)) => f.to_volts(meta)?,

@@ -17,9 +17,10 @@ use crate::l3::correct::{IlluminantEntry, IlluminantRegistry};
 use crate::l3::render::{ChromaMode, WhiteLevel};
 use crate::l3::table::TableKind;
 use crate::pipeline::{
-    CorrectionMode, DecodedFrame, Input, Levels, LightChoice, LightOrigin, OutputFormat,
-    PipelineError, RenderContext, RenderOptions, RenderOutcome, RenderRequest, Renderer, Scaling,
-    StoredTables, TableChoice, check_preview, choose_table, decode, parse_region,
+    CorrectionMode, DecodedFrame, FrameNotes, Input, Levels, LightChoice, LightOrigin,
+    OutputFormat, PipelineError, RenderContext, RenderOptions, RenderOutcome, RenderRequest,
+    Renderer, Scaling, StoredTables, TableChoice, check_preview, choose_table, decode,
+    parse_region,
 };
 use crate::spectral::IsetData;
 
@@ -40,9 +41,10 @@ pub struct RenderArgs {
     #[arg(long, value_name = "ID", conflicts_with = "table")]
     pub table_id: Option<String>,
     /// Acquisition illuminant: a registry name (D65, D50, A, F2, F11, Tungsten,
-    /// Fluorescent), cct:K, xy:x,y (a chromaticity), or any illuminant spec. Default: the sidecar's `illuminant`, else
-    /// a DNG's AsShotNeutral (matched to a colour temperature through the table's sensor),
-    /// else D65.
+    /// Fluorescent), cct:K, xy:x,y (a chromaticity), or any illuminant spec. Default: the
+    /// sidecar's `illuminant`, else a DNG's AsShotNeutral (matched to a colour temperature
+    /// through the table's sensor) or AsShotWhiteXY (as xy:x,y), else an estimate from the
+    /// frame's pixels, else (too little unclipped signal to estimate) D65.
     #[arg(long)]
     pub illuminant: Option<String>,
     /// Input mosaic: .raw (+ .json sidecar), DNG, 16-bit PNG, TIFF or PGM.
@@ -88,6 +90,10 @@ pub struct RenderArgs {
     /// or `off` (as the service's `chroma_denoise`; docs/accuracy.md).
     #[arg(long, default_value_t = ChromaMode::default())]
     pub chroma_denoise: ChromaMode,
+    /// Largest frame read (width × height, stored pixels of a DNG); the default takes every
+    /// catalogue camera (the largest, the Fujifilm GFX 100, stores 102 MP).
+    #[arg(long, value_name = "PIXELS", default_value_t = Limits::default().max_pixels)]
+    pub max_pixels: usize,
 }
 
 /// A failure of `l3 render`: the pipeline's (shown with the input's path where it is about
@@ -169,6 +175,7 @@ pub(crate) fn frame_and_light(
     let input = Input::Decoded(Box::new(read_mosaic(path, &limits)?));
     let frame = decode(input, Levels::default(), table, Scaling::Upfront, &limits)
         .map_err(|e| input_error(e, path))?;
+    warn_of(&frame.notes, path);
     let (spec, origin) = match named {
         Some(s) => (s.to_string(), LightOrigin::Named),
         None => {
@@ -241,7 +248,7 @@ fn render_request(
         renderer,
         // the light estimate reads volts, as it always has here
         scaling: Scaling::Upfront,
-        limits: Limits::default(),
+        limits: Limits::with_max_pixels(a.max_pixels),
     })
 }
 
@@ -253,17 +260,32 @@ pub fn run(cli: &Cli, a: &RenderArgs) -> Result<(), CliError> {
         None => None,
     };
     let white: WhiteLevel = a.white_level.parse()?;
-    let loaded = read_mosaic(&a.input, &Limits::default())?;
+    let loaded = read_mosaic(&a.input, &Limits::with_max_pixels(a.max_pixels))?;
     let request = render_request(a, white, loaded)?;
     let (table_path, table) = match given {
         Some(t) => t,
         None => table_of(a, &request.input)?,
     };
     let out = run_request(request, &table, iset.as_ref(), &a.input)?;
+    warn_of(&out.notes, &a.input);
     let summary = summary(a, &table_path, &out);
     write_file(&a.out, &out.rendered.output.into_vec())?;
     println!("{summary}");
     Ok(())
+}
+
+/// `warning:` lines for what a render of the DNG `input` left undone or moved.
+pub(crate) fn warn_of(notes: &FrameNotes, input: &Path) {
+    if !notes.skipped_opcodes.is_empty() {
+        eprintln!(
+            "warning: {}: DNG opcodes not applied: {}",
+            input.display(),
+            notes.skipped_opcodes.join(", ")
+        );
+    }
+    if let Some(shift) = &notes.cfa_shift {
+        eprintln!("warning: {}: {}", input.display(), shift.describe());
+    }
 }
 
 /// Runs `request` with `table`, lights from a registry of the built-in illuminants (and

@@ -12,11 +12,15 @@ pub struct Limits {
     pub max_dim: usize,
 }
 
+/// The default pixel limit: 150 megapixels, room for the largest catalogue camera (the
+/// Fujifilm GFX 100's stored image is 11664 × 8752 = 102.1 MP) and for the 150 MP backs.
+pub const DEFAULT_MAX_PIXELS: usize = 150_000_000;
+
 impl Default for Limits {
-    /// 100 megapixels, at most 30000 pixels per side.
+    /// [`DEFAULT_MAX_PIXELS`], at most 30000 pixels per side.
     fn default() -> Self {
         Limits {
-            max_pixels: 100_000_000,
+            max_pixels: DEFAULT_MAX_PIXELS,
             max_dim: 30_000,
         }
     }
@@ -47,6 +51,14 @@ impl Limits {
                 pixels: width as u128 * height as u128,
                 max_pixels: self.max_pixels,
             }),
+        }
+    }
+
+    /// The default limits with at most `max_pixels` pixels.
+    pub fn with_max_pixels(max_pixels: usize) -> Self {
+        Limits {
+            max_pixels,
+            ..Limits::default()
         }
     }
 
@@ -89,10 +101,14 @@ mod tests {
     }
 
     #[test]
-    fn default_is_100_mp() {
+    fn default_is_150_mp_and_takes_the_largest_catalogue_camera() {
         let l = Limits::default();
-        assert_eq!(l.check(10_000, 10_000).unwrap(), 100_000_000);
-        assert!(l.check(10_001, 10_000).is_err());
+        assert_eq!(l.check(15_000, 10_000).unwrap(), 150_000_000);
+        assert!(l.check(15_001, 10_000).is_err());
         assert!(l.check(30_001, 1).is_err());
+        // Fujifilm GFX 100: 11664 × 8752 stored
+        assert!(l.check(11_664, 8_752).is_ok());
+        assert!(Limits::with_max_pixels(1000).check(11_664, 8_752).is_err());
+        assert_eq!(Limits::with_max_pixels(1000).max_dim, l.max_dim);
     }
 }

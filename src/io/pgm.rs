@@ -297,7 +297,7 @@ mod tests {
             .err()
             .unwrap()
             .to_string();
-        assert!(e.contains("at most 100000000 pixels"), "{e}");
+        assert!(e.contains("at most 150000000 pixels"), "{e}");
         let e = decode_pgm(b"P2 5000 5000 255 1 2 3", &l())
             .err()
             .unwrap()

@@ -1,4 +1,5 @@
-//! The front of a render: the input decoded, a DNG's CFA checked against the table, the DN
+//! The front of a render: the input decoded, a DNG's CFA checked against the table (a crop
+//! on another phase of the table's CFA moved to it: [`CfaShift`]), the DN
 //! levels (the request's, else the file's, else 0 and 65535) applied, and what the file says
 //! about the light.
 
@@ -70,10 +71,130 @@ pub struct DecodedFrame {
     pub samples: Samples,
     pub width: usize,
     pub height: usize,
-    /// A sidecar's `illuminant` (never a DNG's).
+    /// A sidecar's `illuminant`, or a DNG's AsShotWhiteXY as `xy:x,y` (when the DNG has no
+    /// AsShotNeutral).
     pub illuminant: Option<String>,
     /// A DNG's AsShotNeutral per channel.
     pub neutral: Option<Vec<(String, f64)>>,
+    /// What was done to a DNG, or left undone, that its answer reports.
+    pub notes: FrameNotes,
+}
+
+/// What a render of a DNG reports besides its light: opcodes left unapplied, and a frame
+/// moved to the table's CFA phase.
+#[derive(Debug, Clone, Default, PartialEq, Eq)]
+pub struct FrameNotes {
+    /// The DNG opcodes the reader did not apply ([`crate::io::DngInfo::skipped_opcodes`]).
+    pub skipped_opcodes: Vec<String>,
+    /// The crop moved so that the DNG's CFA is the table's.
+    pub cfa_shift: Option<CfaShift>,
+}
+
+/// A DNG whose crop starts on another CFA phase than the table's (an odd row or column of
+/// an RG/GB sensor reads as GB/RG, GR/BG or BG/GR): its first `rows` rows and `cols` columns
+/// are left out, so that the frame starts on the table's phase.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct CfaShift {
+    /// The CFA as the DNG's crop has it, e.g. `"BG/GR"`.
+    pub from: String,
+    pub rows: usize,
+    pub cols: usize,
+}
+
+impl CfaShift {
+    /// The shift as a sentence, for warnings.
+    pub fn describe(&self) -> String {
+        let plural = |n: usize, what: &str| format!("{n} {what}{}", if n == 1 { "" } else { "s" });
+        let mut parts = Vec::new();
+        if self.rows > 0 {
+            parts.push(plural(self.rows, "row"));
+        }
+        if self.cols > 0 {
+            parts.push(plural(self.cols, "column"));
+        }
+        format!(
+            "the DNG's crop starts on CFA {}: its first {} left out so that the frame starts on the table's CFA",
+            self.from,
+            parts.join(" and ")
+        )
+    }
+}
+
+/// The CFA `cfa` ("RG/GB") seen from pixel (`x`, `y`) of its pattern, `None` when it is not
+/// a rectangle of rows.
+fn cfa_seen_from(cfa: &str, x: usize, y: usize) -> Option<String> {
+    let rows: Vec<Vec<char>> = cfa.trim().split('/').map(|r| r.chars().collect()).collect();
+    let cols = rows.first()?.len();
+    if cols == 0 || rows.iter().any(|r| r.len() != cols) {
+        return None;
+    }
+    let n = rows.len();
+    let seen: Vec<String> = (0..n)
+        .map(|r| {
+            (0..cols)
+                .filter_map(|c| rows.get((r + y) % n)?.get((c + x) % cols).copied())
+                .collect()
+        })
+        .collect();
+    Some(seen.join("/"))
+}
+
+/// The rows and columns to leave out of a frame whose CFA is `input` so that it starts on
+/// `table`'s, fewest first; `None` when no shift of `input` is `table`.
+pub fn cfa_phase(input: &str, table: &str) -> Option<(usize, usize)> {
+    let rows = input.split('/').count();
+    let cols = input.split('/').next().map_or(0, |r| r.chars().count());
+    let mut shifts: Vec<(usize, usize)> = (0..rows)
+        .flat_map(|r| (0..cols).map(move |c| (r, c)))
+        .collect();
+    shifts.sort_by_key(|&(r, c)| (r + c, r));
+    shifts.into_iter().find(|&(r, c)| {
+        cfa_seen_from(input, c, r).is_some_and(|s| s.eq_ignore_ascii_case(table.trim()))
+    })
+}
+
+/// A DNG's CFA checked against the table's: equal, a shift of it (to be applied by
+/// [`shift_frame`]), else [`PipelineError::CfaMismatch`].
+fn check_dng_cfa(cfa: &str, table_cfa: &str) -> Result<Option<CfaShift>, PipelineError> {
+    if cfa.eq_ignore_ascii_case(table_cfa) {
+        return Ok(None);
+    }
+    match cfa_phase(cfa, table_cfa) {
+        Some((rows, cols)) => Ok(Some(CfaShift {
+            from: cfa.to_string(),
+            rows,
+            cols,
+        })),
+        None => Err(PipelineError::CfaMismatch {
+            origin: CfaOrigin::Dng,
+            input: cfa.to_string(),
+            table: table_cfa.to_string(),
+        }),
+    }
+}
+
+/// `frame` without its first `shift.rows` rows and `shift.cols` columns.
+fn shift_frame(frame: RawFrame, shift: &CfaShift) -> Result<RawFrame, PipelineError> {
+    let (w, h) = (frame.width, frame.height);
+    let (nw, nh) = (w.saturating_sub(shift.cols), h.saturating_sub(shift.rows));
+    if nw == 0 || nh == 0 {
+        return Err(PipelineError::CfaMismatch {
+            origin: CfaOrigin::Dng,
+            input: shift.from.clone(),
+            table: format!("(the {w}×{h} frame is too small to move to the table's CFA)"),
+        });
+    }
+    let data = frame
+        .data
+        .chunks_exact(w)
+        .skip(shift.rows)
+        .flat_map(|row| row.get(shift.cols..).unwrap_or(&[]).iter().copied())
+        .collect();
+    Ok(RawFrame {
+        width: nw,
+        height: nh,
+        data,
+    })
 }
 
 impl DecodedFrame {
@@ -176,24 +297,20 @@ pub fn decode(
         }
     };
     let table_cfa = table.meta.cfa.to_string();
-    if let (Some(meta), Some(_)) = (&meta, &dng)
-        && !meta.cfa.eq_ignore_ascii_case(&table_cfa)
-    {
-        return Err(PipelineError::CfaMismatch {
-            origin: CfaOrigin::Dng,
-            input: meta.cfa.clone(),
-            table: table_cfa,
-        });
-    }
+    let cfa_shift = match (&meta, &dng) {
+        (Some(meta), Some(_)) => check_dng_cfa(&meta.cfa, &table_cfa)?,
+        _ => None,
+    };
     // the file's levels (a sidecar's or a DNG's) unless the request gives others
     if let Some(meta) = &meta {
         black = levels.black.unwrap_or(meta.black_level);
         white = levels.white.unwrap_or(meta.white_level);
     }
     let neutral = dng.as_ref().and_then(|d| d.neutral());
+    // a sidecar's illuminant; a DNG's AsShotWhiteXY when it has no AsShotNeutral
     let illuminant = match &dng {
         None => meta.and_then(|m| m.illuminant),
-        Some(_) => None,
+        Some(d) => d.white_xy_light(),
     };
     let (width, height) = mosaic.dims();
     if declared.0.is_some_and(|w| w != width) || declared.1.is_some_and(|h| h != height) {
@@ -202,6 +319,15 @@ pub fn decode(
             declared,
         });
     }
+    let mosaic = match (mosaic, &cfa_shift) {
+        (DecodedMosaic::U16(frame), Some(shift)) => DecodedMosaic::U16(shift_frame(frame, shift)?),
+        (mosaic, _) => mosaic,
+    };
+    let (width, height) = mosaic.dims();
+    let notes = FrameNotes {
+        skipped_opcodes: dng.map(|d| d.skipped_opcodes).unwrap_or_default(),
+        cfa_shift,
+    };
     check_levels(black, white)?;
     let samples = match mosaic {
         DecodedMosaic::U16(frame) if scaling == Scaling::Upfront => {
@@ -220,5 +346,9 @@ pub fn decode(
         height,
         illuminant,
         neutral,
+        notes,
     })
 }
+
+#[cfg(test)]
+mod tests;

@@ -34,7 +34,9 @@ use std::time::Instant;
 
 pub use choice::{StoredTables, TableChoice, choose_table};
 pub use error::{CfaOrigin, PipelineError};
-pub use input::{DecodedFrame, Input, Levels, Samples, Scaling, decode};
+pub use input::{
+    CfaShift, DecodedFrame, FrameNotes, Input, Levels, Samples, Scaling, cfa_phase, decode,
+};
 pub use kernels::{
     CorrectionMode, KernelChoice, KernelKey, KernelSource, Kernels, correction_for, kernels_for,
     uses_own_kernels,
@@ -136,6 +138,8 @@ pub struct RenderOutcome {
     pub decode_ms: f64,
     /// The kernels: the correction fitted, fused, the renderer prepared (or found cached).
     pub kernels_ms: f64,
+    /// DNG opcodes left unapplied, a crop moved to the table's CFA phase.
+    pub notes: FrameNotes,
 }
 
 /// A request whose cheap checks passed: [`RenderRequest::prepare`].
@@ -206,6 +210,7 @@ impl Prepared {
             }
         };
         let (width, height) = (frame.width, frame.height);
+        let notes = frame.notes.clone();
         let t1 = Instant::now();
         let choice = KernelChoice::new(table, &entry, r.correction);
         let (rendered, t2) = match r.renderer {
@@ -233,6 +238,7 @@ impl Prepared {
             input_height: height,
             decode_ms: ms(t0, t1),
             kernels_ms: ms(t1, t2),
+            notes,
         })
     }
 }

@@ -504,7 +504,7 @@ mod tests {
         let none = ConfigFlags::default();
         let c = ServiceConfig::load_layers(None, &[], &none).unwrap();
         assert_eq!(c.server.bind.to_string(), "127.0.0.1:8080");
-        assert_eq!(c.server.max_pixels, 50_000_000);
+        assert_eq!(c.server.max_pixels, 110_000_000);
         assert_eq!(c.server.render_concurrency, 4);
         assert_eq!(c.data.dir, PathBuf::from("./data"));
         assert!(c.training.auto_train_default);

@@ -466,6 +466,21 @@ fn respond(
     }
     put("x-l3-illuminant", out.light);
     put("x-l3-illuminant-source", source.to_string());
+    if !out.notes.skipped_opcodes.is_empty() {
+        put(
+            "x-l3-dng-skipped-opcodes",
+            out.notes.skipped_opcodes.join(", "),
+        );
+    }
+    if let Some(shift) = &out.notes.cfa_shift {
+        put(
+            "x-l3-dng-cfa-shift",
+            format!(
+                "rows={}; cols={}; from={}",
+                shift.rows, shift.cols, shift.from
+            ),
+        );
+    }
     put("x-l3-correction", correction.as_str().to_string());
     put("x-l3-width", r.width.to_string());
     put("x-l3-height", r.height.to_string());

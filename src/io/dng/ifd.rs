@@ -85,9 +85,13 @@ pub(super) fn tag_name(tag: u16) -> String {
         50721 => "ColorMatrix1",
         50722 => "ColorMatrix2",
         50728 => "AsShotNeutral",
+        50729 => "AsShotWhiteXY",
         50778 => "CalibrationIlluminant1",
         50779 => "CalibrationIlluminant2",
         50829 => "ActiveArea",
+        51008 => "OpcodeList1",
+        51009 => "OpcodeList2",
+        51022 => "OpcodeList3",
         _ => return format!("tag {tag}"),
     };
     format!("{name} ({tag})")
@@ -270,6 +274,21 @@ impl<'a> Tiff<'a> {
             )));
         }
         Ok(Some((typ, b)))
+    }
+
+    /// The value bytes of `tag` (an UNDEFINED or BYTE tag such as an opcode list), at most
+    /// `max` of them.
+    pub fn bytes(&self, ifd: &Ifd, tag: u16, max: usize) -> IoResult<Option<&'a [u8]>> {
+        let Some((typ, b)) = self.value_at_most(ifd, tag, max)? else {
+            return Ok(None);
+        };
+        match typ {
+            1 | 7 => Ok(Some(b)),
+            other => Err(dng_err(format!(
+                "{} has TIFF type {other}; BYTE or UNDEFINED is expected",
+                tag_name(tag)
+            ))),
+        }
     }
 
     pub fn uints(&self, ifd: &Ifd, tag: u16, max: usize) -> IoResult<Option<Vec<u64>>> {

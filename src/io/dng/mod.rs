@@ -6,7 +6,9 @@
 //! the IFDs itself (bounded, never panicking: [`ifd`]), decodes uncompressed and lossless
 //! JPEG (compression 7, [`ljpeg`]) strips or tiles of 8–16 bits, in IFD0 or in a SubIFD with
 //! NewSubFileType 0, and applies LinearizationTable, ActiveArea, BlackLevel (scalar, per
-//! CFA position with BlackLevelRepeatDim, and BlackLevelDeltaH/V) and DefaultCrop. The result
+//! CFA position with BlackLevelRepeatDim, and BlackLevelDeltaH/V), DefaultCrop and the
+//! opcodes it supports ([`opcodes`]: FixBadPixelsConstant, GainMap; others are reported in
+//! [`DngInfo::skipped_opcodes`]). The result
 //! is what the `.raw` + JSON sidecar path gives for the same mosaic: a [`RawFrame`] and a
 //! [`RawMeta`] with the CFA (`"RG/WB"`), one black level and the white level, so a DNG renders
 //! exactly as its raw twin does.
@@ -21,6 +23,7 @@
 mod chunks;
 mod ifd;
 mod ljpeg;
+mod opcodes;
 mod read;
 
 use std::io::Cursor;
@@ -69,7 +72,7 @@ fn code_name(code: u64) -> &'static str {
 }
 
 /// What a DNG says besides the pixels.
-#[derive(Debug, Clone, PartialEq)]
+#[derive(Debug, Clone, Default, PartialEq)]
 pub struct DngInfo {
     /// DNGVersion, e.g. `[1, 4, 0, 0]`.
     pub version: [u8; 4],
@@ -86,6 +89,9 @@ pub struct DngInfo {
     /// AsShotNeutral: the camera's response to white under the scene light, one value per
     /// plane (in `plane_colors` order), usually with a maximum of 1.
     pub as_shot_neutral: Option<Vec<f64>>,
+    /// AsShotWhiteXY: the scene light's white as a CIE 1931 chromaticity (x, y); the DNG
+    /// alternative to AsShotNeutral.
+    pub as_shot_white_xy: Option<[f64; 2]>,
     /// CalibrationIlluminant1/2 as EXIF LightSource codes.
     pub calibration_illuminants: [Option<u16>; 2],
     /// ColorMatrix1/2 (XYZ → camera), row-major, `planes × 3` values.
@@ -96,6 +102,10 @@ pub struct DngInfo {
     /// Make (271) and Model (272) of IFD0, trimmed of NULs and spaces.
     pub make: Option<String>,
     pub model: Option<String>,
+    /// The opcodes of OpcodeList1, 2 and 3 the reader did not apply (it applies
+    /// FixBadPixelsConstant in OpcodeList1 and GainMap in OpcodeList2), e.g.
+    /// `"WarpRectilinear (OpcodeList3, optional)"`.
+    pub skipped_opcodes: Vec<String>,
 }
 
 /// What a DNG says of its camera: UniqueCameraModel, Make and Model of IFD0 (each trimmed of
@@ -121,6 +131,16 @@ impl DngInfo {
             make: self.make.clone(),
             model: self.model.clone(),
         }
+    }
+
+    /// The light AsShotWhiteXY names, as an illuminant spec (`xy:x,y`), when the file has no
+    /// AsShotNeutral (which then says the light instead).
+    pub fn white_xy_light(&self) -> Option<String> {
+        if self.as_shot_neutral.is_some() {
+            return None;
+        }
+        self.as_shot_white_xy
+            .map(|[x, y]| format!("xy:{x:.6},{y:.6}"))
     }
 
     /// AsShotNeutral as (channel letter, value) pairs.

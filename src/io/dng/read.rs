@@ -3,6 +3,7 @@
 
 use super::chunks::{check_chunks, decode_chunks, layout};
 use super::ifd::{Ifd, Tiff, dng_err, required, tag_name};
+use super::opcodes::{Lists, MAX_LIST_BYTES, Placement, fix_bad_pixels};
 use super::{DngCamera, DngImage, DngInfo, cfa_letter};
 use crate::io::IoResult;
 use crate::io::limits::Limits;
@@ -40,8 +41,10 @@ const TAG_CROP_ORIGIN: u16 = 50719;
 const TAG_CROP_SIZE: u16 = 50720;
 const TAG_COLOR_MATRIX: [u16; 2] = [50721, 50722];
 const TAG_AS_SHOT_NEUTRAL: u16 = 50728;
+const TAG_AS_SHOT_WHITE_XY: u16 = 50729;
 const TAG_CALIBRATION_ILLUMINANT: [u16; 2] = [50778, 50779];
 const TAG_ACTIVE_AREA: u16 = 50829;
+const TAG_OPCODE_LISTS: [u16; 3] = [51008, 51009, 51022];
 
 const PHOTOMETRIC_CFA: u64 = 32803;
 const PHOTOMETRIC_LINEAR_RAW: u64 = 34892;
@@ -87,9 +90,11 @@ fn find_raw(t: &Tiff<'_>, ifd0: &Ifd) -> IoResult<Ifd> {
     }))
 }
 
+/// A crop coordinate or size rounded to the nearest integer, as the DNG SDK rounds
+/// DefaultCropOrigin and DefaultCropSize rationals.
 fn to_usize(v: f64) -> usize {
     if v.is_finite() && v > 0.0 {
-        v.floor().min(usize::MAX as f64) as usize
+        v.round().min(usize::MAX as f64) as usize
     } else {
         0
     }
@@ -108,21 +113,36 @@ pub(super) fn decode(bytes: &[u8], limits: &Limits) -> IoResult<DngImage> {
     // --- decode
     let lay = layout(&t, &raw, w, h, limits)?;
     check_chunks(&t, &lay, s.compression, s.bits, w, h)?;
+    let ops = opcode_lists(&t, &raw)?;
     let mut img = crate::buffers::zeroed::<u16>(w * h);
     decode_chunks(&t, &lay, s.compression, s.bits, w, h, &mut img)?;
 
-    // --- linearization, areas, levels
-    let lin = linearization(&t, &raw)?;
+    // --- OpcodeList1, linearization, areas, levels, OpcodeList2
     let area = active_area(&t, &raw, w, h)?;
+    for &constant in &ops.bad_pixel_constants {
+        fix_bad_pixels(&mut img, w, constant, |r, c| cfa.colour_at(r, c, &area));
+    }
+    let lin = linearization(&t, &raw)?;
     let crop = default_crop(&t, &raw, &area)?;
     limits.check(crop.width, crop.height)?;
     let levels = levels(&t, &raw, s.bits, &area)?;
-    let data = crop_and_level(&img, w, lin.as_deref(), &area, &crop, &levels);
+    let mut data = crop_and_level(&img, w, lin.as_deref(), &area, &crop, &levels);
     if levels.black_level >= levels.white_level {
         return Err(dng_err(format!(
             "black level {} is not below the white level {}",
             levels.black_level, levels.white_level
         )));
+    }
+    let placement = Placement {
+        x: crop.x,
+        y: crop.y,
+        area_width: area.width,
+        area_height: area.height,
+        black: levels.black_level,
+        white: levels.white_level,
+    };
+    for map in &ops.gain_maps {
+        map.apply(&mut data, crop.width, &placement);
     }
 
     let cam = camera_metadata(&t, &ifd0, &cfa)?;
@@ -143,13 +163,25 @@ pub(super) fn decode(bytes: &[u8], limits: &Limits) -> IoResult<DngImage> {
             plane_colors: cfa.plane_colors,
             black_levels: levels.blacks,
             as_shot_neutral: cam.as_shot_neutral,
+            as_shot_white_xy: cam.as_shot_white_xy,
             calibration_illuminants: cam.calibration_illuminants,
             color_matrices: cam.color_matrices,
             unique_camera_model: cam.unique_camera_model,
             make: cam.make,
             model: cam.model,
+            skipped_opcodes: ops.skipped,
         },
     })
+}
+
+/// OpcodeList1, 2 and 3 of the raw image.
+fn opcode_lists(t: &Tiff<'_>, raw: &Ifd) -> IoResult<Lists> {
+    let [l1, l2, l3] = TAG_OPCODE_LISTS;
+    Lists::new(
+        t.bytes(raw, l1, MAX_LIST_BYTES)?,
+        t.bytes(raw, l2, MAX_LIST_BYTES)?,
+        t.bytes(raw, l3, MAX_LIST_BYTES)?,
+    )
 }
 
 /// DNGVersion of IFD0, which a DNG must have.
@@ -232,6 +264,16 @@ struct CfaPattern {
 }
 
 impl CfaPattern {
+    /// The colour of stored pixel (`r`, `c`): the pattern repeats from the active area's
+    /// origin.
+    fn colour_at(&self, r: usize, c: usize, area: &ActiveArea) -> char {
+        let (rows, cols) = (self.rows.max(1), self.cols.max(1));
+        // (r − top) mod rows, without going below zero
+        let rr = (r + rows * area.top - area.top) % rows;
+        let cc = (c + cols * area.left - area.left) % cols;
+        self.pattern.get(rr * cols + cc).copied().unwrap_or('?')
+    }
+
     /// The CFA seen from pixel (`x`, `y`), rows separated by '/'.
     fn seen_from(&self, x: usize, y: usize) -> String {
         let (rows, cols) = (self.rows, self.cols);
@@ -585,6 +627,7 @@ fn crop_and_level(
 /// The camera metadata of IFD0.
 struct CameraMetadata {
     as_shot_neutral: Option<Vec<f64>>,
+    as_shot_white_xy: Option<[f64; 2]>,
     calibration_illuminants: [Option<u16>; 2],
     color_matrices: [Option<Vec<f64>>; 2],
     unique_camera_model: Option<String>,
@@ -631,6 +674,15 @@ fn camera_metadata(t: &Tiff<'_>, ifd0: &Ifd, cfa: &CfaPattern) -> IoResult<Camer
             )));
         }
     };
+    let as_shot_white_xy = match t.reals(ifd0, TAG_AS_SHOT_WHITE_XY, 2)?.as_deref() {
+        None => None,
+        Some(&[x, y]) if x > 0.0 && y > 0.0 => Some([x, y]),
+        Some(v) => {
+            return Err(dng_err(format!(
+                "AsShotWhiteXY holds {v:?}; two positive values (a chromaticity x, y) are expected"
+            )));
+        }
+    };
     let mut calibration_illuminants = [None, None];
     let mut color_matrices = [None, None];
     for k in 0..2 {
@@ -652,6 +704,7 @@ fn camera_metadata(t: &Tiff<'_>, ifd0: &Ifd, cfa: &CfaPattern) -> IoResult<Camer
     let names = camera_names(t, ifd0)?;
     Ok(CameraMetadata {
         as_shot_neutral,
+        as_shot_white_xy,
         calibration_illuminants,
         color_matrices,
         unique_camera_model: names.unique_camera_model,

@@ -151,18 +151,20 @@ fn tiny_and_odd_sizes_render_finite() {
 fn largest_frames_and_the_pixel_limit() {
     let lim = Limits::default();
     // the pixel and side limits are checked before any allocation or length check
-    let over_pixels = decode_raw_u16_le(&[], 10_001, 10_000, &lim).unwrap_err();
-    println!("10001×10000 raw: {over_pixels}");
+    // a frame one column wider than the pixel limit allows at 10000 rows
+    let wide = lim.max_pixels / 10_000;
+    let over_pixels = decode_raw_u16_le(&[], wide + 1, 10_000, &lim).unwrap_err();
+    println!("{}×10000 raw: {over_pixels}", wide + 1);
     assert!(over_pixels.to_string().contains("pixels"), "{over_pixels}");
     let over_side = decode_raw_u16_le(&[], lim.max_dim + 1, 1, &lim).unwrap_err();
     println!("{}×1 raw: {over_side}", lim.max_dim + 1);
     let overflow = decode_raw_u16_le(&[], usize::MAX, usize::MAX, &lim).unwrap_err();
     println!("usize::MAX² raw: {overflow}");
-    let pgm = format!("P5\n{} {}\n255\n", 10_001, 10_000);
+    let pgm = format!("P5\n{} {}\n255\n", wide + 1, 10_000);
     let e = decode_mosaic(pgm.as_bytes(), &lim).unwrap_err();
-    println!("10001×10000 PGM header: {e}");
+    println!("{}×10000 PGM header: {e}", wide + 1);
     // exactly at the limit: the size is accepted, only the body length is wrong
-    let e = decode_raw_u16_le(&[0, 0], 10_000, 10_000, &lim).unwrap_err();
+    let e = decode_raw_u16_le(&[0, 0], wide, 10_000, &lim).unwrap_err();
     assert!(e.to_string().contains("bytes"), "{e}");
     // the widest and tallest allowed frames one pixel thick, and 4096×2 rows,
     // decoded from raw and rendered
