@@ -9,6 +9,7 @@
 mod queue;
 mod request;
 mod sharded;
+mod submission;
 mod training;
 mod worker;
 
@@ -26,6 +27,7 @@ use serde_json::{Value, json};
 
 pub use queue::{enqueue, enqueue_default, requeue_interrupted};
 pub(super) use request::integral_floats_to_ints;
+#[cfg(feature = "test-support")]
 pub use request::parse_job_request;
 pub use worker::worker;
 
@@ -161,7 +163,7 @@ pub async fn submit(
 ) -> Result<Response, ServiceError> {
     super::render::require_json(&headers)?;
     let body = super::render::body_bytes(body, state.config.server.max_body_bytes)?;
-    let (req, value) = parse_job_request(&body)?;
+    let (req, value) = submission::parse_submission(&state, &body)?;
     let key = idempotency_key(&headers)?;
     // insert, or find the job the key already names (two replicas may race on one key)
     if let Some(id) = enqueue(&state, &value, &req, key.as_deref()).await? {
