@@ -262,6 +262,7 @@ async fn open_state(cfg: &ServiceConfig) -> Result<(AppState, TrainingSpec), Ser
         illuminant_rows: Mutex::new(Vec::new()),
         iset,
         registry: Mutex::new(defaults.clone()),
+        computed_lights: Mutex::new(defaults.clone()),
         registry_writes: tokio::sync::Mutex::new(()),
         default_registry: defaults,
         active: ArcSwapOption::empty(),

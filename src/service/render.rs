@@ -372,7 +372,7 @@ pub async fn render(
     let format = negotiate(headers.get(header::ACCEPT).and_then(|v| v.to_str().ok()))?;
     let named = q.table.take();
     let request = render_request(q, &headers, admitted.body, format, &state.config.server)?;
-    let (format, correction) = (request.format, request.correction);
+    let format = request.format;
     let chosen = table_for(&state, named.as_deref(), &request.input).await?;
     let table = (chosen.table.id.clone(), chosen.choice);
     let ctx = ServiceRender {
@@ -427,7 +427,7 @@ pub async fn render(
     state
         .metrics
         .rendered((out.input_width * out.input_height) as u64);
-    Ok(respond(out, format, table, correction, queue_ms))
+    Ok(respond(out, format, table, queue_ms))
 }
 
 /// The answer of a render: the output with its media type, and what the render reports in
@@ -436,7 +436,6 @@ fn respond(
     out: RenderOutcome,
     format: OutputFormat,
     (table_id, choice): (String, TableChoice),
-    correction: CorrectionMode,
     queue_ms: f64,
 ) -> Response {
     let r = out.rendered;
@@ -466,7 +465,8 @@ fn respond(
     }
     put("x-l3-illuminant", out.light);
     put("x-l3-illuminant-source", source.to_string());
-    put("x-l3-correction", correction.as_str().to_string());
+    // what was applied (a matrix-only light keeps its T whatever the request's mode)
+    put("x-l3-correction", out.correction.as_str().to_string());
     put("x-l3-width", r.width.to_string());
     put("x-l3-height", r.height.to_string());
     let input_pixels = out.input_width * out.input_height;
