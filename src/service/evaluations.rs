@@ -368,12 +368,11 @@ pub fn negotiate(accept: Option<&str>) -> EvaluationFormat {
     let Some(accept) = accept.map(str::trim).filter(|a| !a.is_empty()) else {
         return EvaluationFormat::Json;
     };
-    super::accept::preferred(accept, |media| match media {
-        "application/json" | "application/*" | "*/*" => Some(EvaluationFormat::Json),
-        "image/svg+xml" | "image/*" => Some(EvaluationFormat::Svg),
-        _ => None,
-    })
-    .unwrap_or(EvaluationFormat::Json)
+    let offers = [
+        ("application/json", EvaluationFormat::Json),
+        ("image/svg+xml", EvaluationFormat::Svg),
+    ];
+    super::accept::preferred(accept, &offers).unwrap_or(EvaluationFormat::Json)
 }
 
 /// `GET /v1/evaluations/{id}`: the evaluation as JSON, or its figure as SVG (by `Accept`).

@@ -463,6 +463,15 @@ pub async fn activate_table(state: &AppState, id: &str) -> Result<(), ServiceErr
     Ok(())
 }
 
+/// Loads table `id` (checksum verified) and serves it as the active table without recording
+/// an activation: what a start does with the table recorded as active.
+pub async fn serve_table(state: &AppState, id: &str) -> Result<(), ServiceError> {
+    let loaded = load_usable(state, id).await?;
+    state.active.store(Some(Arc::new(loaded)));
+    tracing::info!(table = id, "serving the recorded active table");
+    Ok(())
+}
+
 /// The id recorded as active, if any.
 pub async fn recorded_active(state: &Inner) -> Result<Option<String>, ServiceError> {
     Ok(state.store.recorded_active().await?)
@@ -482,7 +491,7 @@ fn row_json(state: &Inner, row: &TableRow, full: bool) -> Result<Value, ServiceE
         "created_at_ms": row.created_at,
         "active": active,
         "status": row.status.as_str(),
-        "status_detail": row.status_detail,
+        "status_detail": row.status_detail.as_deref().map(super::error::without_server_paths),
         "last_activated_at_ms": row.last_activated_at,
         "train_illuminants": meta["train_illuminants"].clone(),
         "sensor_name": meta["sensor_name"].clone(),
