@@ -60,7 +60,7 @@ impl FromStr for CorrectionMode {
             "camera" => Ok(Self::Camera),
             "colorimetric" | "t" => Ok(Self::Colorimetric),
             _ => Err(PipelineError::Options(format!(
-                "correction '{s}': expected camera or colorimetric (t)"
+                "correction '{s}': expected camera or colorimetric (also written t)"
             ))),
         }
     }

@@ -131,6 +131,9 @@ pub struct RenderOutcome {
     /// The light's name.
     pub light: String,
     pub light_origin: LightOrigin,
+    /// The correction applied: the request's mode, except that a light given only as a
+    /// matrix (no spectrum, so no camera-aware C) is corrected colorimetrically (its T).
+    pub correction: CorrectionMode,
     /// The input frame's size.
     pub input_width: usize,
     pub input_height: usize,
@@ -213,6 +216,10 @@ impl Prepared {
         let notes = frame.notes.clone();
         let t1 = Instant::now();
         let choice = KernelChoice::new(table, &entry, r.correction);
+        let correction = match r.correction {
+            CorrectionMode::Camera if entry.spd.is_none() => CorrectionMode::Colorimetric,
+            mode => mode,
+        };
         let (rendered, t2) = match r.renderer {
             Renderer::Fast => {
                 let pipeline = ctx.renderer(&choice)?;
@@ -234,6 +241,7 @@ impl Prepared {
             rendered,
             light: entry.name,
             light_origin,
+            correction,
             input_width: width,
             input_height: height,
             decode_ms: ms(t0, t1),

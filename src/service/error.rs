@@ -1,5 +1,8 @@
 //! The service's error type and its one mapping to `application/problem+json` (RFC 9457).
 
+use std::path::Path;
+use std::sync::Mutex;
+
 use axum::http::{HeaderValue, StatusCode, header};
 use axum::response::{IntoResponse, Response};
 
@@ -136,7 +139,8 @@ impl ServiceError {
         }
     }
 
-    /// The problem document.
+    /// The problem document. Its detail names no directory of the server
+    /// ([`without_server_paths`]).
     pub fn problem(&self) -> serde_json::Value {
         let status = self.status();
         serde_json::json!({
@@ -144,20 +148,132 @@ impl ServiceError {
             "title": status.canonical_reason().unwrap_or("error"),
             "status": status.as_u16(),
             "code": self.code(),
-            "detail": self.to_string(),
+            "detail": without_server_paths(&self.to_string()),
         })
     }
+
+    /// The error of a response that did not come from a `ServiceError` (an extractor's
+    /// rejection, e.g. a path that is not UTF-8), by its status, with its text as the detail.
+    pub fn from_status(status: StatusCode, text: &str) -> ServiceError {
+        let text = if text.trim().is_empty() {
+            status.canonical_reason().unwrap_or("error").to_string()
+        } else {
+            text.trim().to_string()
+        };
+        match status {
+            StatusCode::NOT_FOUND => ServiceError::NotFound(text),
+            StatusCode::METHOD_NOT_ALLOWED => ServiceError::MethodNotAllowed(text),
+            StatusCode::PAYLOAD_TOO_LARGE => ServiceError::PayloadTooLarge(text),
+            StatusCode::UNSUPPORTED_MEDIA_TYPE => ServiceError::UnsupportedMediaType(text),
+            StatusCode::UNPROCESSABLE_ENTITY => ServiceError::Unprocessable(text),
+            StatusCode::NOT_ACCEPTABLE => ServiceError::NotAcceptable(text),
+            StatusCode::REQUEST_TIMEOUT => ServiceError::BodyTimeout(text),
+            s if s.is_client_error() => ServiceError::BadRequest(text),
+            _ => ServiceError::Internal(text),
+        }
+    }
+}
+
+/// A response as the API answers errors: an error response that is not a problem document
+/// (an extractor's plain-text rejection) becomes one, by its status. Other responses pass.
+pub async fn as_problem(resp: Response) -> Response {
+    let status = resp.status();
+    let is_problem = resp
+        .headers()
+        .get(header::CONTENT_TYPE)
+        .is_some_and(|v| v.as_bytes().starts_with(b"application/problem+json"));
+    if !(status.is_client_error() || status.is_server_error()) || is_problem {
+        return resp;
+    }
+    let body = axum::body::to_bytes(resp.into_body(), 64 * 1024)
+        .await
+        .unwrap_or_default();
+    ServiceError::from_status(status, &String::from_utf8_lossy(&body)).into_response()
+}
+
+/// The server's directories (data, tables, spectral data) that client-facing text must not
+/// show, longest first.
+static SERVER_DIRS: Mutex<Vec<String>> = Mutex::new(Vec::new());
+
+/// Registers a directory of the server whose absolute path client-facing text must not show
+/// (both as given and canonical).
+pub fn hide_server_dir(dir: &Path) {
+    let mut dirs = SERVER_DIRS.lock().unwrap_or_else(|p| p.into_inner());
+    let canonical = std::fs::canonicalize(dir).ok();
+    for d in [Some(dir.to_path_buf()), canonical].into_iter().flatten() {
+        let abs = if d.is_absolute() {
+            d
+        } else {
+            match std::env::current_dir() {
+                Ok(cwd) => cwd.join(d),
+                Err(_) => continue,
+            }
+        };
+        for text in [abs.display().to_string(), d_display(&abs)] {
+            let text = text.trim_end_matches('/').to_string();
+            if text.len() > 1 && !dirs.contains(&text) {
+                dirs.push(text);
+            }
+        }
+    }
+    dirs.sort_by_key(|d| std::cmp::Reverse(d.len()));
+}
+
+fn d_display(p: &Path) -> String {
+    p.components()
+        .collect::<std::path::PathBuf>()
+        .display()
+        .to_string()
+}
+
+/// `text` without the server's directories: a path inside one is shown relative to it, the
+/// directory itself as "the server's data directory". Client-facing details and job errors
+/// go through it; the log keeps the paths.
+pub fn without_server_paths(text: &str) -> String {
+    let dirs = SERVER_DIRS.lock().unwrap_or_else(|p| p.into_inner());
+    let mut out = text.to_string();
+    for d in dirs.iter() {
+        out = hide_dir(&out, d);
+    }
+    out
+}
+
+/// `text` with the directory `dir` hidden where it stands as a whole path component.
+fn hide_dir(text: &str, dir: &str) -> String {
+    let mut out = String::with_capacity(text.len());
+    let mut rest = text;
+    while let Some(i) = rest.find(dir) {
+        let after = &rest[i + dir.len()..];
+        out.push_str(&rest[..i]);
+        match after.chars().next() {
+            Some('/') => rest = &after[1..],
+            Some(c) if c.is_alphanumeric() || "-_.~".contains(c) => {
+                out.push_str(dir);
+                rest = after;
+            }
+            _ => {
+                out.push_str("the server's data directory");
+                rest = after;
+            }
+        }
+    }
+    out.push_str(rest);
+    out
 }
 
 impl IntoResponse for ServiceError {
     fn into_response(self) -> Response {
         let status = self.status();
+        let problem = self.problem();
         if status == StatusCode::INTERNAL_SERVER_ERROR {
             tracing::error!(code = self.code(), "{self}");
         } else if status.is_server_error() {
             tracing::debug!(code = self.code(), "{self}");
+        } else if problem["detail"].as_str() != Some(self.to_string().as_str()) {
+            // the client's detail hides the server's paths: the log keeps them
+            tracing::info!(code = self.code(), "{self}");
         }
-        let body = serde_json::to_vec(&self.problem()).unwrap_or_default();
+        let body = serde_json::to_vec(&problem).unwrap_or_default();
         let mut resp = (status, body).into_response();
         resp.headers_mut().insert(
             header::CONTENT_TYPE,
@@ -471,6 +587,23 @@ mod tests {
             r.headers()[header::CONTENT_TYPE],
             "application/problem+json"
         );
+    }
+
+    #[test]
+    fn server_paths_are_hidden() {
+        let d = "/srv/l3/data";
+        assert_eq!(
+            hide_dir(
+                "table file /srv/l3/data/tables/tbl_1.safetensors is corrupt",
+                d
+            ),
+            "table file tables/tbl_1.safetensors is corrupt"
+        );
+        assert_eq!(
+            hide_dir("cannot create /srv/l3/data: denied", d),
+            "cannot create the server's data directory: denied"
+        );
+        assert_eq!(hide_dir("/srv/l3/database", d), "/srv/l3/database");
     }
 
     /// Render errors map by their kind: the input's faults to 4xx, the table's or the

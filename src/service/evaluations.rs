@@ -161,13 +161,6 @@ impl EvaluationRequest {
         let method = EvaluationMethod::parse(&self.method).map_err(|_| {
             ServiceError::BadRequest(format!("method '{}': l3 or baseline", self.method))
         })?;
-        let lower = self.acquisition_illuminant.to_ascii_lowercase();
-        if lower.starts_with("csv:") || lower.starts_with("iset:") || lower.starts_with("xy:") {
-            return Err(ServiceError::UnknownIlluminant(format!(
-                "acquisition illuminant '{}': use a named illuminant or cct:K (its spectrum is needed to simulate the chart)",
-                self.acquisition_illuminant
-            )));
-        }
         Ok(Checked {
             chart,
             setup,
@@ -293,6 +286,8 @@ pub async fn create(
     let body = super::render::body_bytes(body, state.config.server.max_body_bytes)?;
     let req = parse_request(&body)?;
     let checked = req.check()?;
+    // the light the chart is simulated under (its spectrum), and its correction
+    let acquisition = super::illuminants::spectral_spec(&state, &req.acquisition_illuminant)?;
     let correction = state.resolve_illuminant(&req.acquisition_illuminant)?;
     let table = match checked.method {
         EvaluationMethod::L3 => Some(table_to_evaluate(&state, req.table_id.as_ref()).await?),
@@ -300,7 +295,7 @@ pub async fn create(
     };
     let slot = evaluation_slot(&state)?;
     let table_id = table.as_ref().map(|t| t.id.clone());
-    let (iset, acquisition) = (state.iset.clone(), req.acquisition_illuminant.clone());
+    let iset = state.iset.clone();
     let report = super::cpu::run(&state.pools.background, "the evaluation", move || {
         let report = evaluate(
             table.as_deref(),
@@ -373,12 +368,11 @@ pub fn negotiate(accept: Option<&str>) -> EvaluationFormat {
     let Some(accept) = accept.map(str::trim).filter(|a| !a.is_empty()) else {
         return EvaluationFormat::Json;
     };
-    super::accept::preferred(accept, |media| match media {
-        "application/json" | "application/*" | "*/*" => Some(EvaluationFormat::Json),
-        "image/svg+xml" | "image/*" => Some(EvaluationFormat::Svg),
-        _ => None,
-    })
-    .unwrap_or(EvaluationFormat::Json)
+    let offers = [
+        ("application/json", EvaluationFormat::Json),
+        ("image/svg+xml", EvaluationFormat::Svg),
+    ];
+    super::accept::preferred(accept, &offers).unwrap_or(EvaluationFormat::Json)
 }
 
 /// `GET /v1/evaluations/{id}`: the evaluation as JSON, or its figure as SVG (by `Accept`).

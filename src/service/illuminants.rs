@@ -316,3 +316,77 @@ pub async fn delete(
     state.forget_illuminant(&stored);
     Ok(StatusCode::NO_CONTENT)
 }
+
+/// What training and evaluations take as a light, for problem details.
+const SPECTRAL_LIGHTS: &str =
+    "a built-in light (GET /v1/illuminants), a registered light made from a cct, or cct:K";
+
+/// The light a client names for a training job or a simulated evaluation, as the spectral
+/// spec the simulation reads: a built-in name or `cct:K` as given, a registered light made
+/// from a colour temperature as its `cct:K`. Files (`csv:`, `iset:`) are refused over HTTP
+/// and an unknown name is 400 `unknown_illuminant` (naming what is accepted); a registered
+/// light the simulation cannot use (given as a matrix, or as SPD samples) is 422 saying why.
+pub fn spectral_spec(state: &Inner, name: &str) -> Result<String, ServiceError> {
+    let spec = name.trim();
+    let lower = spec.to_ascii_lowercase();
+    let unknown = |why: &str| {
+        ServiceError::UnknownIlluminant(format!(
+            "illuminant '{spec}': {why}; use {SPECTRAL_LIGHTS} (known: {})",
+            spectral_names(state).join(", ")
+        ))
+    };
+    if lower.starts_with("csv:") || lower.starts_with("iset:") {
+        return Err(unknown(
+            "file-based illuminant specs are not accepted over HTTP",
+        ));
+    }
+    if lower.starts_with("xy:") {
+        return Err(unknown(
+            "a chromaticity has no spectrum to simulate a scene under",
+        ));
+    }
+    let registered = state.registry().get(spec).cloned();
+    if let Some(e) = registered {
+        match (e.source, e.cct) {
+            (CorrectionSource::Cct, Some(k)) => return Ok(format!("cct:{k}")),
+            // an ISET light of the operator's data directory, by its registry name
+            (CorrectionSource::Iset, _)
+                if crate::spectral::IlluminantSpec::parse(&e.name).is_err() =>
+            {
+                return Ok(format!("iset:{}", e.name));
+            }
+            (CorrectionSource::Matrix, _) => {
+                return Err(ServiceError::Unprocessable(format!(
+                    "illuminant '{spec}' is registered as a matrix only: it has no spectrum to simulate a scene under; register it with \"cct\" to use it here"
+                )));
+            }
+            (CorrectionSource::Spd, _) => {
+                return Err(ServiceError::Unprocessable(format!(
+                    "illuminant '{spec}' is registered from SPD samples, which training and evaluations do not take yet; register it with \"cct\", or use {SPECTRAL_LIGHTS}"
+                )));
+            }
+            _ => {}
+        }
+    }
+    crate::spectral::IlluminantSpec::parse(spec)
+        .map(|_| spec.to_string())
+        .map_err(|_| unknown("no such light"))
+}
+
+/// The names [`spectral_spec`] takes, for its problem details: the registry's lights that
+/// have a usable spectrum, then `cct:K`.
+fn spectral_names(state: &Inner) -> Vec<String> {
+    let mut names: Vec<String> = state
+        .registry()
+        .entries()
+        .filter(|e| match e.source {
+            CorrectionSource::Cct => e.cct.is_some(),
+            CorrectionSource::Matrix | CorrectionSource::Spd => false,
+            CorrectionSource::Iset => true,
+            CorrectionSource::Builtin => crate::spectral::IlluminantSpec::parse(&e.name).is_ok(),
+        })
+        .map(|e| e.name.clone())
+        .collect();
+    names.push("cct:K".into());
+    names
+}

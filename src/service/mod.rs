@@ -8,7 +8,7 @@ mod colorchecker;
 mod config;
 mod console;
 mod cpu;
-mod error;
+pub(crate) mod error;
 mod evaluations;
 #[cfg(feature = "fault-injection")]
 pub mod fault_injection;
@@ -230,6 +230,11 @@ async fn open_state(cfg: &ServiceConfig) -> Result<(AppState, TrainingSpec), Ser
         "database ready"
     );
     let iset = locate_iset(cfg);
+    // problem details and job errors name no directory of the server (the log does)
+    error::hide_server_dir(&data);
+    if let Some(d) = iset.as_ref().and_then(IsetData::dir) {
+        error::hide_server_dir(d);
+    }
     match iset.as_ref().and_then(IsetData::dir) {
         Some(d) => tracing::info!(
             "spectral data: the ISET directory {} over the built-in data",
@@ -262,6 +267,7 @@ async fn open_state(cfg: &ServiceConfig) -> Result<(AppState, TrainingSpec), Ser
         illuminant_rows: Mutex::new(Vec::new()),
         iset,
         registry: Mutex::new(defaults.clone()),
+        computed_lights: Mutex::new(defaults.clone()),
         registry_writes: tokio::sync::Mutex::new(()),
         default_registry: defaults,
         active: ArcSwapOption::empty(),
@@ -292,7 +298,13 @@ async fn activate_stored_table(state: &AppState) -> Result<(), ServiceError> {
         if unusable.iter().any(|(b, _)| *b == id) {
             continue;
         }
-        match tables::activate_table(state, &id).await {
+        // the recorded table is served again, not activated anew (its activation time stays)
+        let served = if recorded.as_deref() == Some(id.as_str()) {
+            tables::serve_table(state, &id).await
+        } else {
+            tables::activate_table(state, &id).await
+        };
+        match served {
             Ok(()) => break,
             Err(e) => tracing::error!(table = id, "cannot activate: {e}"),
         }

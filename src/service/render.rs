@@ -174,6 +174,10 @@ pub async fn admit(State(state): State<AppState>, req: Request, next: Next) -> R
             .insert(header::CONNECTION, HeaderValue::from_static("close"));
         resp
     };
+    // a declared size past the limits is refused before the body is read
+    if let Err(e) = declared_size_limits(parts.uri.query(), &state.config.server) {
+        return close(e);
+    }
     let mut reservation = match adm.reserve(declared.unwrap_or(0), counters) {
         Ok(r) => r,
         Err(e) => return close(e),
@@ -200,6 +204,26 @@ pub async fn admit(State(state): State<AppState>, req: Request, next: Next) -> R
         .await;
     drop(reservation);
     resp
+}
+
+/// Checks the query's `width` and `height`, when both are whole numbers, against the pixel
+/// limits (the decode checks them again, with everything else about the query).
+fn declared_size_limits(query: Option<&str>, server: &ServerConfig) -> Result<(), ServiceError> {
+    let value = |key: &str| {
+        query?
+            .split('&')
+            .filter_map(|kv| kv.split_once('='))
+            .find(|(k, _)| *k == key)
+            .and_then(|(_, v)| v.parse::<usize>().ok())
+    };
+    if let (Some(width), Some(height)) = (value("width"), value("height")) {
+        let limits = Limits {
+            max_pixels: server.max_pixels,
+            ..Limits::default()
+        };
+        limits.check(width, height)?;
+    }
+    Ok(())
 }
 
 /// A render against the chosen table (the active one unless the request or its DNG's camera
@@ -321,6 +345,11 @@ pub(super) fn render_request(
         None => server.correction,
         Some(s) => s.parse::<CorrectionMode>()?,
     };
+    if let Some(cfa) = &q.cfa {
+        // a malformed CFA is the query's mistake, not a mismatch with the table
+        crate::camera::Cfa::parse(cfa.trim())
+            .map_err(|e| ServiceError::BadRequest(format!("cfa '{cfa}': {e}")))?;
+    }
     let input = match (raw, q.width, q.height) {
         (true, Some(width), Some(height)) => Input::RawU16 {
             bytes: body,
@@ -372,7 +401,7 @@ pub async fn render(
     let format = negotiate(headers.get(header::ACCEPT).and_then(|v| v.to_str().ok()))?;
     let named = q.table.take();
     let request = render_request(q, &headers, admitted.body, format, &state.config.server)?;
-    let (format, correction) = (request.format, request.correction);
+    let format = request.format;
     let chosen = table_for(&state, named.as_deref(), &request.input).await?;
     let table = (chosen.table.id.clone(), chosen.choice);
     let ctx = ServiceRender {
@@ -427,7 +456,7 @@ pub async fn render(
     state
         .metrics
         .rendered((out.input_width * out.input_height) as u64);
-    Ok(respond(out, format, table, correction, queue_ms))
+    Ok(respond(out, format, table, queue_ms))
 }
 
 /// The answer of a render: the output with its media type, and what the render reports in
@@ -436,7 +465,6 @@ fn respond(
     out: RenderOutcome,
     format: OutputFormat,
     (table_id, choice): (String, TableChoice),
-    correction: CorrectionMode,
     queue_ms: f64,
 ) -> Response {
     let r = out.rendered;
@@ -481,7 +509,8 @@ fn respond(
             ),
         );
     }
-    put("x-l3-correction", correction.as_str().to_string());
+    // what was applied (a matrix-only light keeps its T whatever the request's mode)
+    put("x-l3-correction", out.correction.as_str().to_string());
     put("x-l3-width", r.width.to_string());
     put("x-l3-height", r.height.to_string());
     let input_pixels = out.input_width * out.input_height;

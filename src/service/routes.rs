@@ -172,8 +172,8 @@ async fn guard(State(state): State<AppState>, req: Request, next: Next) -> Respo
             .headers()
             .get(header::AUTHORIZATION)
             .and_then(|v| v.to_str().ok())
-            .and_then(|v| v.strip_prefix("Bearer "))
-            .is_some_and(|t| constant_time_eq(t.trim().as_bytes(), token.as_bytes()));
+            .and_then(bearer_credentials)
+            .is_some_and(|t| constant_time_eq(t.as_bytes(), token.as_bytes()));
         if ok {
             None
         } else {
@@ -201,6 +201,8 @@ async fn guard(State(state): State<AppState>, req: Request, next: Next) -> Respo
             }
         }
     };
+    // an extractor's plain-text rejection (e.g. a path that is not UTF-8) as a problem
+    let resp = super::error::as_problem(resp).await;
     state.metrics.observe(
         method.as_str(),
         &route,
@@ -208,6 +210,15 @@ async fn guard(State(state): State<AppState>, req: Request, next: Next) -> Respo
         started.elapsed().as_secs_f64(),
     );
     resp
+}
+
+/// The token of an `Authorization: Bearer <token>` header value; the scheme is
+/// case-insensitive (RFC 9110 §11.1), and spaces around the token are ignored.
+fn bearer_credentials(value: &str) -> Option<&str> {
+    let (scheme, token) = value.trim_start().split_once([' ', '\t'])?;
+    scheme
+        .eq_ignore_ascii_case("bearer")
+        .then_some(token.trim())
 }
 
 fn constant_time_eq(a: &[u8], b: &[u8]) -> bool {
@@ -271,5 +282,14 @@ mod tests {
         assert!(!is_mutating(&Method::GET, "/v1/tables"));
         assert!(constant_time_eq(b"abc", b"abc"));
         assert!(!constant_time_eq(b"abc", b"abd"));
+        for (header, token) in [
+            ("Bearer s3cret", Some("s3cret")),
+            ("bearer s3cret", Some("s3cret")),
+            ("BEARER  s3cret ", Some("s3cret")),
+            ("Basic s3cret", None),
+            ("Bearers3cret", None),
+        ] {
+            assert_eq!(bearer_credentials(header), token, "{header}");
+        }
     }
 }

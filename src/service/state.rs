@@ -59,6 +59,9 @@ pub struct Inner {
     pub default_registry: IlluminantRegistry,
     /// Built-ins plus the user's illuminants from the database.
     pub registry: Mutex<IlluminantRegistry>,
+    /// Lights computed for requests (`cct:K`, `xy:x,y`, a DNG's or an estimated light): a
+    /// bounded cache kept out of the public registry.
+    pub computed_lights: Mutex<IlluminantRegistry>,
     /// Held by every change to the registry (PUT, DELETE) from reading it
     /// to swapping in the result, so that changes apply one after another.
     pub registry_writes: tokio::sync::Mutex<()>,
@@ -91,6 +94,9 @@ pub struct Inner {
 /// Largest number of cached fused-kernel sets (each is the size of a table's kernels).
 const KERNEL_CACHE_ENTRIES: usize = 32;
 
+/// Largest number of computed lights kept beyond the built-ins (then the cache starts anew).
+const COMPUTED_LIGHTS: usize = 256;
+
 impl Inner {
     /// Locks the registry (a poisoned lock is still usable: the registry has no invariants a
     /// panic could break half-way).
@@ -104,8 +110,13 @@ impl Inner {
     pub fn resolve_illuminant(&self, spec: &str) -> Result<IlluminantEntry, ServiceError> {
         let spec = spec.trim();
         let unknown = |why: String| {
+            // the core's own list of names offers files, which HTTP refuses: the registry's
+            // names stand in its place
+            let why = why.split(" (known:").next().unwrap_or_default();
+            let names: Vec<String> = self.registry().entries().map(|e| e.name.clone()).collect();
             ServiceError::UnknownIlluminant(format!(
-                "illuminant '{spec}': {why}; use a registered name (GET /v1/illuminants), cct:K or xy:x,y"
+                "illuminant '{spec}': {why}; use a registered name ({}), cct:K or xy:x,y",
+                names.join(", ")
             ))
         };
         let lower = spec.to_ascii_lowercase();
@@ -114,11 +125,20 @@ impl Inner {
                 "file-based illuminant specs are not accepted over HTTP".into(),
             ));
         }
-        let mut reg = self.registry();
-        if let Some(e) = reg.get(spec) {
+        if let Some(e) = self.registry().get(spec) {
             return Ok(e.clone());
         }
-        reg.resolve(spec, self.iset.as_ref())
+        // computed lights are cached apart: the public registry holds built-ins and the
+        // user's lights only, whatever renders asked for
+        let mut computed = self
+            .computed_lights
+            .lock()
+            .unwrap_or_else(|p| p.into_inner());
+        if computed.len() > self.default_registry.len() + COMPUTED_LIGHTS {
+            *computed = self.default_registry.clone();
+        }
+        computed
+            .resolve(spec, self.iset.as_ref())
             .map_err(|e| unknown(e.to_string()))
     }
 

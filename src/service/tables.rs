@@ -297,19 +297,61 @@ pub async fn verify_all(state: &Inner) -> Result<Vec<(String, String)>, ServiceE
 }
 
 /// The good stored tables by the sensor they were trained for (`meta.sensor_name`), newest
-/// first: what the table choice of a render and the sensor listing read.
+/// first: what the table choice of a render and the sensor listing read. A table counts for a
+/// catalogue sensor only when its design (`meta.sensor`) is that sensor's: a design that merely
+/// took a catalogue name (before submissions refused it) cannot stand in for a camera.
 pub(super) async fn stored_tables(store: &Store) -> Result<StoredTables, ServiceError> {
     #[derive(serde::Deserialize)]
-    struct SensorName {
+    struct SensorOf {
         sensor_name: String,
+        #[serde(default)]
+        sensor: serde_json::Value,
     }
     let rows = store.usable_tables_newest_first().await?;
+    let mut designs: std::collections::HashMap<String, Option<serde_json::Value>> =
+        std::collections::HashMap::new();
     Ok(StoredTables::newest_first(rows.into_iter().filter_map(
         |(id, meta)| {
-            let m: SensorName = serde_json::from_str(&meta).ok()?;
+            let m: SensorOf = serde_json::from_str(&meta).ok()?;
+            if let Some(entry) = crate::camera::catalogue::find(&m.sensor_name) {
+                let design = designs
+                    .entry(entry.name.clone())
+                    .or_insert_with(|| catalogue_fingerprint(entry));
+                if !design.as_ref().is_some_and(|d| same_design(d, &m.sensor)) {
+                    return None;
+                }
+            }
             Some((m.sensor_name, id))
         },
     )))
+}
+
+/// A catalogue sensor's design as a table records it (`meta.sensor`).
+fn catalogue_fingerprint(
+    entry: &crate::camera::catalogue::CatalogueEntry,
+) -> Option<serde_json::Value> {
+    serde_json::to_value(entry.design().ok()?).ok()
+}
+
+/// Whether two designs as JSON are the same: equal but for the last bits of their numbers (a
+/// number written as text and read back may differ in its last bit).
+pub(in crate::service) fn same_design(a: &serde_json::Value, b: &serde_json::Value) -> bool {
+    use serde_json::Value;
+    match (a, b) {
+        (Value::Number(x), Value::Number(y)) => match (x.as_f64(), y.as_f64()) {
+            (Some(x), Some(y)) => x == y || (x - y).abs() <= 1e-12 * x.abs().max(y.abs()),
+            _ => x == y,
+        },
+        (Value::Array(x), Value::Array(y)) => {
+            x.len() == y.len() && x.iter().zip(y).all(|(a, b)| same_design(a, b))
+        }
+        (Value::Object(x), Value::Object(y)) => {
+            x.len() == y.len()
+                && x.iter()
+                    .all(|(k, a)| y.get(k).is_some_and(|b| same_design(a, b)))
+        }
+        (a, b) => a == b,
+    }
 }
 
 /// The stored table `id` of the data directory `tables_dir` and its `store`, its bytes
@@ -421,6 +463,15 @@ pub async fn activate_table(state: &AppState, id: &str) -> Result<(), ServiceErr
     Ok(())
 }
 
+/// Loads table `id` (checksum verified) and serves it as the active table without recording
+/// an activation: what a start does with the table recorded as active.
+pub async fn serve_table(state: &AppState, id: &str) -> Result<(), ServiceError> {
+    let loaded = load_usable(state, id).await?;
+    state.active.store(Some(Arc::new(loaded)));
+    tracing::info!(table = id, "serving the recorded active table");
+    Ok(())
+}
+
 /// The id recorded as active, if any.
 pub async fn recorded_active(state: &Inner) -> Result<Option<String>, ServiceError> {
     Ok(state.store.recorded_active().await?)
@@ -440,7 +491,7 @@ fn row_json(state: &Inner, row: &TableRow, full: bool) -> Result<Value, ServiceE
         "created_at_ms": row.created_at,
         "active": active,
         "status": row.status.as_str(),
-        "status_detail": row.status_detail,
+        "status_detail": row.status_detail.as_deref().map(super::error::without_server_paths),
         "last_activated_at_ms": row.last_activated_at,
         "train_illuminants": meta["train_illuminants"].clone(),
         "sensor_name": meta["sensor_name"].clone(),

@@ -9,6 +9,7 @@
 mod queue;
 mod request;
 mod sharded;
+mod submission;
 mod training;
 mod worker;
 
@@ -26,6 +27,7 @@ use serde_json::{Value, json};
 
 pub use queue::{enqueue, enqueue_default, requeue_interrupted};
 pub(super) use request::integral_floats_to_ints;
+#[cfg(feature = "test-support")]
 pub use request::parse_job_request;
 pub use worker::worker;
 
@@ -44,7 +46,8 @@ fn job_json(row: &JobRow) -> Value {
         "status": row.status.as_str(),
         "progress": row.progress,
         "stage": row.stage.map(JobStage::as_str),
-        "error": row.error,
+        // the error as recorded, without the server's directories
+        "error": row.error.as_deref().map(crate::service::error::without_server_paths),
         "table_id": row.table_id,
         "activate": row.activate,
         "attempts": row.attempts,
@@ -54,8 +57,21 @@ fn job_json(row: &JobRow) -> Value {
         "started_at_ms": row.started_at,
         "finished_at_ms": row.finished_at,
         "timings": { "queued_ms": queued_ms.max(0), "running_ms": running_ms.map(|v| v.max(0)) },
-        "links": { "self": format!("/v1/training-jobs/{id}"), "cancel": format!("/v1/training-jobs/{id}/cancel") },
+        "links": job_links(row),
     })
+}
+
+/// A job's links: itself, `cancel` while it can be canceled, its table once it has one.
+fn job_links(row: &JobRow) -> Value {
+    let id = &row.id;
+    let mut links = json!({ "self": format!("/v1/training-jobs/{id}") });
+    if matches!(row.status, JobStatus::Queued | JobStatus::Running) {
+        links["cancel"] = json!(format!("/v1/training-jobs/{id}/cancel"));
+    }
+    if let Some(table) = &row.table_id {
+        links["table"] = json!(format!("/v1/tables/{table}"));
+    }
+    links
 }
 
 /// A shard in its job's description.
@@ -87,7 +103,9 @@ async fn job_view(state: &AppState, row: &JobRow) -> Result<Value, ServiceError>
             "shard": row.shard_index.map(|k| k + 1),
             "count": row.shard_count,
         });
-        v["links"]["cancel"] = json!(format!("/v1/training-jobs/{parent}/cancel"));
+        if v["links"].get("cancel").is_some() {
+            v["links"]["cancel"] = json!(format!("/v1/training-jobs/{parent}/cancel"));
+        }
     }
     if row.kind == JobKind::Sharded {
         let shards = state.store.shards(&row.id).await?;
@@ -161,7 +179,7 @@ pub async fn submit(
 ) -> Result<Response, ServiceError> {
     super::render::require_json(&headers)?;
     let body = super::render::body_bytes(body, state.config.server.max_body_bytes)?;
-    let (req, value) = parse_job_request(&body)?;
+    let (req, value) = submission::parse_submission(&state, &body)?;
     let key = idempotency_key(&headers)?;
     // insert, or find the job the key already names (two replicas may race on one key)
     if let Some(id) = enqueue(&state, &value, &req, key.as_deref()).await? {

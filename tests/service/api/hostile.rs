@@ -245,7 +245,7 @@ async fn hostile_job_json(h: &Hostile<'_>) {
         ("{\"levels\": ", "invalid_json", "not valid JSON"),
         ("{\"levles\": 5}", "invalid_json", "levles"),
         ("{\"levels\": 1}", "bad_request", "levels 1"),
-        ("{\"illuminants\": [\"Moonlight\"]}", "bad_request", "Moonlight"),
+        ("{\"illuminants\": [\"Moonlight\"]}", "unknown_illuminant", "Moonlight"),
     ];
     for (body, code, needle) in cases {
         let r = job(body, "application/json").await.unwrap();

@@ -14,6 +14,7 @@ mod hostile;
 mod limits;
 mod reads;
 mod render;
+mod trust;
 
 fn l3_cli(args: &[&str], dir: &Path) {
     let out = Command::new(env!("CARGO_BIN_EXE_l3"))
