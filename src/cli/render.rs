@@ -169,6 +169,9 @@ pub(crate) fn frame_and_light(
     let input = Input::Decoded(Box::new(read_mosaic(path, &limits)?));
     let frame = decode(input, Levels::default(), table, Scaling::Upfront, &limits)
         .map_err(|e| input_error(e, path))?;
+    if let Some(m) = &frame.sensor_mismatch {
+        eprintln!("warning: {}: {m}", path.display());
+    }
     let (spec, origin) = match named {
         Some(s) => (s.to_string(), LightOrigin::Named),
         None => {
@@ -267,7 +270,8 @@ pub fn run(cli: &Cli, a: &RenderArgs) -> Result<(), CliError> {
 }
 
 /// Runs `request` with `table`, lights from a registry of the built-in illuminants (and
-/// `iset`'s); errors about the input name `input`.
+/// `iset`'s); errors about the input name `input`, and a frame naming another sensor than the
+/// table's is warned of.
 fn run_request(
     request: RenderRequest,
     table: &L3Table,
@@ -279,12 +283,16 @@ fn run_request(
         iset,
         registry: RefCell::new(IlluminantRegistry::with_defaults(table.meta.grid, iset)?),
     };
-    request
+    let out = request
         .run(&ctx, &AtomicBool::new(false))
         .map_err(|f| match f {
             Failure::Pipeline(e) => input_error(e, input),
             Failure::Cli(e) => e,
-        })
+        })?;
+    if let Some(m) = &out.sensor_mismatch {
+        eprintln!("warning: {}: {m}", input.display());
+    }
+    Ok(out)
 }
 
 /// The mosaic file `path` rendered as `l3 render --table … --out frame.raw` renders it: float

@@ -5,6 +5,7 @@
 use bytes::Bytes;
 
 use super::error::{CfaOrigin, PipelineError};
+use super::fit::{SensorMismatch, check_cfa, frame_sensor_mismatch};
 use crate::io::{
     DecodedMosaic, Limits, LoadedMosaic, RawFrame, RawMeta, decode_mosaic_with_meta,
     decode_raw_u16_le,
@@ -74,6 +75,9 @@ pub struct DecodedFrame {
     pub illuminant: Option<String>,
     /// A DNG's AsShotNeutral per channel.
     pub neutral: Option<Vec<(String, f64)>>,
+    /// The sensor the file names (a sidecar's `sensor`, a DNG's camera) when it is not the
+    /// table's: worth a warning, not an error.
+    pub sensor_mismatch: Option<SensorMismatch>,
 }
 
 impl DecodedFrame {
@@ -139,7 +143,7 @@ fn check_levels(black: u16, white: u16) -> Result<(), PipelineError> {
 }
 
 /// Decodes `input` for `table`: its levels (`levels` over the file's, else 0 and 65535)
-/// checked before and after decoding, a DNG's CFA checked against the table's, the declared
+/// checked before and after decoding, a DNG's or a sidecar's CFA checked against the table's, the declared
 /// size against the decoded one; integer samples scaled to volts as `scaling` says.
 pub fn decode(
     input: Input,
@@ -175,16 +179,14 @@ pub fn decode(
             (mosaic, meta, dng, (None, None))
         }
     };
-    let table_cfa = table.meta.cfa.to_string();
-    if let (Some(meta), Some(_)) = (&meta, &dng)
-        && !meta.cfa.eq_ignore_ascii_case(&table_cfa)
-    {
-        return Err(PipelineError::CfaMismatch {
-            origin: CfaOrigin::Dng,
-            input: meta.cfa.clone(),
-            table: table_cfa,
-        });
+    if let Some(meta) = &meta {
+        let origin = match dng {
+            Some(_) => CfaOrigin::Dng,
+            None => CfaOrigin::Sidecar,
+        };
+        check_cfa(&meta.cfa, origin, &table.meta.cfa)?;
     }
+    let sensor_mismatch = frame_sensor_mismatch(meta.as_ref(), dng.as_ref(), table);
     // the file's levels (a sidecar's or a DNG's) unless the request gives others
     if let Some(meta) = &meta {
         black = levels.black.unwrap_or(meta.black_level);
@@ -220,5 +222,6 @@ pub fn decode(
         height,
         illuminant,
         neutral,
+        sensor_mismatch,
     })
 }

@@ -22,6 +22,7 @@
 
 pub mod choice;
 pub mod error;
+pub mod fit;
 pub mod input;
 pub mod kernels;
 pub mod options;
@@ -34,6 +35,7 @@ use std::time::Instant;
 
 pub use choice::{StoredTables, TableChoice, choose_table};
 pub use error::{CfaOrigin, PipelineError};
+pub use fit::{SensorMismatch, check_cfa, design_fit};
 pub use input::{DecodedFrame, Input, Levels, Samples, Scaling, decode};
 pub use kernels::{
     CorrectionMode, KernelChoice, KernelKey, KernelSource, Kernels, correction_for, kernels_for,
@@ -129,6 +131,8 @@ pub struct RenderOutcome {
     /// The light's name.
     pub light: String,
     pub light_origin: LightOrigin,
+    /// The sensor the file names, when it is not the table's (a warning for the caller).
+    pub sensor_mismatch: Option<SensorMismatch>,
     /// The input frame's size.
     pub input_width: usize,
     pub input_height: usize,
@@ -148,16 +152,8 @@ impl RenderRequest {
     /// The checks that need no decoding, in order: the declared CFA against the table's, the
     /// named light resolved, a reference render asked for the whole frame.
     pub fn prepare<C: RenderContext>(self, ctx: &C) -> Result<Prepared, C::Error> {
-        let table_cfa = ctx.table().meta.cfa.to_string();
-        if let Some(cfa) = &self.cfa
-            && !cfa.trim().eq_ignore_ascii_case(&table_cfa)
-        {
-            return Err(PipelineError::CfaMismatch {
-                origin: CfaOrigin::Declared,
-                input: cfa.clone(),
-                table: table_cfa,
-            }
-            .into());
+        if let Some(cfa) = &self.cfa {
+            check_cfa(cfa, CfaOrigin::Declared, &ctx.table().meta.cfa)?;
         }
         let named = match &self.light {
             LightChoice::Named(spec) => Some(ctx.light(spec)?),
@@ -206,6 +202,7 @@ impl Prepared {
             }
         };
         let (width, height) = (frame.width, frame.height);
+        let sensor_mismatch = frame.sensor_mismatch.clone();
         let t1 = Instant::now();
         let choice = KernelChoice::new(table, &entry, r.correction);
         let (rendered, t2) = match r.renderer {
@@ -229,6 +226,7 @@ impl Prepared {
             rendered,
             light: entry.name,
             light_origin,
+            sensor_mismatch,
             input_width: width,
             input_height: height,
             decode_ms: ms(t0, t1),
