@@ -34,9 +34,9 @@ fn a_closed_pipe_ends_the_command_quietly() {
 fn a_table_with_a_method_or_the_paper_table_that_ignores_it_is_a_usage_error() {
     let dir = tempfile::tempdir().unwrap();
     for args in [
-        ["eval", "--method", "baseline", "--table", "t.safetensors"],
-        ["eval", "--method", "isp", "--table", "t.safetensors"],
-        ["eval", "--paper-table", "--table", "t.safetensors"],
+        &["eval", "--method", "baseline", "--table", "t.safetensors"][..],
+        &["eval", "--method", "isp", "--table", "t.safetensors"],
+        &["eval", "--paper-table", "--table", "t.safetensors"],
     ] {
         let out = Command::new(env!("CARGO_BIN_EXE_l3"))
             .args(args)
