@@ -35,7 +35,7 @@ impl std::str::FromStr for DemosaicMethod {
             "auto" | "isp" => Self::Auto,
             _ => {
                 return Err(BaselineError::InvalidParams(format!(
-                    "demosaic method '{s}': expected bilinear, malvar, gradient or auto"
+                    "demosaic method '{s}': expected bilinear, malvar, gradient, auto or isp"
                 )));
             }
         })

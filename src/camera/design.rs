@@ -512,14 +512,63 @@ impl SensorDesign {
         self
     }
 
-    /// Parse and validate TOML text.
+    /// Parse and validate TOML text: a design file, which must give its `name`
+    /// ([`Self::check_given`]).
     pub fn from_toml_str(text: &str) -> Result<Self, CameraError> {
-        let d: Self = toml::from_str(text).map_err(|e| CameraError::Toml {
+        let toml_err = |e: toml::de::Error| CameraError::Toml {
             path: "<text>".into(),
             msg: e.to_string(),
+        };
+        let d: Self = toml::from_str(text).map_err(toml_err)?;
+        let keys: toml::Table = toml::from_str(text).map_err(toml_err)?;
+        d.check_given(|k| keys.contains_key(k))?;
+        d.validate()?;
+        Ok(d)
+    }
+
+    /// A design as a JSON object with the TOML file's keys (a training job's `sensor`),
+    /// checked as a file is ([`Self::check_given`], [`Self::validate`]).
+    pub fn from_json(value: serde_json::Value) -> Result<Self, CameraError> {
+        let given = |k: &str| value.get(k).is_some_and(|v| !v.is_null());
+        let (has_name, has_cfa, has_filters) = (given("name"), given("cfa"), given("filters"));
+        let d: Self =
+            serde_json::from_value(value).map_err(|e| CameraError::Json(e.to_string()))?;
+        d.check_given(|k| match k {
+            "name" => has_name,
+            "cfa" => has_cfa,
+            "filters" => has_filters,
+            _ => false,
         })?;
         d.validate()?;
         Ok(d)
+    }
+
+    /// What a design must give itself rather than take from the paper's: its `name` (else
+    /// it would pass for `rgbw-paper`), and, with its own `cfa`, the matching `filters`
+    /// (when the paper's do not match it). `given` says whether a key was given.
+    fn check_given(&self, given: impl Fn(&str) -> bool) -> Result<(), CameraError> {
+        if !given("name") {
+            return Err(CameraError::InvalidDesign(
+                "`name` is missing: a sensor design must name itself (name = \"my-sensor\"), \
+                 else it would pass for the paper's rgbw-paper"
+                    .into(),
+            ));
+        }
+        let paper = Self::paper_default();
+        let mut ours: Vec<&String> = self.cfa.channel_names.iter().collect();
+        let mut theirs: Vec<&String> = paper.filters.keys().collect();
+        ours.sort();
+        theirs.sort();
+        if given("cfa") && !given("filters") && ours != theirs {
+            return Err(CameraError::InvalidDesign(format!(
+                "'{}': cfa \"{}\" is given without [filters]: a file giving its own cfa must \
+                 give the matching filters (one curve per CFA channel: {})",
+                self.name,
+                self.cfa,
+                self.cfa.channel_names.join(", ")
+            )));
+        }
+        Ok(())
     }
 
     /// The design as TOML text (loads back to an equal design).

@@ -47,6 +47,9 @@ pub enum CameraError {
     InvalidCfa(String),
     #[error("{path}: {msg}")]
     Toml { path: String, msg: String },
+    /// A design object (a training job's `sensor`) that does not deserialize.
+    #[error("{0}")]
+    Json(String),
     #[error("cannot read {path}: {source}")]
     Io {
         path: String,

@@ -99,6 +99,13 @@ impl IspArgs {
 }
 
 pub fn run(cli: &super::Cli, a: &DemosaicArgs) -> Result<(), CliError> {
+    let ext = a.out.extension().and_then(|e| e.to_str()).unwrap_or("");
+    if !matches!(ext.to_ascii_lowercase().as_str(), "tiff" | "tif") {
+        return Err(CliError::Usage(format!(
+            "--out {}: demosaic writes 32-bit float TIFF; use .tiff",
+            a.out.display()
+        )));
+    }
     let iset = iset(&cli.iset_dir)?;
     let design = load_sensor(&a.sensor, iset.as_ref())?;
     let loaded = read_mosaic(&a.input, &Limits::with_max_pixels(a.max_pixels))?;
@@ -121,11 +128,12 @@ pub fn run(cli: &super::Cli, a: &DemosaicArgs) -> Result<(), CliError> {
             m: vec![[0.0; 3]; nc],
             n_channels: nc,
         };
-        let mut args = a.isp.clone();
-        args.isp_demosaic = "auto".into();
-        Ok(args.build(identity, &camera)?)
+        Ok(a.isp.build(identity, &camera)?)
     } else {
-        Err(a.method.parse()?)
+        Err(a
+            .method
+            .parse()
+            .map_err(|e| CliError::Usage(format!("--method: {e}")))?)
     };
     let mut best = f64::INFINITY;
     let mut out = Vec::new();

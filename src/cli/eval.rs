@@ -4,7 +4,7 @@ use clap::Args;
 
 use super::{Cli, CliError, iset, load_sensor, write_file};
 use crate::baseline::ColourMatrix;
-use crate::camera::Camera;
+use crate::camera::{Camera, SensorDesign};
 use crate::eval::{
     Border, ChannelSet, ChartSetup, ColourFit, DeltaEFormula, DeltaEReport, FilterSet, LightLevel,
     Method, MethodOnChart, PaperOptions, SweepOptions, catalogue_sweep, fit_colour_matrix,
@@ -29,7 +29,7 @@ pub struct EvalArgs {
     #[arg(long, conflicts_with_all = ["paper_table", "table", "frame", "captures", "estimate_illuminant", "colour_classes", "illuminant", "no_noise", "exposure", "scene_luminance", "chroma_classes"])]
     pub catalogue: bool,
     /// The table to evaluate (not with --paper-table or --method baseline).
-    #[arg(long)]
+    #[arg(long, conflicts_with = "paper_table")]
     pub table: Option<PathBuf>,
     /// `l3` (the table), `baseline` (bilinear + colour matrix) or `isp` (the strong
     /// conventional ISP: Malvar or gradient-corrected demosaic, a denoiser driven by the
@@ -227,6 +227,12 @@ pub fn run(cli: &Cli, a: &EvalArgs) -> Result<(), CliError> {
             out: &a.out,
         });
     }
+    if a.table.is_some() && a.method != "l3" {
+        return Err(CliError::Usage(format!(
+            "--table evaluates an L3 table: not with --method {}",
+            a.method
+        )));
+    }
     let iset = iset(&cli.iset_dir)?;
     let chart = chart_setup(a)?;
     if a.paper_table {
@@ -291,6 +297,9 @@ fn evaluate_simulated(
                 .as_ref()
                 .ok_or_else(|| CliError::Usage("--table is required with --method l3".into()))?;
             let table = L3Table::load(path)?;
+            if !a.sensor.is_empty() {
+                check_sensor_fits(&design, &table)?;
+            }
             let table_camera;
             let camera = if a.sensor.is_empty() {
                 // evaluate on the sensor the table was trained for
@@ -407,6 +416,17 @@ fn conventional_matrix(
     Ok((fit_colour_matrix(camera, &fit, iset)?, name, corr))
 }
 
+/// `--sensor`'s design against the table's: another CFA is a usage error, another name a
+/// warning (a prototype may be evaluated with another sensor's table).
+fn check_sensor_fits(design: &SensorDesign, table: &L3Table) -> Result<(), CliError> {
+    match crate::pipeline::design_fit(design, table) {
+        Ok(Some(m)) => eprintln!("warning: --sensor: {m}"),
+        Ok(None) => {}
+        Err(e) => return Err(CliError::Usage(format!("--sensor {}: {e}", design.name))),
+    }
+    Ok(())
+}
+
 /// `--frame`: a captured chart frame rendered with `--table` under the light named by
 /// `--illuminant`, else the frame's metadata, else an estimate from its pixels.
 fn evaluate_frame(
@@ -425,7 +445,11 @@ fn evaluate_frame(
     let (width, height) = (input.width, input.height);
     let grid = table.meta.grid;
     let design = match a.sensor.first() {
-        Some(p) => load_sensor(&Some(p.clone()), iset)?,
+        Some(p) => {
+            let design = load_sensor(&Some(p.clone()), iset)?;
+            check_sensor_fits(&design, &table)?;
+            design
+        }
         None => table.sensor_design()?,
     };
     let camera = Camera::new(&design, grid, iset)?;

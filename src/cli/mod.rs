@@ -160,10 +160,25 @@ pub(crate) fn write_file(path: &std::path::Path, bytes: &[u8]) -> Result<(), Cli
     })
 }
 
+/// A command writing to a closed pipe (`l3 sensors | head -1`) ends quietly, as a Unix
+/// filter does, rather than panicking in `println!`: SIGPIPE back to its default action.
+/// `l3 serve` keeps Rust's default (ignored, so a closed socket is an error to handle).
+fn default_sigpipe() {
+    #[cfg(unix)]
+    // SAFETY: called once at the start of `main`, before any thread is spawned; setting a
+    // signal's disposition to SIG_DFL has no other precondition.
+    unsafe {
+        libc::signal(libc::SIGPIPE, libc::SIG_DFL);
+    }
+}
+
 /// Run the CLI; errors are printed and turn into exit code 1 (2 for usage: bad arguments or
 /// configuration).
 pub fn main() -> ExitCode {
     let cli = Cli::parse();
+    if !matches!(cli.command, Command::Serve(_)) {
+        default_sigpipe();
+    }
     let result = match &cli.command {
         Command::Simulate(a) => simulate::run(&cli, a),
         Command::Train(a) => train::run(&cli, a),

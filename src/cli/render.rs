@@ -267,14 +267,14 @@ pub fn run(cli: &Cli, a: &RenderArgs) -> Result<(), CliError> {
         None => table_of(a, &request.input)?,
     };
     let out = run_request(request, &table, iset.as_ref(), &a.input)?;
-    warn_of(&out.notes, &a.input);
     let summary = summary(a, &table_path, &out);
     write_file(&a.out, &out.rendered.output.into_vec())?;
     println!("{summary}");
     Ok(())
 }
 
-/// `warning:` lines for what a render of the DNG `input` left undone or moved.
+/// `warning:` lines for what a render of `input` left undone or moved, and for a frame that
+/// names another sensor than the table's.
 pub(crate) fn warn_of(notes: &FrameNotes, input: &Path) {
     if !notes.skipped_opcodes.is_empty() {
         eprintln!(
@@ -286,10 +286,14 @@ pub(crate) fn warn_of(notes: &FrameNotes, input: &Path) {
     if let Some(shift) = &notes.cfa_shift {
         eprintln!("warning: {}: {}", input.display(), shift.describe());
     }
+    if let Some(m) = &notes.sensor_mismatch {
+        eprintln!("warning: {}: {m}", input.display());
+    }
 }
 
 /// Runs `request` with `table`, lights from a registry of the built-in illuminants (and
-/// `iset`'s); errors about the input name `input`.
+/// `iset`'s); errors about the input name `input`, and what the frame's notes report
+/// ([`warn_of`]) is printed as warnings.
 fn run_request(
     request: RenderRequest,
     table: &L3Table,
@@ -301,12 +305,14 @@ fn run_request(
         iset,
         registry: RefCell::new(IlluminantRegistry::with_defaults(table.meta.grid, iset)?),
     };
-    request
+    let out = request
         .run(&ctx, &AtomicBool::new(false))
         .map_err(|f| match f {
             Failure::Pipeline(e) => input_error(e, input),
             Failure::Cli(e) => e,
-        })
+        })?;
+    warn_of(&out.notes, input);
+    Ok(out)
 }
 
 /// The mosaic file `path` rendered as `l3 render --table … --out frame.raw` renders it: float

@@ -48,9 +48,10 @@ pub fn run(a: &ScielabArgs) -> Result<(), CliError> {
             a.rendered.display()
         )));
     }
-    let s = scielab(&ideal, &rendered, w, h, &opts, a.map.is_some())
+    let mut s = scielab(&ideal, &rendered, w, h, &opts, a.map.is_some())
         .map_err(|e| CliError::Usage(e.to_string()))?;
-    if let (Some(path), Some(map)) = (a.map, &s.map) {
+    // the per-pixel map goes to its TIFF only, not into the printed and written JSON
+    if let (Some(path), Some(map)) = (a.map, s.map.take()) {
         let map: Vec<f32> = map.iter().map(|&v| v as f32).collect();
         write_tiff_gray_f32(path, w, h, &map)?;
     }

@@ -13,6 +13,10 @@ pub enum CfaOrigin {
     Declared,
     /// A DNG's CFAPattern.
     Dng,
+    /// A `.raw` (or image) file's JSON sidecar.
+    Sidecar,
+    /// The sensor design a caller gives (`l3 eval --sensor`).
+    Sensor,
 }
 
 impl fmt::Display for CfaOrigin {
@@ -20,6 +24,8 @@ impl fmt::Display for CfaOrigin {
         f.write_str(match self {
             CfaOrigin::Declared => "the declared",
             CfaOrigin::Dng => "the DNG's",
+            CfaOrigin::Sidecar => "the sidecar's",
+            CfaOrigin::Sensor => "the sensor's",
         })
     }
 }

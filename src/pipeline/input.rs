@@ -6,6 +6,8 @@
 use bytes::Bytes;
 
 use super::error::{CfaOrigin, PipelineError};
+use super::fit::{SensorMismatch, check_cfa, frame_sensor_mismatch};
+use crate::camera::Cfa;
 use crate::io::{
     DecodedMosaic, Limits, LoadedMosaic, RawFrame, RawMeta, decode_mosaic_with_meta,
     decode_raw_u16_le,
@@ -88,6 +90,9 @@ pub struct FrameNotes {
     pub skipped_opcodes: Vec<String>,
     /// The crop moved so that the DNG's CFA is the table's.
     pub cfa_shift: Option<CfaShift>,
+    /// The sensor the file names (a sidecar's `sensor`, a DNG's camera) when it is not the
+    /// table's: worth a warning, not an error.
+    pub sensor_mismatch: Option<SensorMismatch>,
 }
 
 /// A DNG whose crop starts on another CFA phase than the table's (an odd row or column of
@@ -153,23 +158,19 @@ pub fn cfa_phase(input: &str, table: &str) -> Option<(usize, usize)> {
     })
 }
 
-/// A DNG's CFA checked against the table's: equal, a shift of it (to be applied by
-/// [`shift_frame`]), else [`PipelineError::CfaMismatch`].
-fn check_dng_cfa(cfa: &str, table_cfa: &str) -> Result<Option<CfaShift>, PipelineError> {
-    if cfa.eq_ignore_ascii_case(table_cfa) {
+/// A DNG's CFA checked against the table's ([`check_cfa`]): equal, a shift of it (to be
+/// applied by [`shift_frame`]), else [`PipelineError::CfaMismatch`].
+fn check_dng_cfa(cfa: &str, table_cfa: &Cfa) -> Result<Option<CfaShift>, PipelineError> {
+    let Err(mismatch) = check_cfa(cfa, CfaOrigin::Dng, table_cfa) else {
         return Ok(None);
-    }
-    match cfa_phase(cfa, table_cfa) {
+    };
+    match cfa_phase(cfa.trim(), &table_cfa.to_string()) {
         Some((rows, cols)) => Ok(Some(CfaShift {
-            from: cfa.to_string(),
+            from: cfa.trim().to_string(),
             rows,
             cols,
         })),
-        None => Err(PipelineError::CfaMismatch {
-            origin: CfaOrigin::Dng,
-            input: cfa.to_string(),
-            table: table_cfa.to_string(),
-        }),
+        None => Err(mismatch),
     }
 }
 
@@ -260,7 +261,7 @@ fn check_levels(black: u16, white: u16) -> Result<(), PipelineError> {
 }
 
 /// Decodes `input` for `table`: its levels (`levels` over the file's, else 0 and 65535)
-/// checked before and after decoding, a DNG's CFA checked against the table's, the declared
+/// checked before and after decoding, a DNG's or a sidecar's CFA checked against the table's, the declared
 /// size against the decoded one; integer samples scaled to volts as `scaling` says.
 pub fn decode(
     input: Input,
@@ -296,11 +297,15 @@ pub fn decode(
             (mosaic, meta, dng, (None, None))
         }
     };
-    let table_cfa = table.meta.cfa.to_string();
     let cfa_shift = match (&meta, &dng) {
-        (Some(meta), Some(_)) => check_dng_cfa(&meta.cfa, &table_cfa)?,
+        (Some(meta), Some(_)) => check_dng_cfa(&meta.cfa, &table.meta.cfa)?,
+        (Some(meta), None) => {
+            check_cfa(&meta.cfa, CfaOrigin::Sidecar, &table.meta.cfa)?;
+            None
+        }
         _ => None,
     };
+    let sensor_mismatch = frame_sensor_mismatch(meta.as_ref(), dng.as_ref(), table);
     // the file's levels (a sidecar's or a DNG's) unless the request gives others
     if let Some(meta) = &meta {
         black = levels.black.unwrap_or(meta.black_level);
@@ -327,6 +332,7 @@ pub fn decode(
     let notes = FrameNotes {
         skipped_opcodes: dng.map(|d| d.skipped_opcodes).unwrap_or_default(),
         cfa_shift,
+        sensor_mismatch,
     };
     check_levels(black, white)?;
     let samples = match mosaic {

@@ -22,6 +22,7 @@
 
 pub mod choice;
 pub mod error;
+pub mod fit;
 pub mod input;
 pub mod kernels;
 pub mod options;
@@ -34,6 +35,7 @@ use std::time::Instant;
 
 pub use choice::{StoredTables, TableChoice, choose_table};
 pub use error::{CfaOrigin, PipelineError};
+pub use fit::{SensorMismatch, check_cfa, design_fit};
 pub use input::{
     CfaShift, DecodedFrame, FrameNotes, Input, Levels, Samples, Scaling, cfa_phase, decode,
 };
@@ -155,16 +157,8 @@ impl RenderRequest {
     /// The checks that need no decoding, in order: the declared CFA against the table's, the
     /// named light resolved, a reference render asked for the whole frame.
     pub fn prepare<C: RenderContext>(self, ctx: &C) -> Result<Prepared, C::Error> {
-        let table_cfa = ctx.table().meta.cfa.to_string();
-        if let Some(cfa) = &self.cfa
-            && !cfa.trim().eq_ignore_ascii_case(&table_cfa)
-        {
-            return Err(PipelineError::CfaMismatch {
-                origin: CfaOrigin::Declared,
-                input: cfa.clone(),
-                table: table_cfa,
-            }
-            .into());
+        if let Some(cfa) = &self.cfa {
+            check_cfa(cfa, CfaOrigin::Declared, &ctx.table().meta.cfa)?;
         }
         let named = match &self.light {
             LightChoice::Named(spec) => Some(ctx.light(spec)?),

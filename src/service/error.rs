@@ -358,6 +358,8 @@ impl From<crate::pipeline::PipelineError> for ServiceError {
                 source_desc: match origin {
                     CfaOrigin::Declared => "the query's",
                     CfaOrigin::Dng => "the DNG's",
+                    CfaOrigin::Sidecar => "the sidecar's",
+                    CfaOrigin::Sensor => "the sensor's",
                 },
                 input,
                 table,
@@ -447,7 +449,11 @@ impl ServiceError {
         use crate::camera::CameraError::*;
         let is_input = match &e {
             Spectral(s) => spectral_input_fault(s),
-            InvalidDesign(_) | InvalidCfa(_) | InvalidArgument(_) | GridMismatch { .. } => true,
+            InvalidDesign(_)
+            | Json(_)
+            | InvalidCfa(_)
+            | InvalidArgument(_)
+            | GridMismatch { .. } => true,
             Toml { .. } | Io { .. } => false,
         };
         by_fault(e, is_input, input)

@@ -72,6 +72,10 @@ fn scielab_scores_tiff_pairs() {
     let v = json(&out);
     assert_eq!(v["options"]["formula"], "1976");
     assert_eq!(v["filter_taps"], 19);
+    // the per-pixel map goes to its TIFF, neither to stdout nor to the JSON file
+    assert!(v.get("map").is_none(), "{out}");
+    let written = json(&std::fs::read_to_string(d.join("n.json")).unwrap());
+    assert!(written.get("map").is_none());
     let (mean, max) = (
         v["stats"]["mean"].as_f64().unwrap(),
         v["stats"]["max"].as_f64().unwrap(),

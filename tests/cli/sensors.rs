@@ -94,3 +94,30 @@ fn a_catalogue_camera_trains_by_name() {
         "{text}"
     );
 }
+
+#[test]
+fn a_design_file_must_name_itself_and_give_filters_with_its_cfa() {
+    let tmp = tempfile::tempdir().unwrap();
+    let d = tmp.path();
+    write_design(d, "my_camera.csv");
+    let named = std::fs::read_to_string(d.join("my_camera.toml")).unwrap();
+    std::fs::write(
+        d.join("noname.toml"),
+        named.replace("name = \"my-camera\"\n", ""),
+    )
+    .unwrap();
+    let (ok, text) = l3(&["simulate", "--sensor", "noname.toml", "--out", "x"], d);
+    assert!(!ok, "{text}");
+    assert!(
+        text.contains("noname.toml") && text.contains("`name` is missing"),
+        "{text}"
+    );
+    std::fs::write(d.join("cfaonly.toml"), "name = \"c\"\ncfa = \"RG/GB\"\n").unwrap();
+    let (ok, text) = l3(&["simulate", "--sensor", "cfaonly.toml", "--out", "x"], d);
+    assert!(!ok, "{text}");
+    assert!(
+        text.contains("cfaonly.toml")
+            && text.contains("a file giving its own cfa must give the matching filters"),
+        "{text}"
+    );
+}

@@ -256,3 +256,26 @@ fn parametric_filters_are_near_colorimetric() {
     println!("linear floor under A: AR0132AT RGBW {fa:.3}");
     assert!(fa > linear_floor(&rgbw, "A"));
 }
+
+#[test]
+fn a_design_must_name_itself_and_give_filters_with_its_own_cfa() {
+    let e = |t: &str| SensorDesign::from_toml_str(t).unwrap_err().to_string();
+    assert!(e("read_noise_mv = 2.0").contains("`name` is missing"));
+    let cfa_only = e("name = \"b\"\ncfa = \"RG/GB\"");
+    assert!(
+        cfa_only.contains("a file giving its own cfa must give the matching filters"),
+        "{cfa_only}"
+    );
+    // the paper's own CFA needs no filters of its own
+    assert!(SensorDesign::from_toml_str("name = \"p\"\ncfa = \"RG/WB\"").is_ok());
+    // a training job's design object, checked the same way
+    let j = |v: serde_json::Value| SensorDesign::from_json(v).map(|d| d.name);
+    assert_eq!(
+        j(serde_json::json!({"name": "noisy", "read_noise_mv": 2.68})).unwrap(),
+        "noisy"
+    );
+    let e = j(serde_json::json!({"read_noise_mv": 2.68})).unwrap_err();
+    assert!(e.to_string().contains("`name` is missing"), "{e}");
+    let e = j(serde_json::json!({"name": "n", "fill_factr": 0.4})).unwrap_err();
+    assert!(matches!(e, CameraError::Json(_)), "{e}");
+}

@@ -3,7 +3,7 @@
 
 use serde_json::Value;
 
-use crate::camera::SensorDesign;
+use crate::camera::{CameraError, SensorDesign};
 use crate::service::ServiceError;
 
 use crate::l3::learn::TrainingSpec;
@@ -70,13 +70,10 @@ pub fn parse_job_request(body: &[u8]) -> Result<(JobRequest, Value), ServiceErro
             })?
             .design()
             .map_err(|e| ServiceError::Internal(format!("catalogue sensor '{s}': {e}")))?,
-        Some(v) => {
-            let d: SensorDesign =
-                serde_json::from_value(v).map_err(|e| bad(format!("sensor: {e}")))?;
-            d.validate()
-                .map_err(|e| ServiceError::BadRequest(format!("sensor: {e}")))?;
-            d
-        }
+        Some(v) => SensorDesign::from_json(v).map_err(|e| match e {
+            CameraError::Json(m) => bad(format!("sensor: {m}")),
+            e => ServiceError::BadRequest(format!("sensor: {e}")),
+        })?,
     };
     // a new table's defaults, not the stored records' (see `TrainingSpec::chroma_classes`)
     for (key, value) in crate::l3::learn::new_spec_defaults() {
