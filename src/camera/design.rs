@@ -330,7 +330,8 @@ pub struct SensorDesign {
     /// ADC bits; `None` leaves the output continuous.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub adc_bits: Option<u32>,
-    /// Default sensor size (scenes built for this sensor use it).
+    /// The sensor's size in pixels, recorded with the design and its tables. The simulated
+    /// scenes set their own size (`l3 simulate --scene`), so it does not size frames.
     pub rows: usize,
     pub cols: usize,
     /// Seed of the fixed patterns (DSNU, PRNU): one physical sensor.
