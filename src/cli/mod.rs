@@ -187,7 +187,7 @@ pub fn main() -> ExitCode {
         Command::Bench(a) => bench::run(&cli, a),
         Command::Demosaic(a) => demosaic::run(&cli, a),
         Command::Sfr(a) => sfr::run(a),
-        Command::Sensors(a) => sensors::run(a),
+        Command::Sensors(a) => sensors::run(&cli, a),
         Command::Serve(a) => serve::run(&cli, a),
     };
     match result {

@@ -19,6 +19,11 @@ pub struct SensorsArgs {
     /// Print JSON (the body of `GET /v1/sensors`) instead of a table.
     #[arg(long)]
     pub json: bool,
+    /// Print this sensor's design (a TOML file or a catalogue name) as the JSON design object
+    /// `POST /v1/training-jobs` takes as its `sensor`, its CSV curves given inline as samples,
+    /// instead of the catalogue.
+    #[arg(long, value_name = "SENSOR", conflicts_with = "json")]
+    pub design: Option<PathBuf>,
 }
 
 /// The service's configuration with `data_dir` over its data directory.
@@ -40,7 +45,16 @@ pub(crate) fn block_on<T>(f: impl std::future::Future<Output = T>) -> Result<T, 
     Ok(rt.block_on(f))
 }
 
-pub fn run(a: &SensorsArgs) -> Result<(), CliError> {
+pub fn run(cli: &super::Cli, a: &SensorsArgs) -> Result<(), CliError> {
+    if let Some(sensor) = &a.design {
+        let iset = super::iset(&cli.iset_dir)?;
+        let design = super::load_sensor(&Some(sensor.clone()), iset.as_ref())?;
+        let design = design.inlined(iset.as_ref())?;
+        let v = serde_json::to_value(&design)
+            .map_err(|e| CliError::Usage(format!("cannot write the design as JSON: {e}")))?;
+        println!("{}", serde_json::to_string_pretty(&v).unwrap_or_default());
+        return Ok(());
+    }
     let cfg = data_config(&a.data_dir)?;
     let stored = block_on(crate::service::stored_tables_in(&cfg))??;
     let items = catalogue::listing(|name| stored.newest_for(name));

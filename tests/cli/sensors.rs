@@ -121,3 +121,30 @@ fn a_design_file_must_name_itself_and_give_filters_with_its_cfa() {
         "{text}"
     );
 }
+
+/// `l3 sensors --design` prints a design that reads no file: its CSV curves as samples, the
+/// same design the TOML describes.
+#[test]
+fn a_design_prints_with_its_curves_inline() {
+    let tmp = tempfile::tempdir().unwrap();
+    let d = tmp.path();
+    write_design(d, "my_camera.csv");
+    let (ok, text) = l3(&["sensors", "--design", "my_camera.toml"], d);
+    assert!(ok, "{text}");
+    let inline: l3::camera::SensorDesign = serde_json::from_str(&text).unwrap();
+    assert_eq!(inline.name, "my-camera");
+    let r = serde_json::to_value(&inline).unwrap()["filters"]["R"].clone();
+    let nm = r["samples"]["wavelength_nm"].as_array().unwrap();
+    assert_eq!((nm.len(), nm[0].as_f64()), (81, Some(380.0)), "{r}");
+    let from_file = l3::camera::SensorDesign::load(d.join("my_camera.toml"), None).unwrap();
+    let grid = l3::spectral::WavelengthGrid::default();
+    let (a, b) = (
+        from_file.resolve_curves(&grid, None).unwrap(),
+        inline.resolve_curves(&grid, None).unwrap(),
+    );
+    for (x, y) in a.iter().zip(&b) {
+        assert_eq!(x.values(), y.values());
+    }
+    let (ok, text) = l3(&["sensors", "--design", "missing.toml"], d);
+    assert!(!ok && text.contains("missing.toml"), "{text}");
+}

@@ -1,6 +1,7 @@
 //! Unit tests of [`super`].
 
 use super::*;
+use crate::spectral::Extrapolation;
 
 fn config_path(name: &str) -> std::path::PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR"))
@@ -149,7 +150,8 @@ fn toml_errors_are_clear() {
     let both = "[qe]\nconstant = 1.0\ngaussian = { center_nm = 500.0, sigma_nm = 10.0 }";
     assert!(e(both).contains("exactly one"));
     assert!(e("[qe]\ncsv = \"x.csv\"").contains("column"));
-    assert!(e("[qe]\nconstant = 1.0\ncolumn = \"x\"").contains("only go with"));
+    assert!(e("[qe]\nconstant = 1.0\ncolumn = \"x\"").contains("only goes with `csv`"));
+    assert!(e("[qe]\nconstant = 1.0\nscale = 2.0").contains("only goes with `csv` or `samples`"));
     // Omitted fields take the paper defaults.
     let d = SensorDesign::from_toml_str("name = \"x\"\nread_noise_mv = 2.0").unwrap();
     assert_eq!(d.read_noise_mv, 2.0);
@@ -278,4 +280,43 @@ fn a_design_must_name_itself_and_give_filters_with_its_own_cfa() {
     assert!(e.to_string().contains("`name` is missing"), "{e}");
     let e = j(serde_json::json!({"name": "n", "fill_factr": 0.4})).unwrap_err();
     assert!(matches!(e, CameraError::Json(_)), "{e}");
+}
+
+#[test]
+fn inlined_curves_resolve_as_their_csv_and_survive_json() {
+    let d = SensorDesign::load(config_path("rgbw-ar0132at.toml"), None).unwrap();
+    let grid = WavelengthGrid::default();
+    let from_csv = d.resolve_curves(&grid, None).unwrap();
+    let inline = d.clone().inlined(None).unwrap();
+    assert!(
+        inline
+            .filters
+            .values()
+            .chain([&inline.ir_cut, &inline.qe])
+            .all(|f| !matches!(f, FilterSpec::Csv { .. })),
+        "no curve reads a file"
+    );
+    // through JSON, as a design object reaches the service
+    let back: SensorDesign =
+        serde_json::from_value(serde_json::to_value(&inline).unwrap()).unwrap();
+    assert_eq!(back, inline);
+    let curves = back.resolve_curves(&grid, None).unwrap();
+    for (a, b) in from_csv.iter().zip(&curves) {
+        assert_eq!(a.values(), b.values());
+    }
+    // bad samples name the curve and the fault
+    let mut bad = inline.clone();
+    if let Some(f) = bad.filters.values_mut().next() {
+        *f = FilterSpec::Samples {
+            wavelength_nm: vec![500.0, 400.0],
+            values: vec![0.5, 0.5],
+            scale: 1.0,
+        };
+    }
+    let e = bad.validate().unwrap_err().to_string();
+    assert!(e.contains("filter") && e.contains("increasing"), "{e}");
+    let t = toml::from_str::<SensorDesign>(
+        "name = \"x\"\ncfa = \"RG/GB\"\n[filters]\nR = { samples = { wavelength_nm = [400.0, 700.0], values = [0.5, 0.5] }, column = \"r\" }\nG = { constant = 1.0 }\nB = { constant = 1.0 }\n",
+    );
+    assert!(t.is_err(), "column goes only with csv");
 }

@@ -60,7 +60,7 @@ fn check_design(d: &SensorDesign) -> Result<(), ServiceError> {
             && !is_data_table(path)
         {
             return Err(ServiceError::BadRequest(format!(
-                "sensor: {what}: csv \"{path}\" is not accepted over HTTP: a curve's csv must be a relative path of the spectral data (as the catalogue's designs use, e.g. GET /v1/sensors/{{name}}), without '..'; give other curves inline as gaussian, constant or short_pass"
+                "sensor: {what}: csv \"{path}\" is not accepted over HTTP: a curve's csv must be a relative path of the spectral data (as the catalogue's designs use, e.g. GET /v1/sensors/{{name}}), without '..'; give other curves inline as samples (`l3 sensors --design FILE.toml` prints a design with its CSV curves inline), gaussian, constant or short_pass"
             )));
         }
     }

@@ -64,10 +64,21 @@ async fn training_jobs_read_no_file_of_the_server_and_take_no_camera_name() {
         design["filters"]["R"] = json!({"csv": path, "column": "value"});
         let d = problem_of(post(job(json!({"sensor": design}))), 400, "bad_request").await;
         assert!(
-            d.contains("not accepted over HTTP") && d.contains("gaussian"),
+            d.contains("not accepted over HTTP") && d.contains("samples"),
             "{d}"
         );
     }
+    // a measured curve given inline reads no file and is taken
+    let mut design = gaussian_bayer("my-inline");
+    design["filters"]["R"] = json!({"samples": {"wavelength_nm": [400.0, 550.0, 600.0, 700.0],
+        "values": [0.01, 0.1, 0.9, 0.5]}});
+    let r = post(job(json!({"sensor": design}))).send().await.unwrap();
+    assert_eq!(r.status(), 202);
+    let mut bad = gaussian_bayer("my-inline");
+    bad["filters"]["R"] = json!({"samples": {"wavelength_nm": [400.0, 300.0],
+        "values": [0.5, 0.5]}});
+    let d = problem_of(post(job(json!({"sensor": bad}))), 400, "bad_request").await;
+    assert!(d.contains("increasing"), "{d}");
     // a design object named like a catalogue camera, but not that camera
     let d = problem_of(
         post(job(json!({"sensor": gaussian_bayer("BAYER-SONY-ILCE-9")}))),
@@ -76,7 +87,11 @@ async fn training_jobs_read_no_file_of_the_server_and_take_no_camera_name() {
     )
     .await;
     assert!(d.contains("\"sensor\": \"bayer-sony-ilce-9\""), "{d}");
-    assert_eq!(job_count(&server).await, 0, "a refused job is not created");
+    assert_eq!(
+        job_count(&server).await,
+        1,
+        "only the inline design's job is created"
+    );
     // the catalogue's own design (its curves a table of the spectral data) is that sensor
     let sensor = json(
         c.get(url(&server, "/v1/sensors/bayer-sony-ilce-9"))
@@ -342,7 +357,7 @@ async fn an_oversized_query_is_refused_before_the_body() {
     let data = tempfile::tempdir().unwrap();
     let (server, _) = server_with_table(data.path(), None).await;
     let mut s = tokio::net::TcpStream::connect(server.addr()).await.unwrap();
-    let head = "POST /v1/render?width=10000&height=9999 HTTP/1.1\r\nHost: x\r\n\
+    let head = "POST /v1/render?width=20000&height=9999 HTTP/1.1\r\nHost: x\r\n\
         Content-Type: application/octet-stream\r\nContent-Length: 200000000\r\n\r\n";
     s.write_all(head.as_bytes()).await.unwrap();
     s.write_all(&[0u8; 1024]).await.unwrap();
