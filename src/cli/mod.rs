@@ -133,7 +133,12 @@ impl From<crate::pipeline::PipelineError> for CliError {
 pub(crate) fn iset(dir: &Option<PathBuf>) -> Result<Option<IsetData>, CliError> {
     match dir {
         Some(d) => Ok(Some(IsetData::at(d)?)),
-        None => Ok(IsetData::locate()),
+        None => match std::env::var_os(crate::spectral::ISET_DIR_ENV) {
+            Some(d) => Ok(Some(IsetData::at(&d).map_err(|e| {
+                CliError::Usage(format!("{}: {e}", crate::spectral::ISET_DIR_ENV))
+            })?)),
+            None => Ok(IsetData::locate()),
+        },
     }
 }
 

@@ -428,7 +428,7 @@ impl ServiceConfig {
             .merge(vars)
             .merge(flag_layer)
             .extract()
-            .map_err(|e| bad(format!("configuration: {e}")))?;
+            .map_err(|e| bad(e.to_string()))?;
         cfg.validate()?;
         Ok(cfg)
     }

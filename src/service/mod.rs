@@ -150,14 +150,16 @@ pub fn default_training_spec(cfg: &ServiceConfig) -> Result<TrainingSpec, Servic
 }
 
 /// The ISET data directory over the built-in spectral data: the config's, else a located one;
-/// `None`: the built-in data alone.
+/// `None`: the built-in data alone. A configured directory that cannot be read is logged and
+/// the service starts on the built-in data (the tests pin the built-in data so).
 fn locate_iset(cfg: &ServiceConfig) -> Option<IsetData> {
-    if let Some(d) = &cfg.data.iset_dir
-        && d.is_dir()
-    {
+    if let Some(d) = &cfg.data.iset_dir {
         match IsetData::at(d) {
             Ok(i) => return Some(i),
-            Err(e) => tracing::warn!("ISET data at {}: {e}", d.display()),
+            Err(e) => {
+                tracing::warn!("ISET data at {}: {e}; using the built-in data", d.display());
+                return None;
+            }
         }
     }
     IsetData::locate()

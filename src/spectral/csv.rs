@@ -59,6 +59,8 @@ impl SpectralTable {
             .enumerate()
             .filter(|(_, l)| !l.trim().is_empty());
         let (_, header) = lines.next().ok_or_else(|| err(1, "empty file".into()))?;
+        // a UTF-8 byte-order mark, as spreadsheets write before "CSV UTF-8"
+        let header = header.strip_prefix('\u{feff}').unwrap_or(header);
         let mut head = split_row(header);
         if head.len() < 2 {
             return Err(err(
@@ -163,5 +165,12 @@ mod tests {
         assert!(SpectralTable::parse("m", "wavelength_nm,a\n400,1,2\n410,1\n").is_err());
         assert!(SpectralTable::parse("m", "nm,a\n400,1\n410,1\n").is_err());
         assert!(SpectralTable::parse("m", "").is_err());
+    }
+
+    #[test]
+    fn a_byte_order_mark_is_not_part_of_the_header() {
+        let t = SpectralTable::parse("m", "\u{feff}wavelength_nm,a\n400,1\n410,0.5\n").unwrap();
+        assert_eq!(t.names, vec!["a"]);
+        assert_eq!(t.samples("a").unwrap().values(), &[1.0, 0.5]);
     }
 }

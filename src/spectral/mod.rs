@@ -17,7 +17,7 @@ pub use bundled::{bundled_paths, bundled_table};
 pub use csv::{SpectralTable, load_csv};
 pub use grid::WavelengthGrid;
 pub use illuminant::{IlluminantSpec, NamedSpd};
-pub use iset::IsetData;
+pub use iset::{ISET_DIR_ENV, IsetData};
 pub use spectrum::{Extrapolation, Samples, Spectrum};
 
 /// Errors of the spectral layer.

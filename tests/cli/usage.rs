@@ -79,3 +79,22 @@ fn demosaic_refuses_an_output_it_would_not_write_and_names_every_method() {
     let (code, err) = run(&[&base[..], &["x.tiff"]].concat());
     assert_eq!(code, Some(0), "{err}");
 }
+
+/// `$L3_ISET_DIR` set to a folder that is not an ISET data directory is an error naming the
+/// variable, as `--iset-dir` with the same folder is.
+#[test]
+fn a_missing_iset_dir_in_the_environment_is_an_error() {
+    let tmp = tempfile::tempdir().unwrap();
+    let out = std::process::Command::new(env!("CARGO_BIN_EXE_l3"))
+        .args(["simulate", "--scene", "uniform", "--out", "x"])
+        .env("L3_ISET_DIR", tmp.path().join("nowhere"))
+        .current_dir(tmp.path())
+        .output()
+        .unwrap();
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(2), "{err}");
+    assert!(
+        err.contains("L3_ISET_DIR") && err.contains("nowhere"),
+        "{err}"
+    );
+}
