@@ -18,15 +18,8 @@ fn simulate_on(d: &Path, sensor: &str, out: &str) {
 
 /// Runs `args` in `d`: its exit code and standard error.
 fn code_and_stderr(args: &[&str], d: &Path) -> (Option<i32>, String) {
-    let out = std::process::Command::new(env!("CARGO_BIN_EXE_l3"))
-        .args(args)
-        .current_dir(d)
-        .output()
-        .expect("run l3");
-    (
-        out.status.code(),
-        String::from_utf8_lossy(&out.stderr).into_owned(),
-    )
+    let (code, _, err) = crate::support::l3_code(args, d);
+    (code, err)
 }
 
 #[test]

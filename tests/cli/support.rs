@@ -22,13 +22,20 @@ pub fn run_l3(args: &[&str], dir: &Path) -> (bool, String) {
 /// Runs the `l3` executable with `args` in `dir`: whether it succeeded, its standard output
 /// and its standard error.
 pub fn l3(args: &[&str], dir: &Path) -> (bool, String, String) {
+    let (code, out, err) = l3_code(args, dir);
+    (code == Some(0), out, err)
+}
+
+/// Runs the `l3` executable with `args` in `dir`: its exit code, standard output and
+/// standard error.
+pub fn l3_code(args: &[&str], dir: &Path) -> (Option<i32>, String, String) {
     let out = Command::new(env!("CARGO_BIN_EXE_l3"))
         .args(args)
         .current_dir(dir)
         .output()
         .expect("run l3");
     (
-        out.status.success(),
+        out.status.code(),
         String::from_utf8_lossy(&out.stdout).into_owned(),
         String::from_utf8_lossy(&out.stderr).into_owned(),
     )
