@@ -31,8 +31,13 @@ fn a_frame_or_sensor_that_does_not_fit_the_table_is_refused_or_warned_of() {
     let t = table.to_str().unwrap();
     simulate_on(d, "bayer-paper", "bayer");
     simulate_on(d, "rgbw-iset", "iset");
+    another_cfa_is_refused(d, t);
+    another_sensor_is_warned_of(d, t);
+    eval_sensor_fits_the_table(d, t);
+}
 
-    // a .raw whose sidecar gives another CFA: refused as its DNG twin is
+/// A .raw whose sidecar gives another CFA: refused as its DNG twin is.
+fn another_cfa_is_refused(d: &Path, t: &str) {
     let cfa_msg = "CFA 'RG/GB' does not match the table's CFA 'RG/WB'";
     for (input, origin) in [
         ("bayer/mosaic.raw", "sidecar's"),
@@ -60,8 +65,11 @@ fn a_frame_or_sensor_that_does_not_fit_the_table_is_refused_or_warned_of() {
     );
     assert_eq!(code, Some(2), "{err}");
     assert!(err.contains(cfa_msg), "{err}");
+}
 
-    // the same CFA on another sensor: rendered, with a warning naming both sensors
+/// The same CFA on another sensor: rendered, with a warning naming both sensors; the table's
+/// own sensor: no warning.
+fn another_sensor_is_warned_of(d: &Path, t: &str) {
     for input in ["iset/mosaic.raw", "iset/mosaic.dng"] {
         let (code, err) = code_and_stderr(
             &["render", "--table", t, "--in", input, "--out", "i.png"],
@@ -93,8 +101,10 @@ fn a_frame_or_sensor_that_does_not_fit_the_table_is_refused_or_warned_of() {
     );
     assert_eq!(code, Some(0), "{err}");
     assert!(!err.contains("warning:"), "{err}");
+}
 
-    // eval --sensor: another CFA is an error, another name a warning
+/// `eval --sensor`: another CFA is an error, another name a warning.
+fn eval_sensor_fits_the_table(d: &Path, t: &str) {
     let (code, err) = code_and_stderr(
         &[
             "eval",
