@@ -124,7 +124,13 @@ fn print_report(r: &ColorCheckerReport, origin: &str) {
     }
     let (s, b) = (&r.summary, &r.references);
     println!(
-        "ΔE2000 over 24 patches: mean {:.2}, median {:.2}, p90 {:.2}, max {:.2}; between the two references (X-Rite 2014 and ISET): mean {:.2}, max {:.2}",
-        s.mean, s.median, s.p90, s.max, b.mean, b.max
+        "ΔE2000 over 24 patches: mean {:.2}, median {:.2}, p90 {:.2}, max {:.2}; between the two references ({}): mean {:.2}, max {:.2}",
+        s.mean,
+        s.median,
+        s.p90,
+        s.max,
+        r.references_label(),
+        b.mean,
+        b.max
     );
 }

@@ -46,6 +46,16 @@ fn colorchecker(
         "eval --colorchecker --reference {reference} failed: {stdout}{err}"
     );
     assert!(stdout.contains("ΔE2000 over 24 patches"), "{stdout}");
+    // the summary names the two references it compares
+    let pair = match reference {
+        "iset" => "(ISET and X-Rite 2014)",
+        "xrite2014" => "(X-Rite 2014 and ISET)",
+        _ => "(the measured values and X-Rite 2014)",
+    };
+    assert!(
+        stdout.contains(&format!("between the two references {pair}")),
+        "{stdout}"
+    );
     let r = read_json(out);
     assert_eq!(r["schema"], "l3.colorchecker.v1");
     r

@@ -102,6 +102,18 @@ pub struct ColorCheckerReport {
     pub context: serde_json::Value,
 }
 
+impl ColorCheckerReport {
+    /// The two references `references` compares, by name: the report's own and its
+    /// counterpart ([`Reference::counterpart`]), e.g. "X-Rite 2014 and ISET".
+    pub fn references_label(&self) -> String {
+        match self.reference.as_str() {
+            "xrite2014" => "X-Rite 2014 and ISET".into(),
+            "iset" => "ISET and X-Rite 2014".into(),
+            _ => "the measured values and X-Rite 2014".into(),
+        }
+    }
+}
+
 /// The labels of a report: what rendered, under which light.
 pub struct Labels<'a> {
     pub method: &'a str,

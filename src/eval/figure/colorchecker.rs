@@ -356,6 +356,9 @@ fn bar_legend(
         11.5,
         "start",
         &format!(r#"fill="{MUTED}""#),
-        "ΔE2000 between the two references (X-Rite 2014 and ISET's reflectances)",
+        &format!(
+            "ΔE2000 between the two references ({})",
+            r.references_label()
+        ),
     )
 }
