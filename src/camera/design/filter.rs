@@ -377,7 +377,9 @@ fn csv_samples(
         IsetData::or_built_in(iset).table(path)
     }
     .map_err(|e| CameraError::InvalidDesign(format!("{what}: {e}")))?;
-    Ok(table.samples(column)?)
+    table
+        .samples(column)
+        .map_err(|e| CameraError::InvalidDesign(format!("{what}: {e}")))
 }
 
 /// Band average of a smooth function: midpoint rule with

@@ -98,6 +98,23 @@ fn ar0132at_config_loads_from_its_csv() {
     }
     let e = missing.resolve_curves(&grid, None).unwrap_err().to_string();
     assert!(e.contains("ISET") && e.contains("built in"), "{e}");
+    // a column that is not in the file: the error names the curve, the file and the columns
+    let mut no_column = d.clone();
+    if let Some(f) = no_column.filters.get_mut("G") {
+        *f = FilterSpec::Csv {
+            path: "sensor/colorfilters/auto/ar0132atRGBW.csv".into(),
+            column: "bleu".into(),
+            scale: 1.0,
+        };
+    }
+    let e = no_column
+        .resolve_curves(&grid, None)
+        .unwrap_err()
+        .to_string();
+    assert!(
+        e.contains("filter 'G'") && e.contains("bleu") && e.contains("gAR0132"),
+        "{e}"
+    );
 }
 
 #[test]
