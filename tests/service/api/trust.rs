@@ -316,8 +316,7 @@ async fn protocol_details() {
     let id = l3::service::import_table(server.state(), &other, false)
         .await
         .unwrap();
-    let file = data.path().join("tables").join(format!("{id}.safetensors"));
-    std::fs::write(&file, b"not a table").unwrap();
+    corrupt_stored_table(data.path(), &id).await;
     let d = problem_of(
         c.get(url(&server, &format!("/v1/tables/{id}/download"))),
         409,
@@ -327,6 +326,26 @@ async fn protocol_details() {
     let dir = data.path().display().to_string();
     assert!(!d.contains(&dir) && d.contains(&id), "{d}");
     server.shutdown().await.unwrap();
+}
+
+/// Overwrites table `id`'s stored bytes: its file, and on PostgreSQL (where replicas read the
+/// bytes from the database) its `content` column too.
+async fn corrupt_stored_table(data: &std::path::Path, id: &str) {
+    let file = data.join("tables").join(format!("{id}.safetensors"));
+    std::fs::write(&file, b"not a table").unwrap();
+    if let Some(url) = pg::test_database_url(data) {
+        let store = l3::service::Store::connect(&url, data).await.unwrap();
+        let l3::service::Store::Postgres(pool) = &store else {
+            panic!("{url} is not PostgreSQL")
+        };
+        let done = sqlx::query("UPDATE l3_tables SET content = $1 WHERE id = $2")
+            .bind(&b"not a table"[..])
+            .bind(id)
+            .execute(pool)
+            .await
+            .unwrap();
+        assert_eq!(done.rows_affected(), 1);
+    }
 }
 
 /// A restart serves the recorded active table without stamping a new activation time.
