@@ -63,7 +63,7 @@ pub fn run(cli: &Cli, a: &BenchArgs) -> Result<(), CliError> {
     let report = run_bench(&design, iset.as_ref(), &opts, &|m| eprintln!("… {m}"))?;
     let md = markdown_table(&report);
     let svg = svg_plot(&report).map_err(crate::bench::BenchError::from)?;
-    let json = serde_json::to_vec_pretty(&report).map_err(|e| CliError::Usage(e.to_string()))?;
+    let json = serde_json::to_vec_pretty(&report)?;
     write_file(&a.out.join("bench.json"), &json)?;
     write_file(&a.out.join("bench.md"), md.as_bytes())?;
     write_file(&a.out.join("bench.svg"), svg.as_bytes())?;
@@ -118,7 +118,7 @@ fn run_sensor_sweep_to(
         md.push('\n');
         md.push_str(&markdown_table(r));
     }
-    let json = serde_json::to_vec_pretty(&sweep).map_err(|e| CliError::Usage(e.to_string()))?;
+    let json = serde_json::to_vec_pretty(&sweep)?;
     write_file(&a.out.join("sensors.json"), &json)?;
     write_file(&a.out.join("sensors.md"), md.as_bytes())?;
     println!("{md}");

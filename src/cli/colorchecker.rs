@@ -8,9 +8,10 @@ use std::sync::Arc;
 use super::render::{light_source, render_file_xyz};
 use super::{CliError, write_file};
 use crate::eval::EvalError;
+use crate::eval::colorchecker::geometry::sample_patches;
 use crate::eval::colorchecker::{
-    ColorCheckerOptions, ColorCheckerReport, Labels, Measured, Reference, evaluate_colorchecker,
-    rendered_xyz,
+    ColorCheckerOptions, ColorCheckerReport, Labels, Measured, Reference, rendered_xyz,
+    score_colorchecker,
 };
 use crate::l3::L3Table;
 use crate::pipeline::CorrectionMode;
@@ -36,9 +37,8 @@ pub fn run(a: &ColorCheckerArgs, iset: Option<&IsetData>) -> Result<(), CliError
     let corners = a
         .corners
         .ok_or_else(|| CliError::Usage("--colorchecker needs --corners".into()))?;
-    let usage = |e: crate::eval::EvalError| CliError::Usage(e.to_string());
     let opts = ColorCheckerOptions {
-        corners: corners.parse().map_err(usage)?,
+        corners: corners.parse().map_err(CliError::argument)?,
         gap: a.gap,
         reference: reference_arg(a.reference)?,
     };
@@ -65,14 +65,18 @@ pub fn run(a: &ColorCheckerArgs, iset: Option<&IsetData>) -> Result<(), CliError
             "illuminant_source": origin,
         }),
     };
-    let report = evaluate_colorchecker(&xyz, width, height, &opts, iset, labels)?;
+    // where the corners and the gap put the patches: a chart that does not fit the frame is
+    // the flags' mistake
+    let samples =
+        sample_patches(&xyz, width, height, &opts.corners, opts.gap).map_err(CliError::argument)?;
+    let report = score_colorchecker(&samples, &opts, iset, labels)?;
     print_report(&report, origin);
     let path = if a.out.extension().is_some() {
         a.out.to_path_buf()
     } else {
         a.out.join("colorchecker.json")
     };
-    let json = serde_json::to_vec_pretty(&report).map_err(|e| CliError::Usage(e.to_string()))?;
+    let json = serde_json::to_vec_pretty(&report)?;
     write_file(&path, &json)?;
     let svg = path.with_extension("svg");
     write_file(&svg, crate::eval::colorchecker_svg(&report)?.as_bytes())?;

@@ -196,7 +196,7 @@ pub struct EvalArgs {
 /// The chart set-up the arguments describe.
 fn chart_setup(a: &EvalArgs) -> Result<ChartSetup, CliError> {
     let chart = ChartSetup {
-        chart: a.chart.parse()?,
+        chart: a.chart.parse().map_err(CliError::argument)?,
         seed: a.seed,
         noise: !a.no_noise,
         patch_px: a.patch_px.into(),
@@ -209,7 +209,7 @@ fn chart_setup(a: &EvalArgs) -> Result<ChartSetup, CliError> {
         (None, None) => None,
     };
     Ok(match light {
-        Some(l) => l.apply(&chart)?,
+        Some(l) => l.apply(&chart).map_err(CliError::argument)?,
         None => chart,
     })
 }
@@ -289,7 +289,7 @@ fn evaluate_simulated(
     let grid = WavelengthGrid::default();
     let camera = Camera::new(&design, grid, iset)?;
     let mut registry = IlluminantRegistry::with_defaults(grid, iset)?;
-    let corr = registry.resolve(&acq, iset)?;
+    let corr = registry.resolve(&acq, iset).map_err(CliError::argument)?;
     match a.method.as_str() {
         "l3" => {
             let path = a
@@ -454,7 +454,10 @@ fn evaluate_frame(
     };
     let camera = Camera::new(&design, grid, iset)?;
     let mut registry = IlluminantRegistry::with_defaults(grid, iset)?;
-    let corr = registry.resolve(&spec, iset)?;
+    let corr = registry.resolve(&spec, iset).map_err(|e| match named {
+        Some(_) => CliError::argument(e),
+        None => e.into(),
+    })?;
     let mode = a.correction.unwrap_or(CorrectionMode::Colorimetric);
     let corr = correction_for(&table, &corr, mode, iset)?;
     println!("illuminant {} (from {source})", corr.name);
@@ -516,7 +519,7 @@ fn print_and_write(a: &EvalArgs, report: &DeltaEReport) -> Result<(), CliError> 
     } else {
         a.out.join("report.json")
     };
-    let json = serde_json::to_vec_pretty(report).map_err(|e| CliError::Usage(e.to_string()))?;
+    let json = serde_json::to_vec_pretty(report)?;
     write_file(&out, &json)?;
     println!("wrote {}", out.display());
     let svg = out.with_extension("svg");
@@ -553,7 +556,7 @@ fn write_study(a: &EvalArgs, name: &str, study: &impl serde::Serialize) -> Resul
     } else {
         a.out.join(name)
     };
-    let json = serde_json::to_vec_pretty(study).map_err(|e| CliError::Usage(e.to_string()))?;
+    let json = serde_json::to_vec_pretty(study)?;
     write_file(&out, &json)?;
     println!("wrote {}", out.display());
     Ok(())
@@ -630,7 +633,7 @@ fn run_paper_tables(
         } else {
             a.out.clone()
         };
-        let json = serde_json::to_vec_pretty(&t).map_err(|e| CliError::Usage(e.to_string()))?;
+        let json = serde_json::to_vec_pretty(&t)?;
         write_file(&dir.join("paper_table.json"), &json)?;
         write_file(&dir.join("paper_table.md"), md.as_bytes())?;
         for r in &t.reports {
@@ -688,7 +691,7 @@ fn run_catalogue_sweep(a: &EvalArgs, iset: Option<&IsetData>) -> Result<(), CliE
     let sweep = catalogue_sweep(&designs, iset, &opts, &|m| eprintln!("… {m}"))?;
     let md = sweep.markdown();
     println!("{md}");
-    let json = serde_json::to_vec_pretty(&sweep).map_err(|e| CliError::Usage(e.to_string()))?;
+    let json = serde_json::to_vec_pretty(&sweep)?;
     write_file(&a.out.join("catalogue.json"), &json)?;
     write_file(&a.out.join("catalogue.md"), md.as_bytes())?;
     println!(

@@ -4,6 +4,7 @@ mod bench;
 mod colorchecker;
 mod demosaic;
 mod eval;
+mod exit;
 mod render;
 mod scielab;
 mod sensors;
@@ -19,6 +20,8 @@ use clap::{Parser, Subcommand};
 
 use crate::camera::SensorDesign;
 use crate::spectral::IsetData;
+
+pub use exit::Fault;
 
 /// L3 (Local, Linear, Learned) camera pipeline: simulate, train, render, evaluate.
 #[derive(Parser, Debug)]
@@ -57,11 +60,22 @@ pub enum Command {
     Serve(serve::ServeArgs),
 }
 
-/// Errors of the CLI: any layer's error, shown with its message.
+/// Errors of the CLI: any layer's error, shown with its message. Its exit code (1, or 2 for
+/// a bad argument or configuration) is [`CliError::exit_code`], by kind ([`Fault`]).
 #[derive(Debug, thiserror::Error)]
 pub enum CliError {
+    /// Bad arguments or configuration, found by the command itself.
     #[error("{0}")]
     Usage(String),
+    /// An error about a value a flag gave (made at the flag, [`CliError::argument`]): a
+    /// refused value is a usage error, whatever the layer that refused it.
+    #[error(transparent)]
+    Argument(Box<CliError>),
+    /// No table to render with: none given, and none stored for the frame or active.
+    #[error("{0}")]
+    NoTable(String),
+    #[error(transparent)]
+    Pipeline(crate::pipeline::PipelineError),
     #[error(transparent)]
     Camera(#[from] crate::camera::CameraError),
     #[error(transparent)]
@@ -90,6 +104,9 @@ pub enum CliError {
     Learn(#[from] crate::l3::learn::LearnError),
     #[error(transparent)]
     Bench(#[from] crate::bench::BenchError),
+    /// A report that cannot be written as JSON.
+    #[error(transparent)]
+    Json(#[from] serde_json::Error),
     /// The service could not start (its address, its database, its data directory) or
     /// stopped with an error: exit code 1, not a usage error.
     #[error("the service: {0}")]
@@ -102,28 +119,36 @@ pub enum CliError {
     },
 }
 
+impl CliError {
+    /// `e`, about a value a flag gave: a value the core refused is then a usage error (exit
+    /// code 2), while a file the flag named that cannot be read stays an error (1).
+    pub(crate) fn argument(e: impl Into<CliError>) -> CliError {
+        CliError::Argument(Box::new(e.into()))
+    }
+}
+
 impl From<crate::pipeline::PipelineError> for CliError {
-    /// Options (and a region or preview asked of the reference renderer) are usage errors;
-    /// the rest are the layers' errors, shown as they are.
+    /// The pipeline's error as the command line says it: the reference renderer asked for a
+    /// region or preview names the flags, an untrained camera says how to get a table, a
+    /// layer's error is shown as that layer's.
     fn from(e: crate::pipeline::PipelineError) -> Self {
         use crate::pipeline::PipelineError::*;
         match e {
-            Options(m) => CliError::Usage(m),
             WholeFrameOnly => {
                 CliError::Usage("--region and --preview need the fast renderer".into())
-            }
-            CfaMismatch { .. } | Levels { .. } | SizeMismatch { .. } => {
-                CliError::Usage(e.to_string())
             }
             Decode(e) | Encode(e) => e.into(),
             Kernels(e) | Render(e) => e.into(),
             FrameLight(e) => e.into(),
             Correction(e) => e.into(),
-            UntrainedCamera { ref sensors, .. } => CliError::Usage(format!(
+            UntrainedCamera { ref sensors, .. } => CliError::NoTable(format!(
                 "{e}; train one (`l3 train --sensor {} --out FILE`, or POST /v1/training-jobs {{\"sensor\":\"{}\"}} to a service on the data directory), or choose a table with --table FILE or --table-id ID",
                 sensors.first().map_or("", String::as_str),
                 sensors.first().map_or("", String::as_str),
             )),
+            e @ (Options(_) | CfaMismatch { .. } | Levels { .. } | SizeMismatch { .. }) => {
+                CliError::Pipeline(e)
+            }
         }
     }
 }
@@ -177,8 +202,8 @@ fn default_sigpipe() {
     }
 }
 
-/// Run the CLI; errors are printed and turn into exit code 1 (2 for usage: bad arguments or
-/// configuration).
+/// Run the CLI; an error is printed and turns into its exit code ([`CliError::exit_code`]: 1,
+/// or 2 for bad arguments or configuration).
 pub fn main() -> ExitCode {
     let cli = Cli::parse();
     if !matches!(cli.command, Command::Serve(_)) {
@@ -197,13 +222,9 @@ pub fn main() -> ExitCode {
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,
-        Err(CliError::Usage(m)) => {
-            eprintln!("error: {m}");
-            ExitCode::from(2)
-        }
         Err(e) => {
             eprintln!("error: {e}");
-            ExitCode::FAILURE
+            ExitCode::from(e.exit_code())
         }
     }
 }

@@ -259,7 +259,7 @@ pub fn run(cli: &Cli, a: &RenderArgs) -> Result<(), CliError> {
         Some(t) => Some((t.clone(), L3Table::load(t)?)),
         None => None,
     };
-    let white: WhiteLevel = a.white_level.parse()?;
+    let white: WhiteLevel = a.white_level.parse().map_err(CliError::argument)?;
     let loaded = read_mosaic(&a.input, &Limits::with_max_pixels(a.max_pixels))?;
     let request = render_request(a, white, loaded)?;
     let (table_path, table) = match given {
@@ -305,7 +305,13 @@ fn run_request(
         iset,
         registry: RefCell::new(IlluminantRegistry::with_defaults(table.meta.grid, iset)?),
     };
-    let out = request
+    // the cheap checks first: there the context's only errors are the named light's
+    // (`--illuminant`'s), later they are the light the frame gives
+    let prepared = request.prepare(&ctx).map_err(|f| match f {
+        Failure::Pipeline(e) => input_error(e, input),
+        Failure::Cli(e) => CliError::argument(e),
+    })?;
+    let out = prepared
         .run(&ctx, &AtomicBool::new(false))
         .map_err(|f| match f {
             Failure::Pipeline(e) => input_error(e, input),
@@ -363,7 +369,7 @@ fn table_of(a: &RenderArgs, input: &Input) -> Result<(PathBuf, L3Table), CliErro
     let served = match choice.table_id() {
         Some(id) => block_on(crate::service::stored_table_in(&cfg, id))??,
         None => block_on(crate::service::served_table(&cfg))??.ok_or_else(|| {
-            CliError::Usage(format!(
+            CliError::NoTable(format!(
                 "no --table given and the data directory {dir} has no active table; pass --table FILE: \
                  train one with `l3 train --out FILE`, or start `l3 serve --data-dir {dir}` (it trains \
                  a default table), or activate a stored one (POST /v1/tables/{{id}}/activate)"

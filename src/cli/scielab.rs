@@ -55,7 +55,7 @@ pub fn run(a: &ScielabArgs) -> Result<(), CliError> {
         let map: Vec<f32> = map.iter().map(|&v| v as f32).collect();
         write_tiff_gray_f32(path, w, h, &map)?;
     }
-    let json = serde_json::to_string_pretty(&s).map_err(|e| CliError::Usage(e.to_string()))?;
+    let json = serde_json::to_string_pretty(&s)?;
     let out = if a.out.extension().is_some() {
         a.out.to_path_buf()
     } else {

@@ -49,7 +49,7 @@ pub fn run(a: &SfrArgs) -> Result<(), CliError> {
         }
     };
     let sfr = slanted_edge_sfr(roi.view())?;
-    let json = serde_json::to_string_pretty(&sfr).map_err(|e| CliError::Usage(e.to_string()))?;
+    let json = serde_json::to_string_pretty(&sfr)?;
     if let Some(out) = &a.out {
         write_file(out, json.as_bytes())?;
     }

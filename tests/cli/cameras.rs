@@ -4,7 +4,7 @@
 use std::path::Path;
 
 use crate::cli::with_service;
-use crate::support::l3;
+use crate::support::{l3, l3_code};
 
 /// `l3 simulate` through the catalogue sensor `sensor` into `out`, and its DNG written again
 /// (the crate's writer) naming the camera `unique_model`; returns that DNG's path.
@@ -35,14 +35,19 @@ fn render_chooses_the_table_of_the_dngs_camera_and_sensors_lists_it() {
     let d = dir.path();
     let dng = camera_dng(d, "bayer-sony-ilce-9", "Sony ILCE-9");
     let data = d.join("data");
-    let render = |extra: &[&str], out: &str| {
+    let run = |extra: &[&str], out: &str| {
         let base = ["render", "--data-dir", data.to_str().unwrap()];
         let io = ["--in", dng.to_str().unwrap(), "--out", out];
-        l3(&[&base[..], extra, &io[..]].concat(), d)
+        l3_code(&[&base[..], extra, &io[..]].concat(), d)
     };
-    // no table for the camera's sensor: an error naming it and how to train one
-    let (ok, out, err) = render(&[], "none.png");
-    assert!(!ok, "{out}");
+    let render = |extra: &[&str], out: &str| {
+        let (code, out, err) = run(extra, out);
+        (code == Some(0), out, err)
+    };
+    // no table for the camera's sensor: an error (exit code 1, a missing table) naming it
+    // and how to train one
+    let (code, out, err) = run(&[], "none.png");
+    assert_eq!(code, Some(1), "{out}{err}");
     assert!(
         err.contains("bayer-sony-ilce-9") && err.contains("l3 train --sensor bayer-sony-ilce-9"),
         "{err}"

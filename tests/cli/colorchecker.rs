@@ -284,7 +284,7 @@ fn colorchecker_refuses_bad_corners() {
             .output()
             .unwrap()
     };
-    // not eight numbers, and counter-clockwise: usage errors
+    // not eight numbers, and counter-clockwise: usage errors (exit code 2)
     for (corners, says) in [
         ("1,2,3", "eight numbers"),
         ("0,0,0,128,192,128,192,0", "counter-clockwise"),
@@ -296,9 +296,9 @@ fn colorchecker_refuses_bad_corners() {
             "{corners}"
         );
     }
-    // a chart larger than the frame
+    // a chart larger than the frame: the corners' mistake as well
     let o = run("0,0,400,0,400,300,0,300");
-    assert_eq!(o.status.code(), Some(1));
+    assert_eq!(o.status.code(), Some(2));
     assert!(String::from_utf8_lossy(&o.stderr).contains("outside the 192×128 frame"));
     // a reference that is neither built in nor a readable CSV of 24 patches
     std::fs::write(d.join("short.csv"), "L,a,b\n50,0,0\n").unwrap();

@@ -4,13 +4,15 @@
 //! `l3 sensors` and `l3 render --data-dir`'s choice of table by the DNG's camera (`cameras`),
 //! sensors by catalogue name or by a TOML beside its curves (`sensors`), `l3 sfr` on image
 //! files (`sfr`), `l3 eval --scielab` on float XYZ TIFFs (`scielab`), `l3 render` to JPEG
-//! (`jpeg`), and the spatial metrics of `l3 eval` on a simulated chart (`spatial`).
+//! (`jpeg`), the spatial metrics of `l3 eval` on a simulated chart (`spatial`), and the exit
+//! codes of bad flags, designs and missing files (`exit_codes`).
 
 mod bench;
 mod cameras;
 mod catalogue;
 mod cli;
 mod colorchecker;
+mod exit_codes;
 mod fit;
 mod jpeg;
 mod scielab;

@@ -145,7 +145,8 @@ pub fn rendered_xyz(out: RenderOutcome) -> Result<(Vec<f32>, usize, usize), Eval
 }
 
 /// Scores a rendered XYZ image (`width × height × 3`, interleaved, referred to D65) of a
-/// ColorChecker against `opts.reference`.
+/// ColorChecker against `opts.reference`: its patches sampled
+/// ([`geometry::sample_patches`]), then scored ([`score_colorchecker`]).
 pub fn evaluate_colorchecker(
     xyz: &[f32],
     width: usize,
@@ -155,6 +156,25 @@ pub fn evaluate_colorchecker(
     labels: Labels,
 ) -> Result<ColorCheckerReport, EvalError> {
     let samples = geometry::sample_patches(xyz, width, height, &opts.corners, opts.gap)?;
+    score_colorchecker(&samples, opts, iset, labels)
+}
+
+/// Scores the 24 patches sampled with `opts`' corners and gap against `opts.reference`.
+/// Apart from the sampling, whose errors are about the corners and the gap (the chart's place
+/// in the frame), what [`evaluate_colorchecker`] does.
+pub fn score_colorchecker(
+    samples: &[geometry::Sample],
+    opts: &ColorCheckerOptions,
+    iset: Option<&IsetData>,
+    labels: Labels,
+) -> Result<ColorCheckerReport, EvalError> {
+    if samples.len() != geometry::ROWS * geometry::COLS {
+        return Err(EvalError::Invalid(format!(
+            "{} patch samples, a ColorChecker has {}",
+            samples.len(),
+            geometry::ROWS * geometry::COLS
+        )));
+    }
     let refs = opts.reference.patches(iset)?;
     let other = opts.reference.counterpart().patches(iset)?;
     let (reference_y, rendered_y) = (refs[WHITE_PATCH].xyz[1], samples[WHITE_PATCH].xyz[1]);
