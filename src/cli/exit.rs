@@ -52,7 +52,7 @@ impl CliError {
                 Fault::Failure => Fault::Failure,
                 Fault::Usage | Fault::Invalid => Fault::Usage,
             },
-            NoTable(_) | File { .. } | Json(_) | Service(_) => Fault::Failure,
+            NoTable(_) | EarlierPhase { .. } | File { .. } | Json(_) | Service(_) => Fault::Failure,
             Pipeline(e) => e.fault(),
             Camera(e) => e.fault(),
             Scene(e) => e.fault(),

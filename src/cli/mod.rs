@@ -74,6 +74,15 @@ pub enum CliError {
     /// No table to render with: none given, and none stored for the frame or active.
     #[error("{0}")]
     NoTable(String),
+    /// A step of a sharded training run whose input, the files an earlier phase writes, is
+    /// missing; `remedy` says which phase to run first.
+    #[error("{path}: {source}; {remedy}")]
+    EarlierPhase {
+        path: String,
+        remedy: String,
+        #[source]
+        source: std::io::Error,
+    },
     #[error(transparent)]
     Pipeline(crate::pipeline::PipelineError),
     #[error(transparent)]

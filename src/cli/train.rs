@@ -1,4 +1,4 @@
-use std::path::{Path, PathBuf};
+use std::path::PathBuf;
 use std::sync::atomic::AtomicBool;
 use std::time::Instant;
 
@@ -250,13 +250,6 @@ fn print_summary(table: &L3Table, sensor: &str, seconds: f64, a: &TrainArgs) {
     );
 }
 
-fn read_file(path: &Path) -> Result<Vec<u8>, CliError> {
-    std::fs::read(path).map_err(|source| CliError::File {
-        path: path.display().to_string(),
-        source,
-    })
-}
-
 /// The steps of a sharded run, each partial written to `dir` and read back
 /// from there, as separate machines would; each prints its time.
 struct Sharded<'a> {
@@ -272,6 +265,32 @@ impl Sharded<'_> {
     fn path(&self, stage: &str, k: usize) -> PathBuf {
         self.dir
             .join(format!("{stage}-{}-of-{}.l3p", k + 1, self.plan.len()))
+    }
+
+    /// The partial of `stage` (`survey` or `sums`) for shard `k` (0-based), as the phase that
+    /// writes it left it; when it is not there, an error naming that phase.
+    fn read_partial(&self, stage: &str, k: usize) -> Result<Vec<u8>, CliError> {
+        let path = self.path(stage, k);
+        std::fs::read(&path).map_err(|source| {
+            let path = path.display().to_string();
+            if source.kind() != std::io::ErrorKind::NotFound {
+                return CliError::File { path, source };
+            }
+            let (phase, what) = match stage {
+                "survey" => ("survey", "surveys"),
+                _ => ("accumulate", "partial sums"),
+            };
+            CliError::EarlierPhase {
+                path,
+                remedy: format!(
+                    "the shards' {what} are written by `--phase {phase}`: run `l3 train --phase \
+                     {phase} --shard K` for every K from 1 to {} first (with the same --shards, \
+                     --shard-dir and training flags)",
+                    self.plan.len()
+                ),
+                source,
+            }
+        })
     }
 
     fn shard(&self, k: usize) -> Result<&ShardSpec, CliError> {
@@ -305,11 +324,7 @@ impl Sharded<'_> {
     fn classes(&self) -> Result<Classes, CliError> {
         let t = Instant::now();
         let surveys = (0..self.plan.len())
-            .map(|k| {
-                Ok(SurveyPartial::from_bytes(&read_file(
-                    &self.path("survey", k),
-                )?)?)
-            })
+            .map(|k| Ok(SurveyPartial::from_bytes(&self.read_partial("survey", k)?)?))
             .collect::<Result<Vec<_>, CliError>>()?;
         let classes = self.run.classes(&surveys)?;
         println!("survey merge: {:.3} s", t.elapsed().as_secs_f64());
@@ -341,7 +356,7 @@ impl Sharded<'_> {
     fn merge(&self, classes: Classes) -> Result<L3Table, CliError> {
         let t = Instant::now();
         let parts = (0..self.plan.len())
-            .map(|k| Ok(GramPartial::from_bytes(&read_file(&self.path("sums", k))?)?))
+            .map(|k| Ok(GramPartial::from_bytes(&self.read_partial("sums", k)?)?))
             .collect::<Result<Vec<_>, CliError>>()?;
         let read = t.elapsed().as_secs_f64();
         let (table, merging) = self.run.finish_timed(classes, parts, &quiet, self.cancel)?;

@@ -2,7 +2,7 @@
 
 use std::path::Path;
 
-use crate::support::l3;
+use crate::support::{l3, l3_code};
 
 use super::simulate_macbeth;
 
@@ -85,6 +85,56 @@ fn train_in_shards_gives_the_same_table_file() {
     // more shards than batches is a clear error
     let (ok, _, err) = l3(&["train", "--shards", "6", "--scenes", "5"], d);
     assert!(!ok && err.contains("6 shards for 5 batches"), "{err}");
+}
+
+/// A step of a sharded run whose input an earlier phase writes, run before that phase: an
+/// error (exit code 1, a missing file) that names the phase to run first.
+#[test]
+fn a_phase_run_too_early_names_the_phase_to_run_first() {
+    let tmp = tempfile::tempdir().unwrap();
+    let d = tmp.path();
+    let step = |phase: &[&str]| {
+        let base = [
+            "train",
+            "--illuminants",
+            "D65",
+            "--scenes",
+            "4",
+            "--scene-size",
+            "32",
+            "--levels",
+            "4",
+            "--shards",
+            "2",
+            "--shard-dir",
+            "parts",
+            "--out",
+            "t.safetensors",
+        ];
+        l3_code(&[&base[..], phase].concat(), d)
+    };
+    for phase in [
+        &["--phase", "merge"][..],
+        &["--phase", "accumulate", "--shard", "1"],
+    ] {
+        let (code, out, err) = step(phase);
+        assert_eq!(code, Some(1), "{phase:?}: {out}{err}");
+        assert!(
+            err.contains("survey-1-of-2.l3p") && err.contains("--phase survey --shard K"),
+            "{phase:?}: {err}"
+        );
+    }
+    for k in ["1", "2"] {
+        let (code, out, err) = step(&["--phase", "survey", "--shard", k]);
+        assert_eq!(code, Some(0), "{out}{err}");
+    }
+    let (code, out, err) = step(&["--phase", "merge"]);
+    assert_eq!(code, Some(1), "{out}{err}");
+    assert!(
+        err.contains("sums-1-of-2.l3p") && err.contains("--phase accumulate --shard K"),
+        "{err}"
+    );
+    assert!(!d.join("t.safetensors").exists());
 }
 
 /// The transfer maps of the D65 + tungsten table of [`train_in_shards_gives_the_same_table_file`].
