@@ -18,7 +18,7 @@ use std::sync::OnceLock;
 
 use serde::Serialize;
 
-use super::{CameraError, Cfa, SensorDesign};
+use super::{CameraError, Cfa, LoadedDesign, SensorDesign};
 use crate::spectral::IsetData;
 
 /// Where a catalogue sensor comes from.
@@ -430,17 +430,23 @@ pub fn match_camera(id: &CameraId) -> Option<CameraMatch> {
     lookup(&make, &model).map(|hit| found(hit, "make_model"))
 }
 
-/// A sensor named on a command line: a TOML file when `arg` is one, else a catalogue name.
-/// The error for neither names both.
+/// A sensor named on a command line: a TOML file when `arg` is one, else a catalogue name,
+/// with the notes on its curves ([`SensorDesign::load_noted`]). The error for neither names
+/// both.
 pub fn load_named_or_file(
     arg: &std::path::Path,
     iset: Option<&IsetData>,
-) -> Result<SensorDesign, CameraError> {
+) -> Result<LoadedDesign, CameraError> {
     if arg.is_file() {
-        return SensorDesign::load(arg, iset);
+        return SensorDesign::load_noted(arg, iset);
     }
     match arg.to_str().and_then(find) {
-        Some(e) => e.load(iset),
+        Some(e) => {
+            let design = e.design()?;
+            let grid = crate::spectral::WavelengthGrid::default();
+            let (_, notes) = design.resolve_curves_noted(&grid, iset)?;
+            Ok(LoadedDesign { design, notes })
+        }
         None => Err(CameraError::InvalidArgument(format!(
             "sensor '{}' is neither a TOML file nor a catalogue sensor (`l3 sensors` lists the {} of them)",
             arg.display(),

@@ -12,7 +12,15 @@ use crate::spectral::{IsetData, Spectrum, WavelengthGrid};
 
 mod filter;
 
-pub use filter::FilterSpec;
+pub use filter::{COVERAGE_SLACK_NM, CoverageNote, FilterSpec};
+
+/// A design loaded from a file or the catalogue, its curves read, with what they leave to
+/// note: curves that cover clearly less than the simulation grid ([`CoverageNote`]).
+#[derive(Clone, Debug, PartialEq)]
+pub struct LoadedDesign {
+    pub design: SensorDesign,
+    pub notes: Vec<CoverageNote>,
+}
 
 /// A complete sensor design (docs/design.md §3). Units are in the field names.
 /// Fields omitted from a TOML file take the paper's Figure 2 value
@@ -177,6 +185,14 @@ impl SensorDesign {
     /// default grid, from `iset`; `None`: the built-in data), so a missing
     /// file or column fails here.
     pub fn load(path: impl AsRef<Path>, iset: Option<&IsetData>) -> Result<Self, CameraError> {
+        Ok(Self::load_noted(path, iset)?.design)
+    }
+
+    /// [`Self::load`], with the notes on its curves ([`Self::resolve_curves_noted`]).
+    pub fn load_noted(
+        path: impl AsRef<Path>,
+        iset: Option<&IsetData>,
+    ) -> Result<LoadedDesign, CameraError> {
         let p = path.as_ref();
         let text = std::fs::read_to_string(p).map_err(|source| CameraError::Io {
             path: p.display().to_string(),
@@ -194,8 +210,8 @@ impl SensorDesign {
         })?;
         let dir = p.parent().unwrap_or(Path::new(""));
         let design = design.with_curves_beside(dir);
-        design
-            .resolve_curves(&WavelengthGrid::default(), iset)
+        let (_, notes) = design
+            .resolve_curves_noted(&WavelengthGrid::default(), iset)
             .map_err(|e| match e {
                 CameraError::InvalidDesign(m) if m.contains("is neither") => {
                     CameraError::InvalidDesign(format!(
@@ -209,7 +225,7 @@ impl SensorDesign {
                 }
                 other => other,
             })?;
-        Ok(design)
+        Ok(LoadedDesign { design, notes })
     }
 
     /// The design with every relative CSV path that names a file in `dir` (the sensor
@@ -435,34 +451,46 @@ impl SensorDesign {
         grid: &WavelengthGrid,
         iset: Option<&IsetData>,
     ) -> Result<Vec<Spectrum>, CameraError> {
+        Ok(self.resolve_curves_noted(grid, iset)?.0)
+    }
+
+    /// [`Self::resolve_curves`], with a note for every curve (IR-cut, QE, then the filters in
+    /// CFA channel order) whose samples cover clearly less than `grid` ([`CoverageNote`]).
+    pub fn resolve_curves_noted(
+        &self,
+        grid: &WavelengthGrid,
+        iset: Option<&IsetData>,
+    ) -> Result<(Vec<Spectrum>, Vec<CoverageNote>), CameraError> {
         self.validate()?;
-        let ir = self
-            .ir_cut
-            .resolve(grid, iset, &format!("'{}': ir_cut", self.name))?;
-        let qe = self
+        let (ir, ir_note) =
+            self.ir_cut
+                .resolve_noted(grid, iset, &format!("'{}': ir_cut", self.name))?;
+        let (qe, qe_note) = self
             .qe
-            .resolve(grid, iset, &format!("'{}': qe", self.name))?;
+            .resolve_noted(grid, iset, &format!("'{}': qe", self.name))?;
+        let mut notes: Vec<CoverageNote> = ir_note.into_iter().chain(qe_note).collect();
         let common = ir.product(&qe)?;
-        self.cfa
-            .channel_names
-            .iter()
-            .map(|ch| {
-                let what = format!("'{}': filter '{ch}'", self.name);
-                // validate() guarantees the entry exists.
-                let f = self.filters.get(ch).ok_or_else(|| {
-                    CameraError::InvalidDesign(format!("{what}: missing"))
-                })?;
-                let r = f.resolve(grid, iset, &what)?.product(&common)?;
-                if r.max() <= 0.0 {
-                    return Err(CameraError::InvalidDesign(format!(
-                        "{what}: the channel has no response on {}–{} nm (filter × IR-cut × QE is zero)",
-                        grid.start_nm,
-                        grid.end_nm()
-                    )));
-                }
-                Ok(r)
-            })
-            .collect()
+        let mut curves = Vec::with_capacity(self.cfa.channel_names.len());
+        for ch in &self.cfa.channel_names {
+            let what = format!("'{}': filter '{ch}'", self.name);
+            // validate() guarantees the entry exists.
+            let f = self
+                .filters
+                .get(ch)
+                .ok_or_else(|| CameraError::InvalidDesign(format!("{what}: missing")))?;
+            let (r, note) = f.resolve_noted(grid, iset, &what)?;
+            let r = r.product(&common)?;
+            if r.max() <= 0.0 {
+                return Err(CameraError::InvalidDesign(format!(
+                    "{what}: the channel has no response on {}–{} nm (filter × IR-cut × QE is zero)",
+                    grid.start_nm,
+                    grid.end_nm()
+                )));
+            }
+            notes.extend(note);
+            curves.push(r);
+        }
+        Ok((curves, notes))
     }
 
     /// Conversion gain in V/e⁻.

@@ -24,7 +24,9 @@ mod sensor;
 use ndarray::{Array2, Array3};
 
 pub use cfa::{Cfa, MAX_CFA_SIDE};
-pub use design::{FilterSpec, SensorDesign, parametric};
+pub use design::{
+    COVERAGE_SLACK_NM, CoverageNote, FilterSpec, LoadedDesign, SensorDesign, parametric,
+};
 pub use neutral::{NEUTRAL_CCT_RANGE, NeutralMatch};
 pub use optics::{
     DEFAULT_SAMPLES_PER_PIXEL, KM, MAX_SAMPLES_PER_PIXEL, OpticalImage, Optics, diffraction_otf,

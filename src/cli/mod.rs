@@ -181,7 +181,13 @@ pub(crate) fn load_sensor(
     iset: Option<&IsetData>,
 ) -> Result<SensorDesign, CliError> {
     match path {
-        Some(p) => Ok(crate::camera::catalogue::load_named_or_file(p, iset)?),
+        Some(p) => {
+            let loaded = crate::camera::catalogue::load_named_or_file(p, iset)?;
+            for note in &loaded.notes {
+                eprintln!("warning: {}: {note}", p.display());
+            }
+            Ok(loaded.design)
+        }
         None => Ok(SensorDesign::paper_default()),
     }
 }

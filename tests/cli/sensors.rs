@@ -148,3 +148,56 @@ fn a_design_prints_with_its_curves_inline() {
     let (ok, text) = l3(&["sensors", "--design", "missing.toml"], d);
     assert!(!ok && text.contains("missing.toml"), "{text}");
 }
+
+/// Curves from a CSV that covers only part of the simulation grid are taken (zero outside
+/// their range) with a warning per curve naming the sensor file, the curve, the CSV and both
+/// ranges; curves covering the grid get none.
+#[test]
+fn a_csv_covering_part_of_the_grid_is_warned_of() {
+    let tmp = tempfile::tempdir().unwrap();
+    let d = tmp.path();
+    write_design(d, "my_camera.csv");
+    let simulate = |toml: &str, out: &str| {
+        crate::support::l3(
+            &[
+                "simulate", "--sensor", toml, "--scene", "uniform", "--out", out,
+            ],
+            d,
+        )
+    };
+    let (ok, _, err) = simulate("my_camera.toml", "full");
+    assert!(ok, "{err}");
+    assert!(!err.contains("warning:"), "{err}");
+    // the same curves from 500 to 600 nm only
+    let full = std::fs::read_to_string(d.join("my_camera.csv")).unwrap();
+    let short: Vec<&str> = full
+        .lines()
+        .filter(|l| {
+            let nm = l.split(',').next().and_then(|w| w.parse::<u32>().ok());
+            nm.is_none_or(|nm| (500..=600).contains(&nm))
+        })
+        .collect();
+    std::fs::write(d.join("short.csv"), short.join("\n")).unwrap();
+    let toml = std::fs::read_to_string(d.join("my_camera.toml")).unwrap();
+    std::fs::write(
+        d.join("short.toml"),
+        toml.replace("my_camera.csv", "short.csv"),
+    )
+    .unwrap();
+    let (ok, _, err) = simulate("short.toml", "short");
+    assert!(ok, "{err}");
+    let warnings: Vec<&str> = err.lines().filter(|l| l.starts_with("warning:")).collect();
+    assert_eq!(warnings.len(), 3, "{err}");
+    let r = warnings
+        .iter()
+        .find(|l| l.contains("filter 'R'"))
+        .unwrap_or(&"");
+    for part in [
+        "warning: short.toml:",
+        "short.csv (column 'R')",
+        "500–600 nm",
+        "400–700 nm",
+    ] {
+        assert!(r.contains(part), "{part} in: {err}");
+    }
+}

@@ -61,6 +61,58 @@ pub enum FilterSpec {
 /// The most samples an inline curve may hold.
 pub const MAX_INLINE_SAMPLES: usize = 4096;
 
+/// How far inside the simulation grid's first or last band a measured curve (a CSV column or
+/// inline samples) may start or stop, in nm, before it is noted as covering less than the
+/// grid ([`CoverageNote`]).
+pub const COVERAGE_SLACK_NM: f64 = 10.0;
+
+/// A measured curve whose samples cover clearly less than the simulation grid: they start
+/// more than [`COVERAGE_SLACK_NM`] after its first band or stop more than that before its
+/// last. The curve is taken as zero outside its samples, as documented, but a file cut short
+/// by mistake would pass unnoticed: resolving a design returns these notes for its caller to
+/// show (the command line warns; the core never prints).
+#[derive(Clone, Debug, PartialEq)]
+pub struct CoverageNote {
+    /// The curve, e.g. `'my-camera': filter 'R'`.
+    pub curve: String,
+    /// Where its samples are: a CSV file and column, or inline samples.
+    pub source: String,
+    /// The first and last wavelengths of its samples, nm.
+    pub covered_nm: (f64, f64),
+    /// The first and last band centres of the grid, nm.
+    pub grid_nm: (f64, f64),
+}
+
+impl CoverageNote {
+    /// The note for `samples` of `curve` (from `source`) on `grid`, when they cover clearly
+    /// less than it.
+    fn of(samples: &Samples, grid: &WavelengthGrid, curve: &str, source: String) -> Option<Self> {
+        let w = samples.wavelengths();
+        let (first, last) = (*w.first()?, *w.last()?);
+        let (start, end) = (grid.start_nm, grid.end_nm());
+        let short = first > start + COVERAGE_SLACK_NM || last < end - COVERAGE_SLACK_NM;
+        short.then(|| CoverageNote {
+            curve: curve.to_string(),
+            source,
+            covered_nm: (first, last),
+            grid_nm: (start, end),
+        })
+    }
+}
+
+impl std::fmt::Display for CoverageNote {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        let ((a, b), (g0, g1)) = (self.covered_nm, self.grid_nm);
+        write!(
+            f,
+            "{}: {} covers only {a}–{b} nm of the {g0}–{g1} nm simulation grid; the curve is \
+             taken as zero outside {a}–{b} nm (give samples over the whole grid, with zeros \
+             where the curve does not respond, if that is meant)",
+            self.curve, self.source
+        )
+    }
+}
+
 /// Parameters of [`FilterSpec::Samples`] as written in TOML.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
@@ -299,7 +351,19 @@ impl FilterSpec {
         iset: Option<&IsetData>,
         what: &str,
     ) -> Result<Spectrum, CameraError> {
+        Ok(self.resolve_noted(grid, iset, what)?.0)
+    }
+
+    /// [`Self::resolve`], with a note when the curve's samples cover clearly less than
+    /// `grid` ([`CoverageNote`]; only a CSV column or inline samples can).
+    pub fn resolve_noted(
+        &self,
+        grid: &WavelengthGrid,
+        iset: Option<&IsetData>,
+        what: &str,
+    ) -> Result<(Spectrum, Option<CoverageNote>), CameraError> {
         self.validate(what)?;
+        let mut note = None;
         let spectrum = match self {
             FilterSpec::Gaussian {
                 center_nm,
@@ -316,16 +380,21 @@ impl FilterSpec {
                 path,
                 column,
                 scale,
-            } => csv_samples(path, column, iset, what)?
-                .resample(grid, Extrapolation::Zero)
-                .scaled(*scale),
+            } => {
+                let samples = csv_samples(path, column, iset, what)?;
+                let source = format!("{path} (column '{column}')");
+                note = CoverageNote::of(&samples, grid, what, source);
+                samples.resample(grid, Extrapolation::Zero).scaled(*scale)
+            }
             FilterSpec::Samples {
                 wavelength_nm,
                 values,
                 scale,
-            } => Samples::new(wavelength_nm.clone(), values.clone())?
-                .resample(grid, Extrapolation::Zero)
-                .scaled(*scale),
+            } => {
+                let samples = Samples::new(wavelength_nm.clone(), values.clone())?;
+                note = CoverageNote::of(&samples, grid, what, "its inline samples".into());
+                samples.resample(grid, Extrapolation::Zero).scaled(*scale)
+            }
         };
         for (i, &v) in spectrum.values().iter().enumerate() {
             if !(v.is_finite() && (-1e-12..=1.0 + 1e-9).contains(&v)) {
@@ -336,7 +405,7 @@ impl FilterSpec {
                 )));
             }
         }
-        Ok(spectrum)
+        Ok((spectrum, note))
     }
 }
 

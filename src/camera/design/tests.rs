@@ -337,3 +337,92 @@ fn inlined_curves_resolve_as_their_csv_and_survive_json() {
     );
     assert!(t.is_err(), "column goes only with csv");
 }
+
+/// A measured curve whose samples stop well inside the grid is noted, naming the curve, its
+/// source and both ranges; one within [`COVERAGE_SLACK_NM`] of the grid's ends, or beyond
+/// them, or a parametric curve, is not.
+#[test]
+fn a_curve_covering_part_of_the_grid_is_noted() {
+    let grid = WavelengthGrid::default();
+    let with_r = |from: f64, to: f64| {
+        let mut d = SensorDesign::paper_default();
+        d.name = "short".into();
+        let wavelength_nm: Vec<f64> = (0..=10)
+            .map(|i| from + (to - from) * i as f64 / 10.0)
+            .collect();
+        let values = vec![0.5; wavelength_nm.len()];
+        d.filters.insert(
+            "R".into(),
+            FilterSpec::Samples {
+                wavelength_nm,
+                values,
+                scale: 1.0,
+            },
+        );
+        d.resolve_curves_noted(&grid, None).unwrap().1
+    };
+    let notes = with_r(500.0, 600.0);
+    assert_eq!(notes.len(), 1, "{notes:?}");
+    let n = &notes[0];
+    assert_eq!(n.curve, "'short': filter 'R'");
+    assert_eq!((n.covered_nm, n.grid_nm), ((500.0, 600.0), (400.0, 700.0)));
+    let text = n.to_string();
+    assert!(
+        text.contains("filter 'R'") && text.contains("500–600 nm") && text.contains("400–700 nm"),
+        "{text}"
+    );
+    // one end short is enough
+    assert_eq!(with_r(380.0, 650.0).len(), 1);
+    assert_eq!(with_r(420.0, 780.0).len(), 1);
+    // within the slack, or past the grid: no note
+    for (from, to) in [(400.0, 700.0), (410.0, 690.0), (380.0, 780.0)] {
+        assert!(with_r(from, to).is_empty(), "{from}–{to}");
+    }
+    // the paper's parametric curves
+    let paper = SensorDesign::paper_default();
+    assert!(
+        paper
+            .resolve_curves_noted(&grid, None)
+            .unwrap()
+            .1
+            .is_empty()
+    );
+}
+
+/// A CSV column cut short is noted with its file and column, and `load_noted` returns it.
+#[test]
+fn a_short_csv_is_noted_when_the_design_is_loaded() {
+    let dir = tempfile::tempdir().unwrap();
+    let mut csv = String::from("wavelength_nm,red,green,blue\n");
+    for l in (500..=600).step_by(10) {
+        csv.push_str(&format!("{l},0.5,0.5,0.5\n"));
+    }
+    std::fs::write(dir.path().join("short.csv"), csv).unwrap();
+    let toml = "name = \"cut\"\ncfa = \"RG/GB\"\n[filters]\n\
+                R = { csv = \"short.csv\", column = \"red\" }\n\
+                G = { gaussian = { center_nm = 540.0, sigma_nm = 40.0 } }\n\
+                B = { gaussian = { center_nm = 460.0, sigma_nm = 30.0 } }\n";
+    let path = dir.path().join("cut.toml");
+    std::fs::write(&path, toml).unwrap();
+    let loaded = SensorDesign::load_noted(&path, None).unwrap();
+    assert_eq!(loaded.design.name, "cut");
+    assert_eq!(loaded.notes.len(), 1, "{:?}", loaded.notes);
+    let text = loaded.notes[0].to_string();
+    assert!(
+        text.contains("'cut': filter 'R'")
+            && text.contains("short.csv (column 'red')")
+            && text.contains("500–600 nm"),
+        "{text}"
+    );
+}
+
+/// Every catalogue sensor's curves cover the grid: none is noted.
+#[test]
+fn no_catalogue_sensor_is_noted() {
+    let grid = WavelengthGrid::default();
+    for e in crate::camera::catalogue::catalogue() {
+        let d = e.design().unwrap();
+        let notes = d.resolve_curves_noted(&grid, None).unwrap().1;
+        assert!(notes.is_empty(), "{}: {notes:?}", d.name);
+    }
+}
