@@ -233,8 +233,15 @@ fn locate_edge(a: &Array2<f64>) -> Result<(f64, f64), SfrError> {
         / second.len() as f64)
         .sqrt();
     if scatter > MAX_SCATTER_PX {
+        // rows whose derivative nearly cancels (two edges of opposite sense, texture) put
+        // their centroids far outside the region: a figure beyond its width means nothing
+        let by = if scatter > w as f64 {
+            format!("by more than the region is wide ({w} px across the edge)")
+        } else {
+            format!("by {scatter:.2} px")
+        };
         return Err(SfrError::NoEdge(format!(
-            "the rows' edge positions scatter by {scatter:.2} px about a line (at most {MAX_SCATTER_PX} for a straight edge); crop to one straight edge"
+            "the rows' edge positions scatter {by} about a line (at most {MAX_SCATTER_PX} px for a straight edge), as they do when the region holds two edges or texture; crop to one straight edge"
         )));
     }
     let (lo, hi) = (o.min(o + s * (h - 1) as f64), o.max(o + s * (h - 1) as f64));
@@ -499,5 +506,50 @@ mod tests {
         // an edge at exactly 0° leaves sub-pixel bins empty
         let straight = edge(32, 32, 0.0, 1.0, 0.0, 1);
         assert!(slanted_edge_sfr(straight.view()).is_err());
+    }
+
+    /// The scatter a refusal quotes, in px, if it quotes one.
+    fn quoted_scatter(message: &str) -> Option<f64> {
+        let rest = message.split("scatter by ").nth(1)?;
+        rest.split(" px").next()?.parse().ok()
+    }
+
+    /// Texture, or two edges, can scatter the rows' centroids far outside the region: the
+    /// refusal then says the scatter exceeds the region's width rather than quoting a figure
+    /// larger than it.
+    #[test]
+    fn a_scatter_beyond_the_region_is_not_quoted() {
+        let noise = |x: usize, y: usize, k: usize| {
+            ((x * 7919 + y * 104729 + k * 31337) % 1000) as f64 / 1000.0 - 0.5
+        };
+        let mut regions = Vec::new();
+        for k in 0..12 {
+            for side in [48, 64] {
+                regions.push(Array2::from_shape_fn((side, side), |(r, c)| {
+                    0.5 + 0.4 * noise(c, r, k)
+                }));
+            }
+        }
+        // a bright bar: a rising and a falling edge
+        for (x0, x1) in [(60.0, 66.0), (60.0, 70.0), (40.0, 88.0)] {
+            regions.push(Array2::from_shape_fn((128, 128), |(r, c)| {
+                let x = c as f64 - (r as f64 - 64.0) * 5f64.to_radians().tan();
+                0.2 + 0.6 * (phi(x - x0) - phi(x - x1))
+            }));
+        }
+        let mut beyond = 0;
+        for region in &regions {
+            let width = region.ncols().max(region.nrows()) as f64;
+            if let Err(SfrError::NoEdge(m)) = slanted_edge_sfr(region.view()) {
+                if let Some(px) = quoted_scatter(&m) {
+                    assert!(px <= width, "{m}");
+                }
+                if m.contains("more than the region is wide") {
+                    assert!(m.contains("crop to one straight edge"), "{m}");
+                    beyond += 1;
+                }
+            }
+        }
+        assert!(beyond > 0, "no region scattered beyond its width");
     }
 }
