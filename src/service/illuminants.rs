@@ -103,25 +103,21 @@ fn definitions(rows: &[IlluminantRow]) -> Vec<(String, IlluminantDefinition)> {
 }
 
 /// The registry from the stored rows: built-ins, then the user's definitions. Fitting T from
-/// an SPD is CPU work: it runs on the background pool.
+/// an SPD is CPU work: it runs on the render pool, as a PUT's fit does.
 async fn build_registry(
     state: &Inner,
     rows: &[IlluminantRow],
 ) -> Result<IlluminantRegistry, ServiceError> {
     let mut reg = state.default_registry.clone();
     let defs = definitions(rows);
-    super::cpu::run(
-        &state.pools.background,
-        "the illuminant registry",
-        move || {
-            for (name, def) in defs {
-                if let Err(e) = apply(&mut reg, &name, &def) {
-                    tracing::warn!("stored illuminant {name} skipped: {e}");
-                }
+    super::cpu::run(&state.pools.render, "the illuminant registry", move || {
+        for (name, def) in defs {
+            if let Err(e) = apply(&mut reg, &name, &def) {
+                tracing::warn!("stored illuminant {name} skipped: {e}");
             }
-            reg
-        },
-    )
+        }
+        reg
+    })
     .await
 }
 
@@ -253,10 +249,11 @@ pub async fn put(
     // other
     let _writing = state.registry_writes.lock().await;
     // validate on a copy before persisting; fitting T from an SPD is CPU
-    // work, done off the runtime
+    // work, done off the runtime: on the render pool (a few milliseconds, which
+    // on the background pool would wait behind a running training job)
     let copy = state.registry().clone();
     let (name2, def2) = (name.clone(), def.clone());
-    let (copy, entry) = super::cpu::run(&state.pools.background, "the illuminant fit", move || {
+    let (copy, entry) = super::cpu::run(&state.pools.render, "the illuminant fit", move || {
         let mut copy = copy;
         apply(&mut copy, &name2, &def2).map(|e| (copy, e))
     })
