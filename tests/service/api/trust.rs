@@ -8,7 +8,7 @@ use serde_json::{Value, json};
 use crate::service_support::*;
 
 /// A tiny job body with `extra` fields over it.
-fn job(extra: Value) -> Value {
+pub(super) fn job(extra: Value) -> Value {
     let mut body = json!({"scenes": 4, "scene_size": 32, "levels": 4, "patch_size": 3,
         "chroma_classes": 1, "illuminants": ["D65"]});
     for (k, v) in extra.as_object().into_iter().flatten() {
