@@ -130,7 +130,8 @@ impl MethodOnChart<'_> {
             cfa,
             setup.chroma_denoise,
         )?;
-        let rival_name = format!("ISP_{}", super::paper_table::short(self.acquisition));
+        // by the light's resolved name (a light given by its samples goes by its own)
+        let rival_name = format!("ISP_{}", super::paper_table::short(&e.acquisition));
         report.edge_panel = Some(EdgePanel::new(
             e,
             &[(self.method_name.to_string(), own), (rival_name, rival)],

@@ -51,6 +51,46 @@ pub fn check_cfa(input: &str, origin: CfaOrigin, table: &Cfa) -> Result<(), Pipe
     })
 }
 
+/// A CFA a request declares for its frame, against the table's `table`. The same pattern is
+/// [`check_cfa`]'s; otherwise a string that is no CFA of the table's channels (not a
+/// rectangular tile, a single channel, or a channel the table's sensor does not have) is the
+/// request's mistake, [`PipelineError::Options`] naming the parameter (`cfa`), and a tile
+/// of the table's channels in another arrangement is [`PipelineError::CfaMismatch`].
+pub fn check_declared_cfa(input: &str, table: &Cfa) -> Result<(), PipelineError> {
+    let mismatch = match check_cfa(input, CfaOrigin::Declared, table) {
+        Ok(()) => return Ok(()),
+        Err(e) => e,
+    };
+    let input = input.trim();
+    let bad = |why: String| PipelineError::Options(format!("cfa '{input}': {why}"));
+    let declared = Cfa::parse(input).map_err(|e| bad(e.to_string()))?;
+    let theirs = &table.channel_names;
+    let foreign: Vec<&str> = declared
+        .channel_names
+        .iter()
+        .filter(|n| !theirs.iter().any(|t| t.eq_ignore_ascii_case(n)))
+        .map(String::as_str)
+        .collect();
+    if !foreign.is_empty() {
+        return Err(bad(format!(
+            "{} {} of the table's sensor, whose CFA {table} has {}",
+            foreign.join(", "),
+            if foreign.len() == 1 {
+                "is not a channel"
+            } else {
+                "are not channels"
+            },
+            theirs.join(", ")
+        )));
+    }
+    if declared.channel_names.len() < 2 {
+        return Err(bad(format!(
+            "a tile of one channel is no colour filter array; the table's is {table}"
+        )));
+    }
+    Err(mismatch)
+}
+
 /// The sensor a decoded file names, when it is not `table`'s: a sidecar's `sensor`; a DNG's
 /// camera (fitting when the catalogue matches it to the table's sensor, or its model is the
 /// sensor's name, as in l3's own DNGs). `None` when the file names none.
@@ -116,6 +156,40 @@ mod tests {
         );
         let spaced = Cfa::parse("C1 C2 / C3 C4").unwrap();
         assert!(check_cfa("C1 C2/C3 C4", CfaOrigin::Dng, &spaced).is_ok());
+    }
+
+    #[test]
+    fn a_declared_cfa_that_is_no_cfa_of_the_tables_channels_is_the_requests_mistake() {
+        let table = Cfa::parse("RG/WB").unwrap();
+        assert!(check_declared_cfa(" rg/wb ", &table).is_ok());
+        for (input, needle) in [
+            ("RG/G", "cfa 'RG/G': "),
+            (
+                "XX/YY",
+                "X, Y are not channels of the table's sensor, whose CFA RG/WB has R, G, W, B",
+            ),
+            ("RC/WB", "C is not a channel"),
+            ("R", "a tile of one channel"),
+            ("", "empty"),
+        ] {
+            match check_declared_cfa(input, &table) {
+                Err(PipelineError::Options(m)) => assert!(m.contains(needle), "{input}: {m}"),
+                other => panic!("{input}: {other:?}"),
+            }
+        }
+        // the table's channels in another arrangement (or tile) are a mismatch
+        for input in ["RG/GB", "BW/GR", "RGWB"] {
+            assert!(
+                matches!(
+                    check_declared_cfa(input, &table),
+                    Err(PipelineError::CfaMismatch {
+                        origin: CfaOrigin::Declared,
+                        ..
+                    })
+                ),
+                "{input}"
+            );
+        }
     }
 
     #[test]

@@ -35,7 +35,7 @@ use std::time::Instant;
 
 pub use choice::{StoredTables, TableChoice, choose_table};
 pub use error::{CfaOrigin, PipelineError};
-pub use fit::{SensorMismatch, check_cfa, design_fit};
+pub use fit::{SensorMismatch, check_cfa, check_declared_cfa, design_fit};
 pub use input::{
     CfaShift, DecodedFrame, FrameNotes, Input, Levels, Samples, Scaling, cfa_phase, decode,
 };
@@ -158,7 +158,7 @@ impl RenderRequest {
     /// named light resolved, a reference render asked for the whole frame.
     pub fn prepare<C: RenderContext>(self, ctx: &C) -> Result<Prepared, C::Error> {
         if let Some(cfa) = &self.cfa {
-            check_cfa(cfa, CfaOrigin::Declared, &ctx.table().meta.cfa)?;
+            check_declared_cfa(cfa, &ctx.table().meta.cfa)?;
         }
         let named = match &self.light {
             LightChoice::Named(spec) => Some(ctx.light(spec)?),

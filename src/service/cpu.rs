@@ -46,7 +46,8 @@ impl std::str::FromStr for BackgroundPriority {
 
 /// The service's CPU pools.
 pub struct CpuPools {
-    /// Renders (and their decoding and encoding).
+    /// Renders (and their decoding and encoding), and the short fits of illuminant
+    /// registrations, which would wait behind a training job on the background pool.
     pub render: rayon::ThreadPool,
     /// Training jobs and evaluations.
     pub background: rayon::ThreadPool,

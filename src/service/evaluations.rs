@@ -286,24 +286,26 @@ pub async fn create(
     let body = super::render::body_bytes(body, state.config.server.max_body_bytes)?;
     let req = parse_request(&body)?;
     let checked = req.check()?;
-    // the light the chart is simulated under (its spectrum), and its correction
+    // the light the chart is simulated under (its spectrum)
     let acquisition = super::illuminants::spectral_spec(&state, &req.acquisition_illuminant)?;
-    let correction = state.resolve_illuminant(&req.acquisition_illuminant)?;
     let table = match checked.method {
         EvaluationMethod::L3 => Some(table_to_evaluate(&state, req.table_id.as_ref()).await?),
         EvaluationMethod::Baseline => None,
     };
     let slot = evaluation_slot(&state)?;
     let table_id = table.as_ref().map(|t| t.id.clone());
-    let iset = state.iset.clone();
+    let (st, light) = (state.clone(), req.acquisition_illuminant.clone());
     let report = super::cpu::run(&state.pools.background, "the evaluation", move || {
-        let report = evaluate(
-            table.as_deref(),
-            &acquisition,
-            &correction,
-            iset.as_ref(),
-            &checked.setup,
-        );
+        // its correction (fitted here for a light given by its samples)
+        let report = st.resolve_light(&light).and_then(|correction| {
+            evaluate(
+                table.as_deref(),
+                &acquisition,
+                &correction,
+                st.iset.as_ref(),
+                &checked.setup,
+            )
+        });
         drop(slot);
         report
     })

@@ -14,7 +14,7 @@ use super::ServiceError;
 use super::state::{AppState, Inner, now_ms};
 use super::store::IlluminantRow;
 use crate::l3::correct::{CorrectionSource, IlluminantEntry, IlluminantRegistry, Mat3};
-use crate::spectral::Samples;
+use crate::spectral::{IlluminantSpec, Samples};
 
 /// A user illuminant's definition: exactly one of a matrix, an SPD or a CCT.
 #[derive(Debug, Clone, Serialize, Deserialize)]
@@ -103,25 +103,21 @@ fn definitions(rows: &[IlluminantRow]) -> Vec<(String, IlluminantDefinition)> {
 }
 
 /// The registry from the stored rows: built-ins, then the user's definitions. Fitting T from
-/// an SPD is CPU work: it runs on the background pool.
+/// an SPD is CPU work: it runs on the render pool, as a PUT's fit does.
 async fn build_registry(
     state: &Inner,
     rows: &[IlluminantRow],
 ) -> Result<IlluminantRegistry, ServiceError> {
     let mut reg = state.default_registry.clone();
     let defs = definitions(rows);
-    super::cpu::run(
-        &state.pools.background,
-        "the illuminant registry",
-        move || {
-            for (name, def) in defs {
-                if let Err(e) = apply(&mut reg, &name, &def) {
-                    tracing::warn!("stored illuminant {name} skipped: {e}");
-                }
+    super::cpu::run(&state.pools.render, "the illuminant registry", move || {
+        for (name, def) in defs {
+            if let Err(e) = apply(&mut reg, &name, &def) {
+                tracing::warn!("stored illuminant {name} skipped: {e}");
             }
-            reg
-        },
-    )
+        }
+        reg
+    })
     .await
 }
 
@@ -129,7 +125,8 @@ async fn build_registry(
 /// `registry_writes`).
 async fn reload(state: &Inner, rows: Vec<IlluminantRow>) -> Result<(), ServiceError> {
     let reg = build_registry(state, &rows).await?;
-    *state.registry() = reg;
+    // the rows first: what a light names for training ([`spectral_spec`]) is read from them
+    // once the registry has it
     let old = std::mem::replace(
         &mut *state
             .illuminant_rows
@@ -137,6 +134,7 @@ async fn reload(state: &Inner, rows: Vec<IlluminantRow>) -> Result<(), ServiceEr
             .unwrap_or_else(|p| p.into_inner()),
         rows.clone(),
     );
+    *state.registry() = reg;
     // kernels fused with an illuminant that changed or went are stale
     for r in old.iter().filter(|o| !rows.contains(o)) {
         state.forget_illuminant(&r.name);
@@ -239,13 +237,12 @@ pub async fn put(
             "D65 is the rendering target and cannot be replaced".into(),
         ));
     }
-    if lower.starts_with("cct:")
-        || lower.starts_with("xy:")
-        || lower.starts_with("csv:")
-        || lower.starts_with("iset:")
+    if ["cct:", "xy:", "csv:", "iset:", "spd:"]
+        .iter()
+        .any(|p| lower.starts_with(p))
     {
         return Err(ServiceError::BadRequest(format!(
-            "illuminant name '{name}' uses a reserved prefix (cct:, xy:, csv:, iset:)"
+            "illuminant name '{name}' uses a reserved prefix (cct:, xy:, csv:, iset:, spd:)"
         )));
     }
     // one registry change at a time, from reading the live registry to
@@ -253,10 +250,11 @@ pub async fn put(
     // other
     let _writing = state.registry_writes.lock().await;
     // validate on a copy before persisting; fitting T from an SPD is CPU
-    // work, done off the runtime
+    // work, done off the runtime: on the render pool (a few milliseconds, which
+    // on the background pool would wait behind a running training job)
     let copy = state.registry().clone();
     let (name2, def2) = (name.clone(), def.clone());
-    let (copy, entry) = super::cpu::run(&state.pools.background, "the illuminant fit", move || {
+    let (copy, entry) = super::cpu::run(&state.pools.render, "the illuminant fit", move || {
         let mut copy = copy;
         apply(&mut copy, &name2, &def2).map(|e| (copy, e))
     })
@@ -268,12 +266,14 @@ pub async fn put(
         .store
         .upsert_illuminant(&entry.name, &text, now_ms())
         .await?;
-    *state.registry() = copy;
-    state.forget_illuminant(&entry.name);
+    let rows = state.store.illuminants().await?;
+    // the rows before the registry, as in `reload`
     *state
         .illuminant_rows
         .lock()
-        .unwrap_or_else(|p| p.into_inner()) = state.store.illuminants().await?;
+        .unwrap_or_else(|p| p.into_inner()) = rows;
+    *state.registry() = copy;
+    state.forget_illuminant(&entry.name);
     let status = if existed {
         StatusCode::OK
     } else {
@@ -319,13 +319,16 @@ pub async fn delete(
 
 /// What training and evaluations take as a light, for problem details.
 const SPECTRAL_LIGHTS: &str =
-    "a built-in light (GET /v1/illuminants), a registered light made from a cct, or cct:K";
+    "a built-in light (GET /v1/illuminants), a registered light made from a cct or spd, or cct:K";
 
 /// The light a client names for a training job or a simulated evaluation, as the spectral
-/// spec the simulation reads: a built-in name or `cct:K` as given, a registered light made
-/// from a colour temperature as its `cct:K`. Files (`csv:`, `iset:`) are refused over HTTP
-/// and an unknown name is 400 `unknown_illuminant` (naming what is accepted); a registered
-/// light the simulation cannot use (given as a matrix, or as SPD samples) is 422 saying why.
+/// spec the simulation reads, which names no registry entry (a job's stored request is
+/// trained as it was submitted, on any replica): a built-in name or `cct:K` as given, a
+/// registered light made from a colour temperature as its `cct:K`, one made from SPD samples
+/// as those samples under its name (`spd:NAME:W=V,…`, which is also taken as given). Files
+/// (`csv:`, `iset:`) are refused over HTTP and an unknown name is 400 `unknown_illuminant`
+/// (naming what is accepted); a registered light the simulation cannot use (a matrix) is 422
+/// saying why.
 pub fn spectral_spec(state: &Inner, name: &str) -> Result<String, ServiceError> {
     let spec = name.trim();
     let lower = spec.to_ascii_lowercase();
@@ -347,30 +350,55 @@ pub fn spectral_spec(state: &Inner, name: &str) -> Result<String, ServiceError> 
     }
     let registered = state.registry().get(spec).cloned();
     if let Some(e) = registered {
-        match (e.source, e.cct) {
-            (CorrectionSource::Cct, Some(k)) => return Ok(format!("cct:{k}")),
-            // an ISET light of the operator's data directory, by its registry name
-            (CorrectionSource::Iset, _)
-                if crate::spectral::IlluminantSpec::parse(&e.name).is_err() =>
-            {
-                return Ok(format!("iset:{}", e.name));
-            }
-            (CorrectionSource::Matrix, _) => {
-                return Err(ServiceError::Unprocessable(format!(
-                    "illuminant '{spec}' is registered as a matrix only: it has no spectrum to simulate a scene under; register it with \"cct\" to use it here"
-                )));
-            }
-            (CorrectionSource::Spd, _) => {
-                return Err(ServiceError::Unprocessable(format!(
-                    "illuminant '{spec}' is registered from SPD samples, which training and evaluations do not take yet; register it with \"cct\", or use {SPECTRAL_LIGHTS}"
-                )));
-            }
-            _ => {}
+        if let Some(def) = user_definition(state, &e.name) {
+            return registered_spectral_spec(spec, &e.name, &def);
+        }
+        // an ISET light of the operator's data directory, by its registry name
+        if e.source == CorrectionSource::Iset && IlluminantSpec::parse(&e.name).is_err() {
+            return Ok(format!("iset:{}", e.name));
         }
     }
-    crate::spectral::IlluminantSpec::parse(spec)
-        .map(|_| spec.to_string())
-        .map_err(|_| unknown("no such light"))
+    match IlluminantSpec::parse(spec) {
+        // as the stored request will hold it
+        Ok(inline @ IlluminantSpec::Samples { .. }) => Ok(inline.to_string()),
+        Ok(_) => Ok(spec.to_string()),
+        Err(e) if lower.starts_with("spd:") => Err(ServiceError::BadRequest(e.to_string())),
+        Err(_) => Err(unknown("no such light")),
+    }
+}
+
+/// The spectral spec of the user's light `name` (as `spec` named it) defined by `def`.
+fn registered_spectral_spec(
+    spec: &str,
+    name: &str,
+    def: &IlluminantDefinition,
+) -> Result<String, ServiceError> {
+    if let Some(k) = def.cct {
+        return Ok(format!("cct:{k}"));
+    }
+    if let Some(s) = &def.spd {
+        return IlluminantSpec::samples(name, s.wavelengths_nm.clone(), s.values.clone())
+            .map(|inline| inline.to_string())
+            .map_err(|e| {
+                ServiceError::Unprocessable(format!(
+                    "illuminant '{spec}': its SPD samples cannot simulate a scene: {e}"
+                ))
+            });
+    }
+    Err(ServiceError::Unprocessable(format!(
+        "illuminant '{spec}' is registered as a matrix only: it has no spectrum to simulate a scene under; register it with \"cct\" or \"spd\" to use it here"
+    )))
+}
+
+/// The stored definition of the user's light `name` (compared without case), from the rows
+/// the registry was built from.
+fn user_definition(state: &Inner, name: &str) -> Option<IlluminantDefinition> {
+    let rows = state
+        .illuminant_rows
+        .lock()
+        .unwrap_or_else(|p| p.into_inner());
+    let row = rows.iter().find(|r| r.name.eq_ignore_ascii_case(name))?;
+    serde_json::from_str(&row.definition_json).ok()
 }
 
 /// The names [`spectral_spec`] takes, for its problem details: the registry's lights that
@@ -381,9 +409,9 @@ fn spectral_names(state: &Inner) -> Vec<String> {
         .entries()
         .filter(|e| match e.source {
             CorrectionSource::Cct => e.cct.is_some(),
-            CorrectionSource::Matrix | CorrectionSource::Spd => false,
-            CorrectionSource::Iset => true,
-            CorrectionSource::Builtin => crate::spectral::IlluminantSpec::parse(&e.name).is_ok(),
+            CorrectionSource::Spd | CorrectionSource::Iset => true,
+            CorrectionSource::Matrix => false,
+            CorrectionSource::Builtin => IlluminantSpec::parse(&e.name).is_ok(),
         })
         .map(|e| e.name.clone())
         .collect();

@@ -104,10 +104,28 @@ impl Inner {
         self.registry.lock().unwrap_or_else(|p| p.into_inner())
     }
 
-    /// Resolves a request's illuminant: a registered name, `cct:K`, `xy:x,y` (the CCT of that
+    /// Resolves a render's illuminant: a registered name, `cct:K`, `xy:x,y` (the CCT of that
     /// chromaticity), or a CIE standard illuminant name. Files (`csv:`) and `iset:` paths are
-    /// refused over HTTP.
+    /// refused over HTTP, and so is a light given by its samples (`spd:`), which training and
+    /// evaluations take ([`Self::resolve_light`]).
     pub fn resolve_illuminant(&self, spec: &str) -> Result<IlluminantEntry, ServiceError> {
+        let spec = spec.trim();
+        if spec.to_ascii_lowercase().starts_with("spd:") && self.registry().get(spec).is_none() {
+            let name = spec
+                .get(4..)
+                .and_then(|r| r.rsplit_once(':'))
+                .map(|(n, _)| n);
+            return Err(ServiceError::UnknownIlluminant(format!(
+                "illuminant 'spd:{}:…': a light given by its samples is taken by training jobs and evaluations; register it (PUT /v1/illuminants/{{name}} with \"spd\") to render with it",
+                name.unwrap_or_default()
+            )));
+        }
+        self.resolve_light(spec)
+    }
+
+    /// [`Self::resolve_illuminant`] that also takes a light given by its samples (`spd:`),
+    /// whose correction is fitted each time: blocking, for the background pool.
+    pub fn resolve_light(&self, spec: &str) -> Result<IlluminantEntry, ServiceError> {
         let spec = spec.trim();
         let unknown = |why: String| {
             // the core's own list of names offers files, which HTTP refuses: the registry's

@@ -10,8 +10,9 @@ use super::{
 /// How a user names an illuminant on the command line or in a request:
 /// a CIE name (`D65`, `A`, `F11`…), an ISET measured light (`Tungsten`,
 /// `Fluorescent`, or `iset:NAME`), a correlated colour temperature
-/// (`cct:3200`: Planck below 4000 K, CIE daylight from 4000 K), or a CSV file
-/// (`csv:PATH` or `csv:PATH:COLUMN`).
+/// (`cct:3200`: Planck below 4000 K, CIE daylight from 4000 K), a CSV file
+/// (`csv:PATH` or `csv:PATH:COLUMN`), or a named light given by its SPD samples
+/// (`spd:NAME:400=0.5,410=0.6,…`: wavelength in nm `=` relative power).
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(try_from = "String", into = "String")]
 pub enum IlluminantSpec {
@@ -22,7 +23,16 @@ pub enum IlluminantSpec {
         path: String,
         column: Option<String>,
     },
+    /// A light given inline by its samples (no file: what a light registered from an SPD
+    /// becomes in a request that must not depend on the registry), resolved under `name`.
+    Samples {
+        name: String,
+        samples: Samples,
+    },
 }
+
+/// The most samples an inline light ([`IlluminantSpec::Samples`]) may hold.
+pub const MAX_INLINE_SPD_SAMPLES: usize = 4096;
 
 /// A resolved illuminant: a display name and its spectral power distribution.
 #[derive(Clone, Debug)]
@@ -32,9 +42,79 @@ pub struct NamedSpd {
 }
 
 impl IlluminantSpec {
+    /// A light named `name` given by its samples (wavelengths in nm, strictly increasing;
+    /// relative power, finite, not negative and not all zero), at most
+    /// [`MAX_INLINE_SPD_SAMPLES`] of them.
+    pub fn samples(
+        name: &str,
+        wavelengths: Vec<f64>,
+        values: Vec<f64>,
+    ) -> Result<Self, SpectralError> {
+        let bad = |why: String| SpectralError::InvalidIlluminantSpec(format!("spd:{name}:…"), why);
+        if name.trim().is_empty() {
+            return Err(bad("the light needs a name".into()));
+        }
+        if values.len() > MAX_INLINE_SPD_SAMPLES {
+            return Err(bad(format!(
+                "{} samples; at most {MAX_INLINE_SPD_SAMPLES}",
+                values.len()
+            )));
+        }
+        let samples = Samples::new(wavelengths, values).map_err(|e| bad(e.to_string()))?;
+        if let Some(i) = samples.values().iter().position(|v| *v < 0.0) {
+            return Err(bad(format!(
+                "power {} at {} nm is negative",
+                samples.values()[i],
+                samples.wavelengths()[i]
+            )));
+        }
+        if samples.values().iter().all(|v| *v == 0.0) {
+            return Err(bad("every sample is zero: the light has no power".into()));
+        }
+        Ok(Self::Samples {
+            name: name.to_string(),
+            samples,
+        })
+    }
+
+    /// `NAME:W=V,W=V,…` after `spd:` (the name may hold `:`; the samples hold none).
+    fn parse_samples(rest: &str) -> Result<Self, SpectralError> {
+        let Some((name, data)) = rest.rsplit_once(':') else {
+            return Err(SpectralError::InvalidIlluminantSpec(
+                format!("spd:{rest}"),
+                "expected spd:NAME:W=V,W=V,… (wavelength in nm = relative power)".into(),
+            ));
+        };
+        let bad = |why: String| SpectralError::InvalidIlluminantSpec(format!("spd:{name}:…"), why);
+        let mut wavelengths = Vec::new();
+        let mut values = Vec::new();
+        for (i, pair) in data.split(',').enumerate() {
+            if i >= MAX_INLINE_SPD_SAMPLES {
+                return Err(bad(format!("more than {MAX_INLINE_SPD_SAMPLES} samples")));
+            }
+            let number = |t: &str| t.trim().parse::<f64>().ok();
+            let (w, v) = pair
+                .split_once('=')
+                .and_then(|(w, v)| Some((number(w)?, number(v)?)))
+                .ok_or_else(|| {
+                    bad(format!(
+                        "sample {} is '{}'; expected WAVELENGTH=POWER",
+                        i + 1,
+                        pair.trim()
+                    ))
+                })?;
+            wavelengths.push(w);
+            values.push(v);
+        }
+        Self::samples(name, wavelengths, values)
+    }
+
     pub fn parse(s: &str) -> Result<Self, SpectralError> {
         let s = s.trim();
         let bad = |why: &str| SpectralError::InvalidIlluminantSpec(s.to_string(), why.to_string());
+        if let Some(rest) = s.strip_prefix("spd:") {
+            return Self::parse_samples(rest);
+        }
         if let Some(rest) = s.strip_prefix("cct:") {
             let k: f64 = rest
                 .trim()
@@ -85,7 +165,7 @@ impl IlluminantSpec {
             _ => Err(SpectralError::UnknownIlluminant(
                 s.to_string(),
                 format!(
-                    "{}, Tungsten, Fluorescent, iset:NAME, cct:K, csv:PATH[:COLUMN]",
+                    "{}, Tungsten, Fluorescent, iset:NAME, cct:K, csv:PATH[:COLUMN], spd:NAME:W=V,…",
                     CIE_ILLUMINANT_NAMES.join(", ")
                 ),
             )),
@@ -93,9 +173,9 @@ impl IlluminantSpec {
     }
 
     /// Load the SPD. ISET lights come from `iset` (`None`: the built-in
-    /// data, which holds Tungsten and Fluorescent).
+    /// data, which holds Tungsten and Fluorescent). The light is named by its spec, an
+    /// inline one by its own name.
     pub fn resolve(&self, iset: Option<&IsetData>) -> Result<NamedSpd, SpectralError> {
-        let name = self.to_string();
         let spd = match self {
             Self::Cie(n) => cie_illuminant(n).ok_or_else(|| {
                 SpectralError::UnknownIlluminant(n.clone(), CIE_ILLUMINANT_NAMES.join(", "))
@@ -115,8 +195,18 @@ impl IlluminantSpec {
                     None => t.samples_at(0)?,
                 }
             }
+            // known by its own name, not by its numbers
+            Self::Samples { name, samples } => {
+                return Ok(NamedSpd {
+                    name: name.clone(),
+                    spd: samples.clone(),
+                });
+            }
         };
-        Ok(NamedSpd { name, spd })
+        Ok(NamedSpd {
+            name: self.to_string(),
+            spd,
+        })
     }
 }
 
@@ -131,6 +221,16 @@ impl fmt::Display for IlluminantSpec {
                 path,
                 column: Some(c),
             } => write!(f, "csv:{path}:{c}"),
+            // `{}` of an f64 is the shortest text that parses back to it
+            Self::Samples { name, samples } => {
+                write!(f, "spd:{name}:")?;
+                let pairs = samples.wavelengths().iter().zip(samples.values());
+                for (i, (w, v)) in pairs.enumerate() {
+                    let sep = if i == 0 { "" } else { "," };
+                    write!(f, "{sep}{w}={v}")?;
+                }
+                Ok(())
+            }
         }
     }
 }
@@ -221,5 +321,60 @@ mod tests {
                 .resolve(None),
             Err(SpectralError::NoSuchTable { .. })
         ));
+    }
+
+    #[test]
+    fn an_inline_light_goes_by_its_name_and_its_text_parses_back_to_it() {
+        let spec = IlluminantSpec::samples(
+            "my:led",
+            vec![380.0, 455.5, 600.0, 780.0],
+            vec![0.0, 1.0, 0.1 + 0.2, 1e-7],
+        )
+        .unwrap();
+        let text = spec.to_string();
+        assert_eq!(
+            text,
+            "spd:my:led:380=0,455.5=1,600=0.30000000000000004,780=0.0000001"
+        );
+        assert_eq!(IlluminantSpec::parse(&text).unwrap(), spec);
+        // as JSON it is that text, as every spec is
+        let json = serde_json::to_string(&spec).unwrap();
+        assert_eq!(serde_json::from_str::<IlluminantSpec>(&json).unwrap(), spec);
+        let named = spec.resolve(None).unwrap();
+        assert_eq!(named.name, "my:led");
+        assert_eq!(named.spd.values(), &[0.0, 1.0, 0.1 + 0.2, 1e-7]);
+        // spaces around the numbers are taken
+        assert_eq!(
+            IlluminantSpec::parse("spd:x: 400 = 1 , 500=2").unwrap(),
+            IlluminantSpec::samples("x", vec![400.0, 500.0], vec![1.0, 2.0]).unwrap()
+        );
+    }
+
+    #[test]
+    fn an_inline_light_is_checked_and_its_errors_do_not_repeat_its_samples() {
+        for (bad, needle) in [
+            ("spd:", "expected spd:NAME"),
+            ("spd:x", "expected spd:NAME"),
+            ("spd::400=1,500=1", "needs a name"),
+            ("spd:x:", "sample 1"),
+            ("spd:x:400=1", "at least two"),
+            ("spd:x:400=1,500", "sample 2 is '500'"),
+            ("spd:x:400=1,500=a", "sample 2"),
+            ("spd:x:500=1,400=1", "increasing"),
+            ("spd:x:400=1,500=NaN", "not finite"),
+            ("spd:x:400=1,500=-0.5", "negative"),
+            ("spd:x:400=0,500=0", "no power"),
+        ] {
+            let e = IlluminantSpec::parse(bad).unwrap_err().to_string();
+            assert!(e.contains(needle), "{bad}: {e}");
+        }
+        let many: Vec<String> = (0..=MAX_INLINE_SPD_SAMPLES)
+            .map(|i| format!("{}=1", 300 + i))
+            .collect();
+        let e = IlluminantSpec::parse(&format!("spd:big:{}", many.join(",")))
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("at most") || e.contains("more than"), "{e}");
+        assert!(e.len() < 200, "{e}");
     }
 }

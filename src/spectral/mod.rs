@@ -16,7 +16,7 @@ pub use builtin::{
 pub use bundled::{bundled_paths, bundled_table};
 pub use csv::{SpectralTable, load_csv};
 pub use grid::WavelengthGrid;
-pub use illuminant::{IlluminantSpec, NamedSpd};
+pub use illuminant::{IlluminantSpec, MAX_INLINE_SPD_SAMPLES, NamedSpd};
 pub use iset::{ISET_DIR_ENV, IsetData};
 pub use spectrum::{Extrapolation, Samples, Spectrum};
 

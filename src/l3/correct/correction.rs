@@ -397,7 +397,8 @@ impl IlluminantRegistry {
     /// Resolve a request's illuminant: a registered name, or `cct:K`
     /// (computed and cached as `cct:K`), or `xy:x,y` (the illuminant of that
     /// chromaticity's CCT, see [`xy_spec_cct`]), or any other spec that resolves to
-    /// an SPD (a CIE name, an ISET light, a CSV), computed and cached.
+    /// an SPD: a CIE name or an ISET light, computed and cached; a CSV or a light given by its
+    /// samples, computed each time.
     pub fn resolve(
         &mut self,
         spec: &str,
@@ -424,6 +425,12 @@ impl IlluminantRegistry {
                 let spd = parsed.resolve(iset)?.spd;
                 let s = spd.resample(&self.grid, Extrapolation::Zero);
                 self.entry_for(&parsed.to_string(), &s, None, CorrectionSource::Spd)
+            }
+            IlluminantSpec::Samples { name, samples } => {
+                // by the light's name, as a table trained under it records it; never cached
+                // under that name, which in the registry may be another light's
+                let s = samples.resample(&self.grid, Extrapolation::Zero);
+                self.entry_for(name, &s, None, CorrectionSource::Spd)
             }
             _ => {
                 let named = parsed.resolve(iset)?;
@@ -545,5 +552,23 @@ mod tests {
         assert!(r.resolve("nonsense", None).is_err());
         assert!(r.remove("m1").unwrap());
         assert!(!r.remove("m1").unwrap());
+    }
+
+    #[test]
+    fn an_inline_light_resolves_under_its_name_and_is_not_cached() {
+        let g = WavelengthGrid::default();
+        let mut r = IlluminantRegistry::new(g, default_reflectances(&g)).unwrap();
+        let a = cie_illuminant("A").unwrap();
+        let spec = IlluminantSpec::samples("lamp", a.wavelengths().to_vec(), a.values().to_vec())
+            .unwrap()
+            .to_string();
+        let n = r.entries().count();
+        let e = r.resolve(&spec, None).unwrap();
+        assert_eq!((e.name.as_str(), e.source), ("lamp", CorrectionSource::Spd));
+        assert_eq!(r.entries().count(), n, "nothing is cached");
+        assert!(r.get("lamp").is_none());
+        // the same T as the light registered from those samples
+        let registered = r.insert_spd("A2", &a, CorrectionSource::Spd).unwrap().t;
+        assert_eq!(e.t, registered);
     }
 }

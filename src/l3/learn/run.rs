@@ -136,6 +136,7 @@ impl TrainingRun {
             .map(|(_, s)| s)
             .collect();
         let spds: Vec<_> = illuminants.iter().map(|(_, s)| s.clone()).collect();
+        let names: Vec<_> = illuminants.iter().map(|(n, _)| n.clone()).collect();
         let corrections = same_illuminant_corrections(spec.kind, grid, &refl, &spds)?;
         let mut transfer_choice = None;
         let mut texture_maps = None;
@@ -145,6 +146,7 @@ impl TrainingRun {
                     camera: &camera,
                     design,
                     spec,
+                    names: &names,
                     lights: &spds,
                     corrections: &corrections,
                     d65: &d65,
@@ -456,14 +458,16 @@ impl TrainingRun {
 /// What a run's colour maps are fitted from: its camera and sensor, its spec, its lights
 /// (with their corrections T to D65, for a same-illuminant table), D65 and the
 /// reflectances.
-struct MapInputs<'a> {
-    camera: &'a Camera,
-    design: &'a SensorDesign,
-    spec: &'a TrainingSpec,
-    lights: &'a [Spectrum],
-    corrections: &'a [Mat3],
-    d65: &'a Spectrum,
-    refl: &'a [Spectrum],
+pub(super) struct MapInputs<'a> {
+    pub(super) camera: &'a Camera,
+    pub(super) design: &'a SensorDesign,
+    pub(super) spec: &'a TrainingSpec,
+    /// The lights' names, as the table records them (`TableMeta::train_illuminants`).
+    pub(super) names: &'a [String],
+    pub(super) lights: &'a [Spectrum],
+    pub(super) corrections: &'a [Mat3],
+    pub(super) d65: &'a Spectrum,
+    pub(super) refl: &'a [Spectrum],
 }
 
 /// A run's colour maps, and what they bring into its parameters and geometry.
@@ -498,6 +502,7 @@ fn fit_colour_maps(
         corrections,
         d65,
         refl,
+        ..
     } = *inputs;
     let (nm, swing) = (noise_model(design), design.voltage_swing_v);
     let target = match spec.kind {
@@ -515,15 +520,7 @@ fn fit_colour_maps(
         .map(|f| level_maps(&samples, &params.levels, &nm, swing, f))
         .transpose()?;
     let transfer = if spec.kind == TableKind::SameIlluminant {
-        Some(transfer_maps(
-            camera,
-            design,
-            spec,
-            lights,
-            corrections,
-            refl,
-            params,
-        )?)
+        Some(transfer_maps(inputs, params)?)
     } else {
         None
     };

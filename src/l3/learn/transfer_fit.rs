@@ -48,9 +48,9 @@ use serde::{Deserialize, Serialize};
 
 use super::LearnError;
 use super::colour_map::level_maps;
-use super::spec::TrainingSpec;
+use super::run::MapInputs;
 use crate::baseline::ColourMatrix;
-use crate::camera::{Camera, SensorDesign};
+use crate::camera::Camera;
 use crate::colour::{ciede2000, xyz_to_lab};
 use crate::l3::correct::{
     ColourSamples, ColourTarget, Mat3, colour_samples, noise_model, same_illuminant_corrections,
@@ -251,14 +251,19 @@ pub fn choose_transfer_fit(
 /// that [`choose_transfer_fit`] picks on the held-out lights (see
 /// the module doc).
 pub(super) fn transfer_maps(
-    camera: &Camera,
-    design: &SensorDesign,
-    spec: &TrainingSpec,
-    lights: &[Spectrum],
-    corrections: &[Mat3],
-    refl: &[Spectrum],
+    inputs: &MapInputs,
     params: &L3Params,
 ) -> Result<(Vec<ColourMatrix>, TransferChoice), LearnError> {
+    let MapInputs {
+        camera,
+        design,
+        spec,
+        names,
+        lights,
+        corrections,
+        refl,
+        ..
+    } = *inputs;
     let fit = params
         .colour_map
         .ok_or_else(|| LearnError::Invalid("transfer maps need a colour map fit".into()))?;
@@ -286,7 +291,7 @@ pub(super) fn transfer_maps(
         let mismatch = || LearnError::Invalid("lights, corrections and names differ".into());
         let spds = lights.get(range.clone()).ok_or_else(mismatch)?;
         let ts = corrections.get(range.clone()).ok_or_else(mismatch)?;
-        let names = spec.illuminants.get(range).ok_or_else(mismatch)?.to_vec();
+        let names = names.get(range).ok_or_else(mismatch)?.to_vec();
         let weighed = colour_samples(camera, spds, ColourTarget::UnderLight(ts), &d65, refl)?;
         let as_is = colour_samples(camera, spds, ColourTarget::UnderLight(&[]), &d65, refl)?;
         candidates.push((TransferFit::Perceptual, names.clone(), weighed, perceptual));

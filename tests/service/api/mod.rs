@@ -4,7 +4,9 @@
 //! By topic: renders equal to `l3 render`'s, DNG input and the light a frame's metadata names
 //! (`render`), the read endpoints for tables, illuminants, evaluations and metrics (`reads`),
 //! hostile input (`hostile`), backpressure, auth, readiness, an injected panic and the time
-//! limit (`limits`), and concurrent illuminant changes (`concurrency`).
+//! limit (`limits`), concurrent illuminant changes (`concurrency`), what a client cannot make
+//! the service do (`trust`), and lights registered from SPD samples in training and
+//! evaluations (`spd_lights`).
 
 use std::path::Path;
 use std::process::Command;
@@ -14,6 +16,7 @@ mod hostile;
 mod limits;
 mod reads;
 mod render;
+mod spd_lights;
 mod trust;
 
 fn l3_cli(args: &[&str], dir: &Path) {

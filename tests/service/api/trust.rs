@@ -8,7 +8,7 @@ use serde_json::{Value, json};
 use crate::service_support::*;
 
 /// A tiny job body with `extra` fields over it.
-fn job(extra: Value) -> Value {
+pub(super) fn job(extra: Value) -> Value {
     let mut body = json!({"scenes": 4, "scene_size": 32, "levels": 4, "patch_size": 3,
         "chroma_classes": 1, "illuminants": ["D65"]});
     for (k, v) in extra.as_object().into_iter().flatten() {
@@ -301,10 +301,26 @@ async fn protocol_details() {
         .header("content-type", "application/octet-stream")
         .body(gradient_raw(16, 16))
     };
-    // a malformed CFA is the query's mistake; a well-formed other one a mismatch
-    let d = problem_of(render("cfa=RG/G"), 400, "bad_request").await;
-    assert!(d.contains("cfa 'RG/G'"), "{d}");
-    problem_of(render("cfa=RG/GB"), 422, "cfa_mismatch").await;
+    // a malformed CFA (no rectangular tile, a channel the table's sensor does not have, a
+    // single channel) is the query's mistake; the table's channels otherwise arranged, a
+    // mismatch
+    for (cfa, needle) in [
+        ("RG/G", "rectangular"),
+        ("XX/YY", "X, Y are not channels of the table's sensor"),
+        ("RG/BY", "Y is not a channel"),
+        ("R", "one channel"),
+    ] {
+        let d = problem_of(render(&format!("cfa={cfa}")), 400, "bad_request").await;
+        assert!(
+            d.starts_with(&format!("cfa '{cfa}': ")) && d.contains(needle),
+            "{d}"
+        );
+    }
+    for cfa in ["RG/GB", "BW/GR"] {
+        problem_of(render(&format!("cfa={cfa}")), 422, "cfa_mismatch").await;
+    }
+    let r = render("cfa=rg/wb").send().await.unwrap();
+    assert_eq!(r.status(), 200, "the table's own CFA, however cased");
     let d = problem_of(render("correction=foo"), 400, "bad_request").await;
     assert!(
         d.ends_with("expected camera or colorimetric (also written t)"),
