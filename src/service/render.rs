@@ -229,6 +229,7 @@ fn declared_size_limits(query: Option<&str>, server: &ServerConfig) -> Result<()
 /// A render against the chosen table (the active one unless the request or its DNG's camera
 /// chose another: [`super::table_choice`]): lights from the service's registry (no files
 /// over HTTP), prepared renderers from its cache while the table is held.
+#[derive(Clone)]
 pub(super) struct ServiceRender {
     pub(super) state: AppState,
     pub(super) active: Arc<ActiveTable>,
@@ -409,8 +410,18 @@ pub async fn render(
         active: chosen.table,
         keep_renderers: chosen.keep_renderers,
     };
-    // the query's CFA and a named illuminant are checked before the body is decoded
-    let prepared = request.prepare(&ctx)?;
+    // the query's CFA and a named illuminant are checked before the body is decoded; a light
+    // whose correction is not held yet is fitted on the render pool, not on this thread
+    let prepared = match &request.light {
+        LightChoice::Named(spec) if !state.holds_light(spec) => {
+            let c = ctx.clone();
+            super::cpu::run(&state.pools.render, "the render's light", move || {
+                request.prepare(&c)
+            })
+            .await??
+        }
+        _ => request.prepare(&ctx)?,
+    };
     let permit = admitted
         .slot
         .lock()

@@ -123,6 +123,19 @@ impl Inner {
         self.resolve_light(spec)
     }
 
+    /// Whether [`Self::resolve_illuminant`] answers `spec` from what the service holds,
+    /// without fitting a correction (a fit takes ~0.1 s of CPU: callers on the async runtime
+    /// send the resolve to a pool when this is false).
+    pub fn holds_light(&self, spec: &str) -> bool {
+        let spec = spec.trim();
+        self.registry().holds(spec)
+            || self
+                .computed_lights
+                .lock()
+                .unwrap_or_else(|p| p.into_inner())
+                .holds(spec)
+    }
+
     /// [`Self::resolve_illuminant`] that also takes a light given by its samples (`spd:`),
     /// whose correction is fitted each time: blocking, for the background pool.
     pub fn resolve_light(&self, spec: &str) -> Result<IlluminantEntry, ServiceError> {

@@ -394,6 +394,24 @@ impl IlluminantRegistry {
         Ok(k.and_then(|k| self.entries.remove(&k)).is_some())
     }
 
+    /// Whether [`Self::resolve`] would answer `spec` from what is already held, without
+    /// fitting a correction: a held name, or a `cct:K` or `xy:x,y` whose colour temperature
+    /// is held. Cheap, for a caller deciding where the resolve may run.
+    pub fn holds(&self, spec: &str) -> bool {
+        if self.get(spec).is_some() {
+            return true;
+        }
+        let cct = match xy_spec_cct(spec) {
+            Ok(Some(k)) => Some(k),
+            Ok(None) => match IlluminantSpec::parse(spec) {
+                Ok(IlluminantSpec::Cct(k)) => Some(k),
+                _ => None,
+            },
+            Err(_) => None,
+        };
+        cct.is_some_and(|k| self.get(&format!("cct:{}", k.round())).is_some())
+    }
+
     /// Resolve a request's illuminant: a registered name, or `cct:K`
     /// (computed and cached as `cct:K`), or `xy:x,y` (the illuminant of that
     /// chromaticity's CCT, see [`xy_spec_cct`]), or any other spec that resolves to
@@ -492,6 +510,28 @@ mod tests {
         assert!(xy_spec_cct("xy:0.9,0.9").is_err());
         assert!(xy_spec_cct("xy:1,2,3").is_err());
         assert!(xy_spec_cct("xy:ä").is_err());
+    }
+
+    #[test]
+    fn holds_what_resolve_answers_without_a_fit() {
+        let mut r = IlluminantRegistry::with_defaults(WavelengthGrid::default(), None).unwrap();
+        assert!(r.holds("D65") && r.holds("tungsten"));
+        for spec in [
+            "cct:4321",
+            "xy:0.3721,0.3751",
+            "csv:x.csv",
+            "nonesuch",
+            "xy:0.9,0.9",
+        ] {
+            assert!(!r.holds(spec), "{spec}");
+        }
+        r.resolve("cct:4321.2", None).unwrap();
+        assert!(r.holds("cct:4321") && r.holds("cct:4320.9"));
+        // that chromaticity's colour temperature rounds to another kelvin
+        let k = xy_spec_cct("xy:0.3721,0.3751").unwrap().unwrap().round();
+        assert!(!r.holds("xy:0.3721,0.3751"));
+        r.resolve("xy:0.3721,0.3751", None).unwrap();
+        assert!(r.holds("xy:0.3721,0.3751") && r.holds(&format!("cct:{k}")));
     }
 
     #[test]
