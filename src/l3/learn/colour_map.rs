@@ -70,10 +70,13 @@
 use nalgebra::{DMatrix, DVector};
 
 use super::LearnError;
+use super::spec::TrainingSpec;
 use crate::baseline::ColourMatrix;
+use crate::camera::{Camera, SensorDesign};
 use crate::l3::classify::ChromaClasses;
-use crate::l3::correct::{ColourSamples, LevelNoise, NoiseModel, mean_loss_fit};
+use crate::l3::correct::{ColourSamples, LevelNoise, Mat3, NoiseModel, mean_loss_fit};
 use crate::l3::params::{ColourLoss, ColourMapFit};
+use crate::spectral::Spectrum;
 
 /// The plain least-squares linear map `XYZ = M · channels` over `samples`:
 /// the noise-free reference an L3 table is compared with.
@@ -297,6 +300,21 @@ fn solve_level(
         )));
     }
     Ok(m)
+}
+
+/// What a run's colour maps are fitted from: its camera and sensor, its spec, its lights
+/// (with their corrections T to D65, for a same-illuminant table), D65 and the
+/// reflectances.
+pub(super) struct MapInputs<'a> {
+    pub(super) camera: &'a Camera,
+    pub(super) design: &'a SensorDesign,
+    pub(super) spec: &'a TrainingSpec,
+    /// The lights' names, as the table records them (`TableMeta::train_illuminants`).
+    pub(super) names: &'a [String],
+    pub(super) lights: &'a [Spectrum],
+    pub(super) corrections: &'a [Mat3],
+    pub(super) d65: &'a Spectrum,
+    pub(super) refl: &'a [Spectrum],
 }
 
 #[cfg(test)]

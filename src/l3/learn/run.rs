@@ -14,7 +14,7 @@ use rand_chacha::ChaCha8Rng;
 use sha2::{Digest, Sha256};
 
 use super::LearnError;
-use super::colour_map::{band_maps, level_maps};
+use super::colour_map::{MapInputs, band_maps, level_maps};
 use super::partial_format::PARTIAL_FORMAT_VERSION;
 use super::scenes::{TrainingScenes, mix};
 use super::setup::{ClassMaps, Learned, TrainControl, TrainSetup, TrainingFrame};
@@ -453,21 +453,6 @@ impl TrainingRun {
         table.meta.training_seconds = self.started.elapsed().as_secs_f64();
         Ok(table)
     }
-}
-
-/// What a run's colour maps are fitted from: its camera and sensor, its spec, its lights
-/// (with their corrections T to D65, for a same-illuminant table), D65 and the
-/// reflectances.
-pub(super) struct MapInputs<'a> {
-    pub(super) camera: &'a Camera,
-    pub(super) design: &'a SensorDesign,
-    pub(super) spec: &'a TrainingSpec,
-    /// The lights' names, as the table records them (`TableMeta::train_illuminants`).
-    pub(super) names: &'a [String],
-    pub(super) lights: &'a [Spectrum],
-    pub(super) corrections: &'a [Mat3],
-    pub(super) d65: &'a Spectrum,
-    pub(super) refl: &'a [Spectrum],
 }
 
 /// A run's colour maps, and what they bring into its parameters and geometry.

@@ -47,8 +47,7 @@
 use serde::{Deserialize, Serialize};
 
 use super::LearnError;
-use super::colour_map::level_maps;
-use super::run::MapInputs;
+use super::colour_map::{MapInputs, level_maps};
 use crate::baseline::ColourMatrix;
 use crate::camera::Camera;
 use crate::colour::{ciede2000, xyz_to_lab};
