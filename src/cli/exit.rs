@@ -204,22 +204,10 @@ impl FaultOf for IoError {
     /// A file that cannot be opened, read or written, or an encoder's failure: a failure; a
     /// file whose contents are not a frame: invalid.
     fn fault(&self) -> Fault {
-        use IoError::*;
-        match self {
-            File { .. } | Encode { .. } => Fault::Failure,
-            ZeroDimension { .. }
-            | DimensionTooLarge { .. }
-            | TooManyPixels { .. }
-            | Length { .. }
-            | UnknownFormat { .. }
-            | PixelLayout { .. }
-            | Png(_)
-            | Tiff(_)
-            | Dng(_)
-            | Pgm(_)
-            | NonFinite { .. }
-            | Sidecar { .. }
-            | InvalidMeta(_) => Fault::Invalid,
+        if self.is_input() {
+            Fault::Invalid
+        } else {
+            Fault::Failure
         }
     }
 }

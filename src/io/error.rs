@@ -94,6 +94,29 @@ pub enum IoError {
 pub type IoResult<T> = Result<T, IoError>;
 
 impl IoError {
+    /// Whether the input's contents are at fault (a frame that does not decode or is not a
+    /// frame), rather than the system (a file that cannot be read or written, an encoder that
+    /// failed). The command line's exit code and the service's status both follow it.
+    pub fn is_input(&self) -> bool {
+        use IoError::*;
+        match self {
+            File { .. } | Encode { .. } => false,
+            ZeroDimension { .. }
+            | DimensionTooLarge { .. }
+            | TooManyPixels { .. }
+            | Length { .. }
+            | UnknownFormat { .. }
+            | PixelLayout { .. }
+            | Png(_)
+            | Tiff(_)
+            | Dng(_)
+            | Pgm(_)
+            | NonFinite { .. }
+            | Sidecar { .. }
+            | InvalidMeta(_) => true,
+        }
+    }
+
     pub(crate) fn file(
         action: &'static str,
         path: &std::path::Path,
@@ -104,5 +127,23 @@ impl IoError {
             path: path.to_path_buf(),
             source,
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_frame_that_is_no_frame_is_the_input_and_a_file_the_system() {
+        assert!(
+            IoError::ZeroDimension {
+                width: 0,
+                height: 4
+            }
+            .is_input()
+        );
+        let missing = std::io::Error::from(std::io::ErrorKind::NotFound);
+        assert!(!IoError::file("read", std::path::Path::new("x.raw"), missing).is_input());
     }
 }

@@ -320,22 +320,10 @@ impl From<StoreError> for ServiceError {
 
 impl From<crate::io::IoError> for ServiceError {
     fn from(e: crate::io::IoError) -> Self {
-        use crate::io::IoError::*;
-        match e {
-            File { .. } | Encode { .. } => ServiceError::Internal(e.to_string()),
-            Length { .. }
-            | ZeroDimension { .. }
-            | DimensionTooLarge { .. }
-            | TooManyPixels { .. }
-            | UnknownFormat { .. }
-            | PixelLayout { .. }
-            | Png(_)
-            | Tiff(_)
-            | Dng(_)
-            | Pgm(_)
-            | NonFinite { .. }
-            | Sidecar { .. }
-            | InvalidMeta(_) => ServiceError::InvalidImage(e.to_string()),
+        if e.is_input() {
+            ServiceError::InvalidImage(e.to_string())
+        } else {
+            ServiceError::Internal(e.to_string())
         }
     }
 }
