@@ -432,11 +432,14 @@ impl IlluminantRegistry {
         let parsed = IlluminantSpec::parse(spec)?;
         match &parsed {
             IlluminantSpec::Cct(k) => {
-                let name = format!("cct:{}", k.round());
+                // computed at the kelvin it is cached under, so that what a request gets does
+                // not depend on which nearby temperature was asked for first
+                let k = k.round();
+                let name = format!("cct:{k}");
                 if let Some(e) = self.get(&name) {
                     return Ok(e.clone());
                 }
-                Ok(self.insert_cct(&name, *k)?.clone())
+                Ok(self.insert_cct(&name, k)?.clone())
             }
             IlluminantSpec::Csv { .. } => {
                 // never cache arbitrary files under their path
@@ -532,6 +535,27 @@ mod tests {
         assert!(!r.holds("xy:0.3721,0.3751"));
         r.resolve("xy:0.3721,0.3751", None).unwrap();
         assert!(r.holds("xy:0.3721,0.3751") && r.holds(&format!("cct:{k}")));
+    }
+
+    /// `cct:K` is the light of the nearest kelvin, whichever request computed it first (at
+    /// 4000 K the light switches from Planck's to daylight).
+    #[test]
+    fn cct_is_computed_at_the_kelvin_it_is_cached_under() {
+        let g = WavelengthGrid::default();
+        for (first, then) in [("cct:3999.5", "cct:4000"), ("cct:1500.4", "cct:1500")] {
+            let mut warm = IlluminantRegistry::with_defaults(g, None).unwrap();
+            warm.resolve(first, None).unwrap();
+            let mut cold = IlluminantRegistry::with_defaults(g, None).unwrap();
+            assert_eq!(
+                warm.resolve(then, None).unwrap().t,
+                cold.resolve(then, None).unwrap().t,
+                "{first} then {then}"
+            );
+            assert_eq!(
+                cold.resolve(first, None).unwrap().t,
+                warm.resolve(first, None).unwrap().t
+            );
+        }
     }
 
     #[test]
