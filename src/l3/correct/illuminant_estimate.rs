@@ -17,7 +17,7 @@
 
 use super::CorrectError;
 use crate::camera::Cfa;
-use crate::l3::render::Mosaic;
+use crate::l3::render::{DnScale, Mosaic};
 use crate::l3::table::{L3Table, TableError};
 
 /// Tiles with a value at or above this fraction of the swing are left out.
@@ -133,15 +133,20 @@ fn tile_channel_means(
             "the mosaic has {len} values for a {width}×{height} frame"
         )));
     }
-    let swing = swing as f32;
     let volts_at: Box<dyn Fn(usize) -> f32 + '_> = match mosaic {
         Mosaic::Volts(v) => Box::new(move |i| v[i]),
         Mosaic::Dn { data, black, white } => {
-            let (b, range) = (*black as f32, (*white as f32 - *black as f32).max(1.0));
-            Box::new(move |i| (data[i] as f32 - b) / range * swing)
+            // the volts a decoded frame holds, to the last bit: on coarse (8-bit) data the
+            // brightest tiles tie, and another rounding would choose other tiles
+            let dn = DnScale::new(*black, *white, swing).ok_or_else(|| {
+                CorrectError::InvalidInput(format!(
+                    "white level {white} must exceed black level {black}"
+                ))
+            })?;
+            Box::new(move |i| dn.volts(data[i]))
         }
     };
-    let clip = CLIP_FRACTION * swing;
+    let clip = CLIP_FRACTION * swing as f32;
     let nc = cfa.n_channels();
     let mut counts = vec![0usize; nc];
     for &c in &cfa.pattern {
@@ -392,6 +397,38 @@ mod tests {
             (n[0].1 - 0.5).abs() < 1e-6 && (n[2].1 - 1.0).abs() < 1e-6,
             "{n:?}"
         );
+    }
+
+    /// A DN frame gives the neutral its decoded volts give, to the bit, even on 8-bit data
+    /// where many tiles tie on brightness (the service estimates from DN, the CLI from volts).
+    #[test]
+    fn dn_and_decoded_volts_give_the_same_neutral() {
+        let (w, h) = (96, 64);
+        let mut state = 0x2545_f491_u32;
+        let data: Vec<u16> = (0..w * h)
+            .map(|_| {
+                state ^= state << 13;
+                state ^= state >> 17;
+                state ^= state << 5;
+                (state % 256) as u16
+            })
+            .collect();
+        for (black, white) in [(0u16, 255u16), (16, 255), (0, 100)] {
+            let frame = crate::io::RawFrame::new(w, h, data.clone()).unwrap();
+            let meta = crate::io::RawMeta::new(w, h, "RG/WB", black, white, 1.8);
+            let volts = frame.to_volts(&meta).unwrap();
+            let dn = Mosaic::Dn {
+                data: &data,
+                black,
+                white,
+            };
+            let s = NeutralStatistic::BrightTiles;
+            assert_eq!(
+                frame_neutral(&dn, w, h, &rgbw(), 1.8, s).unwrap(),
+                frame_neutral(&Mosaic::Volts(&volts), w, h, &rgbw(), 1.8, s).unwrap(),
+                "black {black}, white {white}"
+            );
+        }
     }
 
     #[test]

@@ -11,7 +11,7 @@ pub(super) mod reference;
 
 pub use chroma::{ChromaMode, ChromaStage, UnknownChromaMode};
 pub use error::RenderError;
-pub use fast::{FastOptions, FastRenderer, Frame, Mosaic, Region};
+pub use fast::{DnScale, FastOptions, FastRenderer, Frame, Mosaic, Region};
 pub use output::{
     WHITE_GRID, WhiteLevel, linear_srgb_matrix, white_from_samples, white_sample_points, white_y,
     xyz_to_srgb8, xyz_to_srgb16,

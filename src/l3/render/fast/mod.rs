@@ -49,6 +49,7 @@ mod tile;
 mod wide;
 
 pub use frames::Frame;
+pub use source::DnScale;
 
 use dispatch::{avx512_available, simd_available};
 use kernels::KernelSet;

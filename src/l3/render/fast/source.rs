@@ -14,17 +14,33 @@ pub(super) struct Source<'a> {
     pub(super) dn: DnScale,
 }
 
-/// The f64 constants of the DN → volts conversion.
+/// DN → volts: `((dn − black) · scale).clamp(0, swing)` in f64, then f32, the arithmetic of
+/// `RawFrame::to_volts`, so that every path that reads a DN frame (the renderers, the light's
+/// estimate) sees the volts a decoded frame holds, to the last bit.
 #[derive(Clone, Copy, Debug, Default)]
-pub(super) struct DnScale {
-    pub(super) black: f64,
-    pub(super) scale: f64,
-    pub(super) swing: f64,
+pub struct DnScale {
+    black: f64,
+    scale: f64,
+    swing: f64,
 }
 
 impl DnScale {
+    /// The conversion for `black` and `white` levels and a `swing` in volts; `None` unless
+    /// white exceeds black.
+    pub fn new(black: u16, white: u16, swing: f64) -> Option<DnScale> {
+        (white > black).then(|| {
+            let b = f64::from(black);
+            DnScale {
+                black: b,
+                scale: swing / (f64::from(white) - b),
+                swing,
+            }
+        })
+    }
+
+    /// The volts of `d`.
     #[inline(always)]
-    pub(super) fn volts(&self, d: u16) -> f32 {
+    pub fn volts(&self, d: u16) -> f32 {
         ((f64::from(d) - self.black) * self.scale).clamp(0.0, self.swing) as f32
     }
 }
@@ -131,17 +147,11 @@ impl FastRenderer {
                 (v.len(), DnScale::default(), clamped)
             }
             Mosaic::Dn { data, black, white } => {
-                if white <= black {
-                    return Err(RenderError::InvalidInput(format!(
+                let dn = DnScale::new(black, white, self.swing_f64).ok_or_else(|| {
+                    RenderError::InvalidInput(format!(
                         "white level {white} must exceed black level {black}"
-                    )));
-                }
-                let (b, s) = (f64::from(black), self.swing_f64);
-                let dn = DnScale {
-                    black: b,
-                    scale: s / (f64::from(white) - b),
-                    swing: s,
-                };
+                    ))
+                })?;
                 (data.len(), dn, 0)
             }
         };
