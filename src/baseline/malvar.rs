@@ -71,7 +71,7 @@ pub fn malvar_demosaic(
 ) -> Result<Vec<f32>, BaselineError> {
     check_frame(volts, width, height)?;
     let lay = BayerLayout::of(cfa).ok_or_else(|| {
-        BaselineError::InvalidInput(format!("Malvar demosaicking needs a Bayer CFA, not {cfa}"))
+        BaselineError::InvalidParams(format!("Malvar demosaicking needs a Bayer CFA, not {cfa}"))
     })?;
     let site = |r: usize, c: usize| -> Site {
         let (rr, rc) = lay.r_at;
