@@ -22,6 +22,34 @@ pub struct LoadedDesign {
     pub notes: Vec<CoverageNote>,
 }
 
+/// The longest design name.
+pub const MAX_NAME_LEN: usize = 100;
+
+/// The largest analog offset, as a fraction of the voltage swing.
+pub const MAX_OFFSET_FRACTION: f64 = 0.5;
+
+/// A design's name is a file name on every system, and no path: letters, digits, `-`, `_`,
+/// `.`, `+`, not starting with `.`.
+fn is_identifier(name: &str) -> bool {
+    name.len() <= MAX_NAME_LEN
+        && !name.starts_with('.')
+        && name
+            .chars()
+            .all(|c| c.is_ascii_alphanumeric() || matches!(c, '-' | '_' | '.' | '+'))
+}
+
+/// A 1×4 tile of R, G, G and B: the way datasheets name a Bayer phase (`RGGB`), which
+/// [`Cfa::parse`] reads as a stripe.
+fn looks_like_bayer_in_one_row(cfa: &Cfa) -> bool {
+    let mut names: Vec<&str> = cfa
+        .pattern
+        .iter()
+        .map(|&c| cfa.channel_names[c].as_str())
+        .collect();
+    names.sort_unstable();
+    cfa.rows == 1 && names == ["B", "G", "G", "R"]
+}
+
 /// A complete sensor design (docs/design.md §3). Units are in the field names.
 /// Fields omitted from a TOML file take the paper's Figure 2 value
 /// ([`SensorDesign::paper_default`]), except that a file giving its own `cfa`
@@ -268,7 +296,7 @@ impl SensorDesign {
             path: "<text>".into(),
             msg: e.to_string(),
         };
-        let d: Self = toml::from_str(text).map_err(toml_err)?;
+        let mut d: Self = toml::from_str(text).map_err(toml_err)?;
         let keys: toml::Table = toml::from_str(text).map_err(toml_err)?;
         d.check_given(|k| keys.contains_key(k))?;
         d.validate()?;
@@ -279,23 +307,23 @@ impl SensorDesign {
     /// checked as a file is ([`Self::check_given`], [`Self::validate`]).
     pub fn from_json(value: serde_json::Value) -> Result<Self, CameraError> {
         let given = |k: &str| value.get(k).is_some_and(|v| !v.is_null());
-        let (has_name, has_cfa, has_filters) = (given("name"), given("cfa"), given("filters"));
-        let d: Self =
+        let keys = ["name", "description", "cfa", "filters"];
+        let has = keys.map(given);
+        let mut d: Self =
             serde_json::from_value(value).map_err(|e| CameraError::Json(e.to_string()))?;
-        d.check_given(|k| match k {
-            "name" => has_name,
-            "cfa" => has_cfa,
-            "filters" => has_filters,
-            _ => false,
-        })?;
+        d.check_given(|k| keys.iter().zip(has).any(|(key, h)| h && *key == k))?;
         d.validate()?;
         Ok(d)
     }
 
     /// What a design must give itself rather than take from the paper's: its `name` (else
-    /// it would pass for `rgbw-paper`), and, with its own `cfa`, the matching `filters`
-    /// (when the paper's do not match it). `given` says whether a key was given.
-    fn check_given(&self, given: impl Fn(&str) -> bool) -> Result<(), CameraError> {
+    /// it would pass for `rgbw-paper`), with its own `cfa` the matching `filters`, and with
+    /// its own `filters` the `cfa` they fit (when the paper's do not match). A design without
+    /// a `description` has none, not the paper sensor's. `given` says whether a key was given.
+    fn check_given(&mut self, given: impl Fn(&str) -> bool) -> Result<(), CameraError> {
+        if !given("description") {
+            self.description.clear();
+        }
         if !given("name") {
             return Err(CameraError::InvalidDesign(
                 "`name` is missing: a sensor design must name itself (name = \"my-sensor\"), \
@@ -308,6 +336,17 @@ impl SensorDesign {
         let mut theirs: Vec<&String> = paper.filters.keys().collect();
         ours.sort();
         theirs.sort();
+        let mut filters: Vec<&String> = self.filters.keys().collect();
+        filters.sort();
+        if given("filters") && !given("cfa") && filters != ours {
+            return Err(CameraError::InvalidDesign(format!(
+                "'{}': [filters] ({}) are given without a cfa; without one the CFA is the \
+                 paper's \"{}\": give the pattern, e.g. cfa = \"RG/GB\"",
+                self.name,
+                self.filters.keys().cloned().collect::<Vec<_>>().join(", "),
+                self.cfa
+            )));
+        }
         if given("cfa") && !given("filters") && ours != theirs {
             return Err(CameraError::InvalidDesign(format!(
                 "'{}': cfa \"{}\" is given without [filters]: a file giving its own cfa must \
@@ -339,6 +378,13 @@ impl SensorDesign {
         let err = |msg: String| Err(CameraError::InvalidDesign(format!("'{name}': {msg}")));
         if self.name.trim().is_empty() {
             return err("name is empty".into());
+        }
+        if !is_identifier(&self.name) {
+            return err(format!(
+                "name '{}' must be an identifier: up to {MAX_NAME_LEN} letters, digits, '-', \
+                 '_', '.' or '+', not starting with '.' (it names folders and tables)",
+                self.name
+            ));
         }
         let ranges: [(&str, f64, f64, f64, bool); 12] = [
             // (field, value, low, high, low is inclusive)
@@ -386,9 +432,11 @@ impl SensorDesign {
                 return err(format!("{field} = {v} must be within {open}{lo}, {hi}]"));
             }
         }
-        if !(self.offset_v.is_finite() && self.offset_v.abs() < self.voltage_swing_v) {
+        let max_offset = MAX_OFFSET_FRACTION * self.voltage_swing_v;
+        if !(self.offset_v.is_finite() && self.offset_v.abs() <= max_offset) {
             return err(format!(
-                "offset_v = {} must be finite and smaller in magnitude than the swing {} V",
+                "offset_v = {} must be finite and at most {max_offset} V in magnitude (half the \
+                 swing {} V: the signal needs the rest)",
                 self.offset_v, self.voltage_swing_v
             ));
         }
@@ -404,6 +452,13 @@ impl SensorDesign {
             ));
         }
         self.validate_channels(name)?;
+        if looks_like_bayer_in_one_row(&self.cfa) {
+            return err(format!(
+                "cfa \"{}\" is one row of four pixels; a 2×2 tile is written row by row with \
+                 '/', e.g. \"RG/GB\" for RGGB",
+                self.cfa
+            ));
+        }
         self.ir_cut.validate(&format!("'{name}': ir_cut"))?;
         self.qe.validate(&format!("'{name}': qe"))?;
         Ok(())
@@ -481,8 +536,15 @@ impl SensorDesign {
             let (r, note) = f.resolve_noted(grid, iset, &what)?;
             let r = r.product(&common)?;
             if r.max() <= 0.0 {
+                // a curve sampled off the grid (in µm, say) is the likely cause: say so
+                let off_grid: String = notes
+                    .iter()
+                    .chain(&note)
+                    .map(|n| format!("; {n}"))
+                    .collect();
                 return Err(CameraError::InvalidDesign(format!(
-                    "{what}: the channel has no response on {}–{} nm (filter × IR-cut × QE is zero)",
+                    "{what}: the channel has no response on {}–{} nm (filter × IR-cut × QE is \
+                     zero){off_grid}",
                     grid.start_nm,
                     grid.end_nm()
                 )));

@@ -83,6 +83,16 @@ pub fn run(cli: &Cli, a: &SimulateArgs) -> Result<(), CliError> {
         a.seed,
     )?;
     let secs = started.elapsed().as_secs_f64();
+    let auto = a.exposure.trim().eq_ignore_ascii_case("auto");
+    if auto && cap.exposure_s >= crate::camera::MAX_AUTO_EXPOSURE_S {
+        eprintln!(
+            "warning: auto-exposure stopped at its longest, {} s: the sensor '{}' collects too \
+             little light from this scene to reach 95 % of its swing (its curves' scale?); the \
+             frame is mostly noise",
+            crate::camera::MAX_AUTO_EXPOSURE_S,
+            design.name
+        );
+    }
     let (h, w) = cap.volts.dim();
     let swing = design.voltage_swing_v;
     let volts = cap.volts.as_slice().unwrap_or(&[]);

@@ -135,7 +135,10 @@ fn a_design_prints_with_its_curves_inline() {
     assert_eq!(inline.name, "my-camera");
     let r = serde_json::to_value(&inline).unwrap()["filters"]["R"].clone();
     let nm = r["samples"]["wavelength_nm"].as_array().unwrap();
-    assert_eq!((nm.len(), nm[0].as_f64()), (81, Some(380.0)), "{r}");
+    // the file's 380–780 nm at 5 nm, cut to what the 400–700 nm grid reaches (390–710 nm)
+    // and one sample beyond either end
+    let ends = (nm[0].as_f64(), nm[nm.len() - 1].as_f64());
+    assert_eq!((nm.len(), ends), (67, (Some(385.0), Some(715.0))), "{r}");
     let from_file = l3::camera::SensorDesign::load(d.join("my_camera.toml"), None).unwrap();
     let grid = l3::spectral::WavelengthGrid::default();
     let (a, b) = (

@@ -113,6 +113,9 @@ impl std::fmt::Display for CoverageNote {
     }
 }
 
+/// Negative values down to this fraction of a curve's peak are measurement noise, taken as 0.
+pub const NEGATIVE_NOISE_FRACTION: f64 = 0.01;
+
 /// Parameters of [`FilterSpec::Samples`] as written in TOML.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
@@ -364,6 +367,7 @@ impl FilterSpec {
     ) -> Result<(Spectrum, Option<CoverageNote>), CameraError> {
         self.validate(what)?;
         let mut note = None;
+        let mut source = String::new();
         let spectrum = match self {
             FilterSpec::Gaussian {
                 center_nm,
@@ -382,8 +386,9 @@ impl FilterSpec {
                 scale,
             } => {
                 let samples = csv_samples(path, column, iset, what)?;
-                let source = format!("{path} (column '{column}')");
-                note = CoverageNote::of(&samples, grid, what, source);
+                source = format!(" ({path}, column '{column}')");
+                note =
+                    CoverageNote::of(&samples, grid, what, format!("{path} (column '{column}')"));
                 samples.resample(grid, Extrapolation::Zero).scaled(*scale)
             }
             FilterSpec::Samples {
@@ -396,16 +401,29 @@ impl FilterSpec {
                 samples.resample(grid, Extrapolation::Zero).scaled(*scale)
             }
         };
-        for (i, &v) in spectrum.values().iter().enumerate() {
-            if !(v.is_finite() && (-1e-12..=1.0 + 1e-9).contains(&v)) {
+        // measurement noise leaves small negatives in a curve's tails: they are zero
+        let peak = spectrum.max().max(0.0);
+        let floor = -NEGATIVE_NOISE_FRACTION * peak;
+        let mut values = spectrum.values().to_vec();
+        for (i, v) in values.iter_mut().enumerate() {
+            let band = grid.wavelength(i);
+            if !v.is_finite() || *v > 1.0 + 1e-9 {
                 return Err(CameraError::InvalidDesign(format!(
-                    "{what}: value {v} at {} nm is outside [0, 1] (a transmittance or quantum \
-                     efficiency; use `scale` for data in percent)",
-                    grid.wavelength(i)
+                    "{what}{source}: value {v} (averaged over the band at {band} nm) is outside \
+                     [0, 1] (a transmittance or quantum efficiency; use `scale` for data in \
+                     percent)"
                 )));
             }
+            if *v < -1e-12 && *v < floor {
+                return Err(CameraError::InvalidDesign(format!(
+                    "{what}{source}: value {v} (averaged over the band at {band} nm) is \
+                     negative beyond measurement noise ({:.0} % of the peak {peak})",
+                    NEGATIVE_NOISE_FRACTION * 100.0
+                )));
+            }
+            *v = v.max(0.0);
         }
-        Ok((spectrum, note))
+        Ok((Spectrum::new(*grid, values)?, note))
     }
 }
 
@@ -423,9 +441,35 @@ impl FilterSpec {
             return Ok(self.clone());
         };
         let samples = csv_samples(path, column, iset, what)?;
+        let (w, v) = (samples.wavelengths(), samples.values());
+        // the samples the default grid's bands reach, and one beyond either end, so that the
+        // curve resolves exactly as its file does
+        let (lo, hi) = {
+            let g = WavelengthGrid::default();
+            (g.start_nm - g.step_nm, g.end_nm() + g.step_nm)
+        };
+        let first = w.partition_point(|&x| x < lo).saturating_sub(1);
+        let last = (w.partition_point(|&x| x <= hi) + 1).min(w.len());
+        // a curve off the grid stays whole, for the error that names its range
+        let (first, last) = if last - first < 2 {
+            (0, w.len())
+        } else {
+            (first, last)
+        };
+        if last - first > MAX_INLINE_SAMPLES {
+            return Err(CameraError::InvalidDesign(format!(
+                "{what}: {} has {} samples between {} and {} nm; a design inlined for the \
+                 service takes at most {MAX_INLINE_SAMPLES} per curve (resample the file, to \
+                 1 nm say)",
+                path,
+                last - first,
+                w[first],
+                w[last - 1]
+            )));
+        }
         Ok(FilterSpec::Samples {
-            wavelength_nm: samples.wavelengths().to_vec(),
-            values: samples.values().to_vec(),
+            wavelength_nm: w[first..last].to_vec(),
+            values: v[first..last].to_vec(),
             scale: *scale,
         })
     }

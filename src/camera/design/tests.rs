@@ -134,6 +134,10 @@ fn validation_errors_are_clear() {
     check(&|d| d.optics.f_number = 0.0, "f_number");
     check(&|d| d.adc_bits = Some(40), "adc_bits");
     check(&|d| d.offset_v = 2.0, "offset_v");
+    // auto-exposure aims at 95 % of the swing: an offset near it leaves no signal
+    check(&|d| d.offset_v = 1.71, "half the swing");
+    check(&|d| d.name = "../escaped".into(), "identifier");
+    check(&|d| d.name = "a b".into(), "identifier");
     check(&|d| d.rows = 0, "size");
     check(&|d| d.name = String::new(), "name is empty");
     check(
@@ -425,4 +429,87 @@ fn no_catalogue_sensor_is_noted() {
         let notes = d.resolve_curves_noted(&grid, None).unwrap().1;
         assert!(notes.is_empty(), "{}: {notes:?}", d.name);
     }
+}
+
+/// What a file must say for itself: the CFA its filters fit, a Bayer tile as rows, its own
+/// description.
+#[test]
+fn a_file_states_its_cfa_and_description() {
+    let rgb = "[filters]\nR = { constant = 0.5 }\nG = { constant = 0.6 }\nB = { constant = 0.4 }\n";
+    let e = SensorDesign::from_toml_str(&format!("name = \"s\"\n{rgb}")).unwrap_err();
+    assert!(
+        e.to_string().contains("without a cfa") && e.to_string().contains("RG/WB"),
+        "{e}"
+    );
+    let e =
+        SensorDesign::from_toml_str(&format!("name = \"s\"\ncfa = \"RGGB\"\n{rgb}")).unwrap_err();
+    assert!(e.to_string().contains("\"RG/GB\""), "{e}");
+    let d = SensorDesign::from_toml_str(&format!("name = \"s\"\ncfa = \"RG/GB\"\n{rgb}")).unwrap();
+    assert_eq!(d.description, "");
+    let d = SensorDesign::from_toml_str(&format!(
+        "name = \"s\"\ndescription = \"mine\"\ncfa = \"RG/GB\"\n{rgb}"
+    ))
+    .unwrap();
+    assert_eq!(d.description, "mine");
+    let j = SensorDesign::from_json(serde_json::json!({"name": "s"})).unwrap();
+    assert_eq!(j.description, "");
+}
+
+/// Small negatives in a measured curve's tails are noise, taken as zero; larger ones are
+/// refused, naming the samples' source.
+#[test]
+fn negative_noise_in_a_curve_is_zero() {
+    let grid = WavelengthGrid::default();
+    let curve = |tail: f64| FilterSpec::Samples {
+        wavelength_nm: vec![390.0, 550.0, 690.0, 710.0],
+        values: vec![0.2, 0.8, tail, tail],
+        scale: 1.0,
+    };
+    let (s, _) = curve(-0.004).resolve_noted(&grid, None, "f").unwrap();
+    assert!(s.values().iter().all(|&v| v >= 0.0));
+    assert_eq!(s.values()[30], 0.0);
+    let e = curve(-0.1).resolve_noted(&grid, None, "f").unwrap_err();
+    assert!(e.to_string().contains("negative"), "{e}");
+}
+
+/// A finely sampled file inlines to the samples the grid reaches (within the service's
+/// limit) and resolves as the file does.
+#[test]
+fn a_fine_csv_inlines_within_the_limit() {
+    let dir = std::env::temp_dir().join(format!("l3-inline-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let csv = dir.join("fine.csv");
+    let mut text = String::from("wavelength_nm,R,G,B\n");
+    for i in 0..=8000 {
+        let w = 300.0 + f64::from(i) * 0.1;
+        let g = |c: f64| (-0.5 * ((w - c) / 40.0).powi(2)).exp();
+        text.push_str(&format!("{w:.1},{},{},{}\n", g(600.0), g(540.0), g(450.0)));
+    }
+    std::fs::write(&csv, text).unwrap();
+    let toml = "name = \"fine\"\ncfa = \"RG/GB\"\n[filters]\n\
+                R = { csv = \"fine.csv\", column = \"R\" }\n\
+                G = { csv = \"fine.csv\", column = \"G\" }\n\
+                B = { csv = \"fine.csv\", column = \"B\" }\n";
+    let path = dir.join("fine.toml");
+    std::fs::write(&path, toml).unwrap();
+    let d = SensorDesign::load(&path, None).unwrap();
+    let inline = d.clone().inlined(None).unwrap();
+    let grid = WavelengthGrid::default();
+    for f in inline.filters.values() {
+        let FilterSpec::Samples { wavelength_nm, .. } = f else {
+            panic!("not inlined: {f:?}");
+        };
+        assert!(wavelength_nm.len() <= filter::MAX_INLINE_SAMPLES);
+    }
+    inline.validate().unwrap();
+    let (a, b) = (
+        d.resolve_curves(&grid, None).unwrap(),
+        inline.resolve_curves(&grid, None).unwrap(),
+    );
+    for (a, b) in a.iter().zip(&b) {
+        for (x, y) in a.values().iter().zip(b.values()) {
+            assert!((x - y).abs() < 1e-12, "{x} {y}");
+        }
+    }
+    std::fs::remove_dir_all(&dir).ok();
 }

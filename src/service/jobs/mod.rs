@@ -180,6 +180,9 @@ pub async fn submit(
     super::render::require_json(&headers)?;
     let body = super::render::body_bytes(body, state.config.server.max_body_bytes)?;
     let (req, value) = submission::parse_submission(&state, &body)?;
+    if value.get("sensor").is_some_and(Value::is_object) {
+        submission::check_curves(&state, &req).await?;
+    }
     let key = idempotency_key(&headers)?;
     // insert, or find the job the key already names (two replicas may race on one key)
     if let Some(id) = enqueue(&state, &value, &req, key.as_deref()).await? {

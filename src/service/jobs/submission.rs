@@ -12,6 +12,7 @@ use super::request::{JobRequest, parse_job_request};
 use crate::camera::{FilterSpec, SensorDesign};
 use crate::service::ServiceError;
 use crate::service::state::Inner;
+use crate::spectral::WavelengthGrid;
 
 /// Parses a submitted job's body ([`parse_job_request`]) after the checks above: registered
 /// lights are replaced by the spectral spec they stand for, so the stored request trains
@@ -32,6 +33,22 @@ pub fn parse_submission(state: &Inner, body: &[u8]) -> Result<(JobRequest, Value
         check_design(&req.sensor)?;
     }
     Ok((req, value))
+}
+
+/// A design object's curves resolve on the simulation grid (values in range, a response in
+/// every channel, tables that exist), as the CLI checks a design when it loads it: a design
+/// that can only fail is refused at submission, not queued. Resolving is CPU work (and may
+/// read the spectral data), so it runs on the render pool.
+pub async fn check_curves(state: &Inner, req: &JobRequest) -> Result<(), ServiceError> {
+    let design = req.sensor.clone();
+    let iset = state.iset.clone();
+    crate::service::cpu::run(&state.pools.render, "the sensor's curves", move || {
+        design
+            .resolve_curves(&WavelengthGrid::default(), iset.as_ref())
+            .map(|_| ())
+            .map_err(|e| ServiceError::BadRequest(format!("sensor: {e}")))
+    })
+    .await?
 }
 
 /// A design object sent over HTTP: not named like a catalogue sensor unless it is that

@@ -79,6 +79,24 @@ async fn training_jobs_read_no_file_of_the_server_and_take_no_camera_name() {
         "values": [0.5, 0.5]}});
     let d = problem_of(post(job(json!({"sensor": bad}))), 400, "bad_request").await;
     assert!(d.contains("increasing"), "{d}");
+    // curves that cannot train are refused at submission, as the CLI refuses them at load:
+    // a curve in percent, one sampled in µm, a table the spectral data lacks
+    for (curve, needle) in [
+        (
+            json!({"samples": {"wavelength_nm": [400.0, 700.0], "values": [50.0, 50.0]}}),
+            "percent",
+        ),
+        (
+            json!({"samples": {"wavelength_nm": [0.4, 0.7], "values": [0.5, 0.5]}}),
+            "no response",
+        ),
+        (json!({"csv": "cam.csv", "column": "R"}), "cam.csv"),
+    ] {
+        let mut bad = gaussian_bayer("my-inline");
+        bad["filters"]["R"] = curve;
+        let d = problem_of(post(job(json!({"sensor": bad}))), 400, "bad_request").await;
+        assert!(d.contains(needle), "{needle}: {d}");
+    }
     // a design object named like a catalogue camera, but not that camera
     let d = problem_of(
         post(job(json!({"sensor": gaussian_bayer("BAYER-SONY-ILCE-9")}))),
