@@ -218,7 +218,7 @@ impl FaultOf for EvalError {
     fn fault(&self) -> Fault {
         use EvalError::*;
         match self {
-            Invalid(_) => Fault::Invalid,
+            Invalid(_) | NoSignal(_) => Fault::Invalid,
             Table(e) => e.fault(),
             Correct(e) => e.fault(),
             Render(e) => e.fault(),

@@ -117,9 +117,7 @@ impl EdgeCapture {
     /// its e-SFR and its false colour. An edge the SFR cannot find in the render is an
     /// error ([`EvalError::Sfr`]).
     pub fn score(&self, rendered_xyz: &[f32]) -> Result<EdgeScore, EvalError> {
-        self.check(rendered_xyz)?;
-        let roi = Roi::of(&self.params);
-        let sfr = slanted_edge_sfr(roi.luminance(rendered_xyz, self.width)?.view())?;
+        let sfr = self.sfr(rendered_xyz)?;
         Ok(EdgeScore {
             mtf50: sfr.mtf50_cycles_per_pixel,
             mtf_at_half_nyquist: sfr.mtf_at_half_nyquist,
@@ -129,7 +127,17 @@ impl EdgeCapture {
         })
     }
 
-    /// The false colour of a rendered XYZ image alone (see the module doc).
+    /// The e-SFR of a rendered XYZ image alone ([`EvalError::Sfr`] when it finds no edge).
+    pub fn sfr(&self, rendered_xyz: &[f32]) -> Result<Sfr, EvalError> {
+        self.check(rendered_xyz)?;
+        let roi = Roi::of(&self.params);
+        Ok(slanted_edge_sfr(
+            roi.luminance(rendered_xyz, self.width)?.view(),
+        )?)
+    }
+
+    /// The false colour of a rendered XYZ image alone (see the module doc);
+    /// [`EvalError::NoSignal`] when the edge's light side is dark in some XYZ channel.
     pub fn false_colour(&self, rendered_xyz: &[f32]) -> Result<f64, EvalError> {
         self.check(rendered_xyz)?;
         false_colour(&self.params, rendered_xyz, self.width)
@@ -254,7 +262,7 @@ pub fn false_colour(p: &SlantedEdgeParams, xyz: &[f32], width: usize) -> Result<
     let flat = |d: f64| (FLAT_NEAR_PX..=FLAT_FAR_PX).contains(&d);
     let (bright, n) = mean_where(p, xyz, width, flat);
     if n == 0 || !bright.iter().all(|v| v.is_finite() && *v > 0.0) {
-        return Err(EvalError::Invalid(format!(
+        return Err(EvalError::NoSignal(format!(
             "the edge's light side has no signal (mean XYZ {bright:?})"
         )));
     }
@@ -392,5 +400,17 @@ mod tests {
         let flat = vec![0.5f32; cap.width * cap.height * 3];
         assert!(matches!(cap.score(&flat), Err(EvalError::Sfr(_))));
         assert!(cap.score(&flat[3..]).is_err());
+        // a render with no Z on the light side (a light with almost no blue) finds its edge,
+        // but has no false colour to measure
+        let no_blue: Vec<f32> = cap
+            .ideal_image
+            .chunks_exact(3)
+            .flat_map(|p| [p[0], p[1], 0.0])
+            .collect();
+        assert!(cap.sfr(&no_blue).is_ok());
+        assert!(matches!(
+            cap.false_colour(&no_blue),
+            Err(EvalError::NoSignal(_))
+        ));
     }
 }

@@ -70,6 +70,10 @@ pub use workflow::{
 pub enum EvalError {
     #[error("invalid evaluation input: {0}")]
     Invalid(String),
+    /// A render with no signal where a measure needs one (the light side of the edge chart
+    /// under a light with almost no blue, say): that measure is left out of a report.
+    #[error("no signal to measure: {0}")]
+    NoSignal(String),
     #[error(transparent)]
     Table(#[from] crate::l3::table::TableError),
     #[error(transparent)]

@@ -105,15 +105,20 @@ impl SpatialCaptures {
             ideal_mtf50: Some(e.ideal_sfr.mtf50_cycles_per_pixel),
             ..SpatialScore::default()
         };
-        match e.score(&edge_xyz) {
+        // what cannot be measured is left out: an edge the SFR cannot find in the render
+        // (noise at very low light), or a light side with no signal in some XYZ channel to
+        // measure false colour against (a light with almost no blue, such as cct:1000)
+        match e.sfr(&edge_xyz) {
             Ok(s) => {
-                out.mtf50 = Some(s.mtf50);
+                out.mtf50 = Some(s.mtf50_cycles_per_pixel);
                 out.mtf_at_half_nyquist = Some(s.mtf_at_half_nyquist);
-                out.false_colour = Some(s.false_colour);
             }
-            // no edge the SFR can find in the render (noise at very low light): the false
-            // colour needs only the scene's geometry
-            Err(EvalError::Sfr(_)) => out.false_colour = Some(e.false_colour(&edge_xyz)?),
+            Err(EvalError::Sfr(_)) => {}
+            Err(other) => return Err(other),
+        }
+        match e.false_colour(&edge_xyz) {
+            Ok(f) => out.false_colour = Some(f),
+            Err(EvalError::NoSignal(_)) => {}
             Err(other) => return Err(other),
         }
         let t = &self.texture;

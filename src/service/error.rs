@@ -410,7 +410,7 @@ impl ServiceError {
             // the camera-aware correction of a table that cannot be fitted: the table's fault
             Scene(SceneError::Image { .. }) | Learn(_) => false,
             // the evaluation's own edge, not the request's
-            Sfr(_) => false,
+            Sfr(_) | NoSignal(_) => false,
             Table(e) => e.is_input(),
             Correct(e) => e.is_input(),
             Render(e) => e.is_input(),
