@@ -121,6 +121,18 @@ impl<T> TableCache<T> {
         evicted
     }
 
+    /// Drops `id` (a table found unusable); whether it was cached.
+    pub fn remove(&self, id: &str) -> bool {
+        let mut lru = self.lock();
+        match lru.entries.remove(id) {
+            Some(e) => {
+                lru.held -= e.bytes;
+                true
+            }
+            None => false,
+        }
+    }
+
     /// Whether `id` is cached.
     pub fn contains(&self, id: &str) -> bool {
         self.lock().entries.contains_key(id)

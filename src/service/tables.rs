@@ -258,6 +258,10 @@ pub(super) async fn load_verified(
             if let Some(st) = e.status() {
                 tracing::error!(table = id, "{}; the table is marked {st}", e.message());
                 set_status(state, id, st, Some(e.message())).await?;
+                // renders by id stop too (the active table renders on from its verified copy)
+                if state.tables.remove(id) {
+                    state.forget_tables(&[id.to_string()]);
+                }
                 Err(ServiceError::Conflict(format!(
                     "table '{id}' cannot be used: {}",
                     e.message()
