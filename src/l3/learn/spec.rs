@@ -148,6 +148,14 @@ impl Default for TrainingSpec {
     }
 }
 
+/// The largest scene mean luminance a training spec takes, cd/m² (a sunlit scene is about
+/// 10⁴; beyond this the simulation's electron rates lose their meaning).
+pub const MAX_MEAN_LUMINANCE: f64 = 1e6;
+
+/// The most pixels per channel a colour map is fitted for (beyond it the noise is nil: 0 says
+/// so).
+pub const MAX_AVERAGING_PX: f64 = 1e6;
+
 impl TrainingSpec {
     pub fn validate(&self) -> Result<(), LearnError> {
         let bad = |m: String| Err(LearnError::Invalid(m));
@@ -169,18 +177,22 @@ impl TrainingSpec {
         if !(16..=1024).contains(&self.scene_size) {
             return bad(format!("scene_size {} (16 to 1024)", self.scene_size));
         }
+        let max_px = MAX_AVERAGING_PX;
         if let Some(px) = self.colour_averaging_px
-            && !(px.is_finite() && (px == 0.0 || px >= 1.0))
+            && !(px.is_finite() && (px == 0.0 || (1.0..=max_px).contains(&px)))
         {
-            return bad(format!("colour_averaging_px {px} (0, or at least 1)"));
+            return bad(format!("colour_averaging_px {px} (0, or 1 to {max_px})"));
         }
         if let Some(px) = self.texture_colour_averaging_px
-            && !(px.is_finite() && px >= 1.0)
+            && !(px.is_finite() && (1.0..=max_px).contains(&px))
         {
-            return bad(format!("texture_colour_averaging_px {px} (at least 1)"));
+            return bad(format!("texture_colour_averaging_px {px} (1 to {max_px})"));
         }
-        if !(self.mean_luminance.is_finite() && self.mean_luminance > 0.0) {
-            return bad(format!("mean_luminance {}", self.mean_luminance));
+        let l = self.mean_luminance;
+        if !(l.is_finite() && l > 0.0 && l <= MAX_MEAN_LUMINANCE) {
+            return bad(format!(
+                "mean_luminance {l} (above 0, at most {MAX_MEAN_LUMINANCE} cd/m²)"
+            ));
         }
         if !(1..=MAX_CHROMA_CLASSES).contains(&self.chroma_classes) {
             return bad(format!(
