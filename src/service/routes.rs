@@ -52,9 +52,16 @@ pub const ROUTES: &[(&str, &str)] = &[
 /// The committed OpenAPI document, served at `/openapi.yaml`.
 pub const OPENAPI_YAML: &str = include_str!("../../openapi.yaml");
 
-/// Routes that change nothing (no bearer token needed even when one is configured).
-fn is_mutating(method: &Method, path: &str) -> bool {
-    !(method == Method::GET || method == Method::HEAD || path == "/v1/render")
+/// Whether a request to `route` (the matched route's template) changes something, and so needs
+/// the bearer token when one is configured: a served route other than a read or a render. A
+/// method the route does not serve changes nothing: it gets its 405 whoever asks.
+fn is_mutating(method: &Method, route: &str) -> bool {
+    method != Method::GET
+        && method != Method::HEAD
+        && route != "/v1/render"
+        && ROUTES
+            .iter()
+            .any(|&(m, r)| m == method.as_str() && r == route)
 }
 
 fn handler(method: &str, path: &str) -> Option<MethodRouter<AppState>> {
@@ -167,7 +174,7 @@ async fn guard(State(state): State<AppState>, req: Request, next: Next) -> Respo
         .map(|p| p.as_str().to_string())
         .unwrap_or_else(|| "unmatched".into());
     let token = &state.config.server.bearer_token;
-    let resp = if !token.is_empty() && is_mutating(&method, req.uri().path()) {
+    let resp = if !token.is_empty() && is_mutating(&method, &route) {
         let ok = req
             .headers()
             .get(header::AUTHORIZATION)
@@ -277,9 +284,14 @@ mod tests {
     #[test]
     fn mutating_routes() {
         assert!(is_mutating(&Method::POST, "/v1/training-jobs"));
-        assert!(is_mutating(&Method::DELETE, "/v1/illuminants/x"));
+        assert!(is_mutating(&Method::DELETE, "/v1/illuminants/{name}"));
+        assert!(is_mutating(&Method::POST, "/v1/tables/{id}/activate"));
         assert!(!is_mutating(&Method::POST, "/v1/render"));
         assert!(!is_mutating(&Method::GET, "/v1/tables"));
+        // methods a route does not serve are answered 405, token or not
+        assert!(!is_mutating(&Method::DELETE, "/v1/tables"));
+        assert!(!is_mutating(&Method::OPTIONS, "/healthz"));
+        assert!(!is_mutating(&Method::POST, "unmatched"));
         assert!(constant_time_eq(b"abc", b"abc"));
         assert!(!constant_time_eq(b"abc", b"abd"));
         for (header, token) in [

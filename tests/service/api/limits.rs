@@ -67,6 +67,9 @@ async fn a_render_queued_past_the_longest_wait_gets_503_with_retry_after_and_mut
             .status(),
         200
     );
+    // a method a route does not serve is 405 with or without the token
+    let r = c.delete(url(&server, "/v1/tables")).send().await.unwrap();
+    problem(r, 405, "method_not_allowed").await;
     let r = c
         .post(url(&server, "/v1/training-jobs"))
         .bearer_auth("s3cret")
