@@ -241,15 +241,22 @@ impl SensorDesign {
         let (_, notes) = design
             .resolve_curves_noted(&WavelengthGrid::default(), iset)
             .map_err(|e| match e {
-                CameraError::InvalidDesign(m) if m.contains("is neither") => {
-                    CameraError::InvalidDesign(format!(
-                        "{m}; looked first beside the sensor TOML, in {}",
-                        if dir.as_os_str().is_empty() {
-                            Path::new(".").display()
+                // the file the curve's design is in, as errors in the TOML itself name it
+                CameraError::InvalidDesign(m) => {
+                    let looked = if m.contains("is neither") {
+                        let dir = if dir.as_os_str().is_empty() {
+                            Path::new(".")
                         } else {
+                            dir
+                        };
+                        format!(
+                            "; looked first beside the sensor TOML, in {}",
                             dir.display()
-                        }
-                    ))
+                        )
+                    } else {
+                        String::new()
+                    };
+                    CameraError::InvalidDesign(format!("{}: {m}{looked}", p.display()))
                 }
                 other => other,
             })?;
