@@ -6,7 +6,8 @@ use super::{Samples, SpectralError};
 /// named spectrum (the layout of `../shared/data/iset`). Grids may be
 /// non-uniform; rows must be in increasing wavelength order. Read with the `csv` crate
 /// (quoted cells, CRLF); cells are separated by commas, or by semicolons or tabs when the header
-/// has more of those (then a decimal comma is a point); lines starting with `#` are comments.
+/// has more of those; a decimal comma (in a quoted cell where commas separate cells) is a
+/// point; lines starting with `#` are comments.
 #[derive(Clone, Debug)]
 pub struct SpectralTable {
     pub path: String,
@@ -103,9 +104,15 @@ impl SpectralTable {
         for row in rows {
             let (line, cells) = row?;
             if cells.len() != head.len() + 1 {
+                let hint = if dialect.delimiter == b',' && cells.len() > head.len() + 1 {
+                    " (decimal commas? where commas separate cells, quote such numbers or \
+                     separate cells with semicolons)"
+                } else {
+                    ""
+                };
                 return Err(err(
                     line,
-                    format!("{} cells, header has {}", cells.len(), head.len() + 1),
+                    format!("{} cells, header has {}{hint}", cells.len(), head.len() + 1),
                 ));
             }
             let parse = |s: &str, column: &str| -> Result<f64, SpectralError> {
@@ -182,7 +189,7 @@ fn check_wavelength_header(first: &str) -> Result<(), String> {
 }
 
 /// How a file separates its cells: the delimiter its header uses most (commas, semicolons or
-/// tabs), and, with semicolons or tabs, decimal commas taken as points.
+/// tabs). A number's decimal comma is taken as a point.
 #[derive(Clone, Copy)]
 struct Dialect {
     delimiter: u8,
@@ -203,13 +210,13 @@ impl Dialect {
         Dialect { delimiter }
     }
 
-    /// The cell as Rust parses a number: a decimal comma as a point where commas do not
-    /// separate cells.
+    /// The cell as Rust parses a number: a decimal comma as a point (a cell holds a comma
+    /// only when commas do not separate cells, or when it is quoted).
     fn number(&self, cell: &str) -> String {
-        if self.delimiter == b',' {
-            cell.to_string()
-        } else {
+        if cell.matches(',').count() == 1 && !cell.contains('.') {
             cell.replace(',', ".")
+        } else {
+            cell.to_string()
         }
     }
 }
@@ -263,6 +270,7 @@ mod tests {
             "Wavelength (nm)\ta\tb\n400\t0,5\t1\n410\t0.25\t2\n",
             "# vendor X, 2024\nwavelength_nm,a,b\n400,0.5,1\n# mid\n410,0.25,2\n",
             "wavelength[nm],\"a\",\"b, measured\"\n400,0.5,1\n410,0.25,2\n",
+            "wavelength_nm,a,b\n400,\"0,5\",1\n410,\"0,25\",2\n",
         ] {
             let t = SpectralTable::parse("m", text).unwrap_or_else(|e| panic!("{text:?}: {e}"));
             assert_eq!(t.samples("a").unwrap().values(), &want, "{text:?}");
