@@ -307,6 +307,7 @@ impl SensorDesign {
         let keys: toml::Table = toml::from_str(text).map_err(toml_err)?;
         d.check_given(|k| keys.contains_key(k))?;
         d.validate()?;
+        d.check_new()?;
         Ok(d)
     }
 
@@ -320,6 +321,7 @@ impl SensorDesign {
             serde_json::from_value(value).map_err(|e| CameraError::Json(e.to_string()))?;
         d.check_given(|k| keys.iter().zip(has).any(|(key, h)| h && *key == k))?;
         d.validate()?;
+        d.check_new()?;
         Ok(d)
     }
 
@@ -366,6 +368,42 @@ impl SensorDesign {
         Ok(())
     }
 
+    /// What a design described now must be, beyond [`Self::validate`] (which the designs
+    /// stored in older tables must keep passing): a name that is an identifier (it names
+    /// folders), an offset that leaves the signal half the swing, and a CFA that is not a
+    /// Bayer phase written in one row (`RGGB`).
+    fn check_new(&self) -> Result<(), CameraError> {
+        let err = |msg: String| {
+            Err(CameraError::InvalidDesign(format!(
+                "'{}': {msg}",
+                self.name
+            )))
+        };
+        if !is_identifier(&self.name) {
+            return err(format!(
+                "name '{}' must be an identifier: up to {MAX_NAME_LEN} letters, digits, '-', \
+                 '_', '.' or '+', not starting with '.' (it names folders and tables)",
+                self.name
+            ));
+        }
+        let max_offset = MAX_OFFSET_FRACTION * self.voltage_swing_v;
+        if self.offset_v.abs() > max_offset {
+            return err(format!(
+                "offset_v = {} must be at most {max_offset} V in magnitude (half the swing \
+                 {} V: the signal needs the rest)",
+                self.offset_v, self.voltage_swing_v
+            ));
+        }
+        if looks_like_bayer_in_one_row(&self.cfa) {
+            return err(format!(
+                "cfa \"{}\" is one row of four pixels; a 2×2 tile is written row by row with \
+                 '/', e.g. \"RG/GB\" for RGGB",
+                self.cfa
+            ));
+        }
+        Ok(())
+    }
+
     /// The design as TOML text (loads back to an equal design).
     pub fn to_toml_string(&self) -> Result<String, CameraError> {
         toml::to_string(self).map_err(|e| CameraError::Toml {
@@ -385,13 +423,6 @@ impl SensorDesign {
         let err = |msg: String| Err(CameraError::InvalidDesign(format!("'{name}': {msg}")));
         if self.name.trim().is_empty() {
             return err("name is empty".into());
-        }
-        if !is_identifier(&self.name) {
-            return err(format!(
-                "name '{}' must be an identifier: up to {MAX_NAME_LEN} letters, digits, '-', \
-                 '_', '.' or '+', not starting with '.' (it names folders and tables)",
-                self.name
-            ));
         }
         let ranges: [(&str, f64, f64, f64, bool); 12] = [
             // (field, value, low, high, low is inclusive)
@@ -439,11 +470,9 @@ impl SensorDesign {
                 return err(format!("{field} = {v} must be within {open}{lo}, {hi}]"));
             }
         }
-        let max_offset = MAX_OFFSET_FRACTION * self.voltage_swing_v;
-        if !(self.offset_v.is_finite() && self.offset_v.abs() <= max_offset) {
+        if !(self.offset_v.is_finite() && self.offset_v.abs() < self.voltage_swing_v) {
             return err(format!(
-                "offset_v = {} must be finite and at most {max_offset} V in magnitude (half the \
-                 swing {} V: the signal needs the rest)",
+                "offset_v = {} must be finite and smaller in magnitude than the swing {} V",
                 self.offset_v, self.voltage_swing_v
             ));
         }
@@ -459,13 +488,6 @@ impl SensorDesign {
             ));
         }
         self.validate_channels(name)?;
-        if looks_like_bayer_in_one_row(&self.cfa) {
-            return err(format!(
-                "cfa \"{}\" is one row of four pixels; a 2×2 tile is written row by row with \
-                 '/', e.g. \"RG/GB\" for RGGB",
-                self.cfa
-            ));
-        }
         self.ir_cut.validate(&format!("'{name}': ir_cut"))?;
         self.qe.validate(&format!("'{name}': qe"))?;
         Ok(())
