@@ -126,6 +126,7 @@ pub fn synthetic_meta(params: &L3Params) -> Result<TableMeta, LearnError> {
         version: TABLE_FORMAT_VERSION,
         kind: TableKind::SameIlluminant,
         train_illuminants: vec!["synthetic".into()],
+        train_white_xy: Vec::new(),
         target_illuminant: "same".into(),
         sensor_name: "synthetic-rgbw".into(),
         sensor: serde_json::Value::Null,

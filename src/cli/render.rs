@@ -144,7 +144,9 @@ impl RenderContext for CliRender<'_> {
             .resolve(spec, self.iset)
             .map_err(|e| Failure::Cli(e.into()))?;
         let table = self.table;
-        if table.meta.kind == TableKind::CrossIlluminant && !table.trained_under(&entry.name) {
+        if table.meta.kind == TableKind::CrossIlluminant
+            && !table.trained_under_light(&entry.name, entry.white_xy)
+        {
             eprintln!(
                 "warning: cross-illuminant table trained for {} used for {}",
                 table.meta.train_illuminants.join("+"),

@@ -550,6 +550,22 @@ fn transfer_kernels_carry_the_pooled_maps_to_a_light_the_table_was_not_trained_o
         fuse_entry(&table, &entry).unwrap(),
         fuse_kernels(&table, &t)
     );
+    // another light registered under the training light's name, with another white, is
+    // not the table's own: the transfer kernels
+    let own = [0.4476, 0.4074];
+    table.meta.train_white_xy = vec![own];
+    entry.white_xy = Some([own[0] + 0.02, own[1]]);
+    assert!(table.transfers_to_light("SYNTHETIC", entry.white_xy));
+    assert_eq!(
+        fuse_entry(&table, &entry).unwrap(),
+        fuse_kernels(&moved, &t)
+    );
+    entry.white_xy = Some(own);
+    assert!(!table.transfers_to_light("SYNTHETIC", entry.white_xy));
+    // a table that did not record its whites (older files) goes by the name
+    table.meta.train_white_xy.clear();
+    entry.white_xy = Some([own[0] + 0.02, own[1]]);
+    assert!(!table.transfers_to_light("SYNTHETIC", entry.white_xy));
     // a correction fitted per band on the table (C) keeps the class kernels
     entry.name = "Lamp".into();
     entry.level_corrections = vec![t; table.n_bands()];

@@ -498,6 +498,7 @@ fn row_json(state: &Inner, row: &TableRow, full: bool) -> Result<Value, ServiceE
         "status_detail": row.status_detail.as_deref().map(super::error::without_server_paths),
         "last_activated_at_ms": row.last_activated_at,
         "train_illuminants": meta["train_illuminants"].clone(),
+        "train_white_xy": meta.get("train_white_xy").cloned().unwrap_or_else(|| json!([])),
         "sensor_name": meta["sensor_name"].clone(),
         "training_seconds": meta["training_seconds"].clone(),
         "links": {

@@ -46,6 +46,17 @@ fn training_is_reproducible_and_thread_count_independent() {
     assert!(max_norm < 1e3, "kernel norm {max_norm}");
     assert_eq!(a.reports.len(), a.n_classes());
     assert!(a.meta.sat_cases[0] == 0);
+    // each training light's white, recorded beside its name: D65's and A's
+    let w = &a.meta.train_white_xy;
+    assert_eq!(w.len(), 2, "{w:?}");
+    assert!(
+        (w[0][0] - 0.3127).abs() < 2e-3 && (w[0][1] - 0.3290).abs() < 2e-3,
+        "{w:?}"
+    );
+    assert!(
+        (w[1][0] - 0.4476).abs() < 2e-3 && (w[1][1] - 0.4074).abs() < 2e-3,
+        "{w:?}"
+    );
 }
 
 #[test]

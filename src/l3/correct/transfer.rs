@@ -32,21 +32,51 @@
 
 use crate::l3::table::{L3Table, TableError};
 
+/// How far (in CIE 1931 x and in y) a light's white may lie from a training light's recorded
+/// white and still be that light: the same spectrum resampled from another copy of the data
+/// moves it by less than 10⁻⁴; another light of the same name, by far more.
+pub const TRAINING_WHITE_TOLERANCE: f64 = 1e-3;
+
 impl L3Table {
     /// Whether the table was trained under the light named `name` (one of
     /// its training illuminants, compared without case).
     pub fn trained_under(&self, name: &str) -> bool {
+        self.trained_under_light(name, None)
+    }
+
+    /// [`Self::trained_under`] for a light whose white is known (`white_xy`): the name must
+    /// match, and, where the table recorded that training light's white, the white too
+    /// (within [`TRAINING_WHITE_TOLERANCE`]). A light registered later under a training
+    /// light's name with other samples is then not the table's own.
+    pub fn trained_under_light(&self, name: &str, white_xy: Option<[f64; 2]>) -> bool {
+        let recorded = &self.meta.train_white_xy;
         self.meta
             .train_illuminants
             .iter()
-            .any(|n| n.eq_ignore_ascii_case(name))
+            .enumerate()
+            .any(|(i, n)| {
+                n.eq_ignore_ascii_case(name)
+                    && match (white_xy, recorded.get(i)) {
+                        (Some(w), Some(t)) => {
+                            (w[0] - t[0]).abs() <= TRAINING_WHITE_TOLERANCE
+                                && (w[1] - t[1]).abs() <= TRAINING_WHITE_TOLERANCE
+                        }
+                        _ => true,
+                    }
+            })
     }
 
     /// Whether the table renders under the light named `name`, corrected by
     /// one 3×3 matrix, with [`Self::transfer_kernels`] rather than its own:
     /// it keeps transfer maps and was not trained under that light.
     pub fn transfers_to(&self, name: &str) -> bool {
-        self.meta.params.transfer_maps.is_some() && !self.trained_under(name)
+        self.transfers_to_light(name, None)
+    }
+
+    /// [`Self::transfers_to`] for a light whose white is known
+    /// ([`Self::trained_under_light`]).
+    pub fn transfers_to_light(&self, name: &str, white_xy: Option<[f64; 2]>) -> bool {
+        self.meta.params.transfer_maps.is_some() && !self.trained_under_light(name, white_xy)
     }
 
     /// The table's kernels with every unsaturated kernel's channel sums moved

@@ -27,7 +27,7 @@ use super::trainer::{accumulate_batches, classes_from_survey, learn, survey_batc
 use super::transfer_fit::{TransferChoice, transfer_maps};
 use crate::baseline::ColourMatrix;
 use crate::camera::{Camera, NoiseSwitches, SensorDesign, mosaic};
-use crate::colour::mat3_mul_vec;
+use crate::colour::{Cmfs, mat3_mul_vec, xy};
 use crate::l3::classify::{ChromaClasses, MIN_SURFACES_PER_CHANNEL, PatchGeometry};
 use crate::l3::correct::{
     ColourTarget, Mat3, NoiseModel, colour_samples, inverse_correction, noise_model,
@@ -417,6 +417,14 @@ impl TrainingRun {
             version: TABLE_FORMAT_VERSION,
             kind: spec.kind,
             train_illuminants: self.illuminants.iter().map(|(n, _)| n.clone()).collect(),
+            train_white_xy: {
+                let cmfs = Cmfs::cie1931(&self.grid);
+                self.illuminants
+                    .iter()
+                    .map(|(_, spd)| cmfs.white(spd).ok().map(xy))
+                    .collect::<Option<Vec<_>>>()
+                    .unwrap_or_default()
+            },
             target_illuminant: match spec.kind {
                 TableKind::SameIlluminant => "same".into(),
                 TableKind::CrossIlluminant => "D65".into(),

@@ -55,7 +55,7 @@ pub fn fuse_kernels(table: &L3Table, m: &[[f64; 3]; 3]) -> Vec<f32> {
 pub fn fuse_entry(table: &L3Table, entry: &IlluminantEntry) -> Result<Vec<f32>, RenderError> {
     let nl = table.n_bands();
     if entry.level_corrections.len() != nl || nl == 0 {
-        if table.transfers_to(&entry.name)
+        if table.transfers_to_light(&entry.name, entry.white_xy)
             && let Some(k) = table.transfer_kernels()?
         {
             return Ok(fuse_matrix(&k, &entry.t, table.n_features()));

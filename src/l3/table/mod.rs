@@ -67,6 +67,12 @@ pub struct TableMeta {
     pub kind: TableKind,
     /// Illuminants the training scenes were lit by.
     pub train_illuminants: Vec<String>,
+    /// The chromaticity (CIE 1931 x, y) of each training light's white, in the order of
+    /// `train_illuminants`: what tells a light registered later under one of those names,
+    /// with other samples, from the light the table was trained under. Empty in tables
+    /// written before it was recorded.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub train_white_xy: Vec<[f64; 2]>,
     /// `same` for SI tables, else the target illuminant (D65).
     pub target_illuminant: String,
     pub sensor_name: String,
