@@ -33,8 +33,9 @@
 use crate::l3::table::{L3Table, TableError};
 
 /// How far (in CIE 1931 x and in y) a light's white may lie from a training light's recorded
-/// white and still be that light: the same spectrum resampled from another copy of the data
-/// moves it by less than 10⁻⁴; another light of the same name, by far more.
+/// white and still be that light. The same spectrum on the same grid gives the same white; the
+/// margin is for rounding and for a copy of the spectral data resampled otherwise. A 100 K
+/// step of a blackbody near 3000 K moves x by about 0.007, seven times the margin.
 pub const TRAINING_WHITE_TOLERANCE: f64 = 1e-3;
 
 impl L3Table {
