@@ -290,7 +290,7 @@ impl FaultOf for PipelineError {
     fn fault(&self) -> Fault {
         use PipelineError::*;
         match self {
-            Options(_) | WholeFrameOnly | CfaMismatch { .. } => Fault::Usage,
+            Options(_) | WholeFrameOnly | CfaMismatch { .. } | GivenLevels { .. } => Fault::Usage,
             Levels { .. } | SizeMismatch { .. } | FrameLight(_) => Fault::Invalid,
             UntrainedCamera { .. } => Fault::Failure,
             Decode(e) | Encode(e) => e.fault(),
@@ -317,6 +317,7 @@ mod tests {
             LearnError::Invalid("levels 0".into()).into(),
             EvalError::Learn(LearnError::Invalid("scenes 0".into())).into(),
             PipelineError::Options("region".into()).into(),
+            PipelineError::GivenLevels { black: 0, white: 0 }.into(),
         ];
         for e in usage {
             assert_eq!(e.fault(), Fault::Usage, "{e}");

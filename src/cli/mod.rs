@@ -155,9 +155,11 @@ impl From<crate::pipeline::PipelineError> for CliError {
                 sensors.first().map_or("", String::as_str),
                 sensors.first().map_or("", String::as_str),
             )),
-            e @ (Options(_) | CfaMismatch { .. } | Levels { .. } | SizeMismatch { .. }) => {
-                CliError::Pipeline(e)
-            }
+            e @ (Options(_)
+            | CfaMismatch { .. }
+            | Levels { .. }
+            | GivenLevels { .. }
+            | SizeMismatch { .. }) => CliError::Pipeline(e),
         }
     }
 }

@@ -48,9 +48,14 @@ pub enum PipelineError {
         input: String,
         table: String,
     },
-    /// Black and white levels that leave no range.
+    /// Black and white levels that leave no range, the file's or the file's with the
+    /// request's.
     #[error("white level {white} must exceed black level {black}")]
     Levels { black: u16, white: u16 },
+    /// Black and white levels the request gives (or the request's with the defaults, 0 and
+    /// 65535) that leave no range, whatever the file holds.
+    #[error("white level {white} must exceed black level {black}")]
+    GivenLevels { black: u16, white: u16 },
     /// A decoded image whose size is not the declared one.
     #[error("the image is {}×{} but {}×{} was declared", image.0, image.1, show(declared.0), show(declared.1))]
     SizeMismatch {

@@ -271,7 +271,9 @@ pub fn decode(
     limits: &Limits,
 ) -> Result<DecodedFrame, PipelineError> {
     let (mut black, mut white) = (levels.black.unwrap_or(0), levels.white.unwrap_or(65535));
-    check_levels(black, white)?;
+    if white <= black {
+        return Err(PipelineError::GivenLevels { black, white });
+    }
     let (mosaic, meta, dng, declared) = match input {
         Input::RawU16 {
             bytes,

@@ -355,6 +355,9 @@ impl From<crate::pipeline::PipelineError> for ServiceError {
             Levels { black, white } => ServiceError::InvalidImage(format!(
                 "white_level {white} must exceed black_level {black}"
             )),
+            GivenLevels { black, white } => ServiceError::BadRequest(format!(
+                "white_level {white} must exceed black_level {black} (0 and 65535 when not given)"
+            )),
             SizeMismatch {
                 image: (w, h),
                 declared: (dw, dh),
@@ -632,6 +635,12 @@ mod tests {
         assert_eq!(e.code(), "request_timeout");
         let e = ServiceError::from(PipelineError::Options("preview 17".into()));
         assert_eq!(e.code(), "bad_request");
+        // levels the query gives are the query's fault; the file's, the image's
+        let (black, white) = (9, 9);
+        let e = ServiceError::from(PipelineError::GivenLevels { black, white });
+        assert_eq!(e.code(), "bad_request");
+        let e = ServiceError::from(PipelineError::Levels { black, white });
+        assert_eq!(e.code(), "invalid_image");
         // the caller chooses the 4xx of an input fault
         let e = ServiceError::from_l3(TableError::NoSensor, ServiceError::Unprocessable);
         assert_eq!((e.status().as_u16(), e.code()), (422, "unprocessable"));

@@ -199,7 +199,8 @@ async fn hostile_other_parameters(h: &Hostile<'_>) {
         ("width=32&height=32&region=30,30,8,8", Some(RAW), 2048, 400, "bad_request", &[]),
         ("width=32&height=32&preview=99", Some(RAW), 2048, 400, "bad_request", &[]),
         ("width=32&height=32&black_level=70000", Some(RAW), 2048, 400, "bad_request", &[]),
-        ("width=32&height=32&black_level=9&white_level=9", Some(RAW), 2048, 400, "invalid_image", &["black_level"]),
+        ("width=32&height=32&black_level=9&white_level=9", Some(RAW), 2048, 400, "bad_request", &["black_level"]),
+        ("width=32&height=32&white_level=0", Some(RAW), 2048, 400, "bad_request", &["white_level 0"]),
     ];
     h.refuse_all(cases).await;
 }
