@@ -28,7 +28,7 @@ fn numbers(v: &serde_json::Value, path: &str, out: &mut Vec<(String, f64)>) {
 
 /// `l3 bench --quick ARGS --out OUT`, which must succeed; its stdout.
 fn quick_bench(args: &[&str], out: &std::path::Path) -> String {
-    let run = Command::new(env!("CARGO_BIN_EXE_l3"))
+    let run = Command::new(env!("L3_BIN"))
         .args(["bench", "--quick"])
         .args(args)
         .arg("--out")
@@ -204,7 +204,7 @@ fn markdown_and_plot(out_dir: &Path, stdout: &str, isp: &[&ConfigResult]) {
 fn sensor_sweep_runs_every_sensor_in_one_go() {
     let tmp = tempfile::tempdir().unwrap();
     let out_dir = tmp.path().join("sweep");
-    let root = env!("CARGO_MANIFEST_DIR");
+    let root = env!("L3_ROOT");
     let sensors = format!(
         "{root}/config/sensors/rgbw-iset.toml,{root}/config/sensors/bayer-nikon-d5100.toml"
     );

@@ -275,7 +275,7 @@ fn colorchecker_refuses_bad_corners() {
     l3::test_support::tiny_table().save(&table).unwrap();
     let frame = sim.join("mosaic.raw");
     let run = |corners: &str| {
-        Command::new(env!("CARGO_BIN_EXE_l3"))
+        Command::new(env!("L3_BIN"))
             .args(["eval", "--colorchecker"])
             .arg(&frame)
             .args(["--corners", corners, "--table"])
@@ -306,7 +306,7 @@ fn colorchecker_refuses_bad_corners() {
         ("nope.csv", "nope.csv"),
         ("short.csv", "1 patches, 24 expected"),
     ] {
-        let o = Command::new(env!("CARGO_BIN_EXE_l3"))
+        let o = Command::new(env!("L3_BIN"))
             .args(["eval", "--colorchecker"])
             .arg(&frame)
             .args([
@@ -325,7 +325,7 @@ fn colorchecker_refuses_bad_corners() {
         assert!(err.contains(says), "{reference}: {err}");
     }
     // --corners is required
-    let o = Command::new(env!("CARGO_BIN_EXE_l3"))
+    let o = Command::new(env!("L3_BIN"))
         .args(["eval", "--colorchecker"])
         .arg(&frame)
         .arg("--table")

@@ -6,7 +6,7 @@ use std::process::Command;
 /// Runs the `l3` executable with `args` in `dir`: whether it succeeded, and its standard
 /// output followed by its standard error.
 pub fn run_l3(args: &[&str], dir: &Path) -> (bool, String) {
-    let out = Command::new(env!("CARGO_BIN_EXE_l3"))
+    let out = Command::new(env!("L3_BIN"))
         .args(args)
         .current_dir(dir)
         .output()
@@ -29,7 +29,7 @@ pub fn l3(args: &[&str], dir: &Path) -> (bool, String, String) {
 /// Runs the `l3` executable with `args` in `dir`: its exit code, standard output and
 /// standard error.
 pub fn l3_code(args: &[&str], dir: &Path) -> (Option<i32>, String, String) {
-    let out = Command::new(env!("CARGO_BIN_EXE_l3"))
+    let out = Command::new(env!("L3_BIN"))
         .args(args)
         .current_dir(dir)
         .output()

@@ -7,7 +7,7 @@ use std::process::{Command, Stdio};
 /// `l3 args` with its standard output closed before it writes: it must end without a panic.
 fn with_closed_stdout(args: &[&str]) {
     let dir = tempfile::tempdir().unwrap();
-    let mut child = Command::new(env!("CARGO_BIN_EXE_l3"))
+    let mut child = Command::new(env!("L3_BIN"))
         .args(args)
         .current_dir(dir.path())
         .stdout(Stdio::piped())
@@ -38,7 +38,7 @@ fn a_table_with_a_method_or_the_paper_table_that_ignores_it_is_a_usage_error() {
         &["eval", "--method", "isp", "--table", "t.safetensors"],
         &["eval", "--paper-table", "--table", "t.safetensors"],
     ] {
-        let out = Command::new(env!("CARGO_BIN_EXE_l3"))
+        let out = Command::new(env!("L3_BIN"))
             .args(args)
             .current_dir(dir.path())
             .output()
@@ -58,7 +58,7 @@ fn demosaic_refuses_an_output_it_would_not_write_and_names_every_method() {
     pgm.extend((0..16u8).map(|v| v * 10));
     std::fs::write(d.join("m.pgm"), pgm).unwrap();
     let run = |args: &[&str]| {
-        let out = Command::new(env!("CARGO_BIN_EXE_l3"))
+        let out = Command::new(env!("L3_BIN"))
             .args(args)
             .current_dir(d)
             .output()
@@ -85,7 +85,7 @@ fn demosaic_refuses_an_output_it_would_not_write_and_names_every_method() {
 #[test]
 fn a_missing_iset_dir_in_the_environment_is_an_error() {
     let tmp = tempfile::tempdir().unwrap();
-    let out = std::process::Command::new(env!("CARGO_BIN_EXE_l3"))
+    let out = std::process::Command::new(env!("L3_BIN"))
         .args(["simulate", "--scene", "uniform", "--out", "x"])
         .env("L3_ISET_DIR", tmp.path().join("nowhere"))
         .current_dir(tmp.path())

@@ -8,7 +8,7 @@ use l3::spectral::{Extrapolation, Spectrum, WavelengthGrid, cie_illuminant};
 use proptest::prelude::*;
 
 fn ref_file(name: &str) -> Option<PathBuf> {
-    let p = PathBuf::from(env!("CARGO_MANIFEST_DIR"))
+    let p = PathBuf::from(env!("L3_ROOT"))
         .join("../shared/data/ref")
         .join(name);
     if p.is_file() {

@@ -17,7 +17,7 @@ use l3::spectral::{Extrapolation, WavelengthGrid, ces_reflectances, cie_illumina
 use proptest::prelude::*;
 
 fn design(name: &str) -> SensorDesign {
-    let path = format!("{}/config/sensors/{name}.toml", env!("CARGO_MANIFEST_DIR"));
+    let path = format!("{}/config/sensors/{name}.toml", env!("L3_ROOT"));
     SensorDesign::load(path, None).expect("sensor design")
 }
 

@@ -447,8 +447,7 @@ fn finer_optical_sampling_bins_into_pixels() {
 
 #[test]
 fn ar0132at_camera_simulates_on_its_built_in_curves() {
-    let path =
-        std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("config/sensors/rgbw-ar0132at.toml");
+    let path = std::path::Path::new(env!("L3_ROOT")).join("config/sensors/rgbw-ar0132at.toml");
     let design = SensorDesign::load(&path, None).unwrap();
     let cam = Camera::new(&design, WavelengthGrid::default(), None).unwrap();
     let cap = simulate(
@@ -477,8 +476,7 @@ fn ar0132at_camera_simulates_on_its_built_in_curves() {
 /// between a patch interior's bilinear-demosaicked channel mean and the
 /// same mean of the channel at every pixel (no mosaic).
 fn mosaic_error_on_chart(samples_per_pixel: u32) -> (f64, f64) {
-    let path =
-        std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("config/sensors/rgbw-iset.toml");
+    let path = std::path::Path::new(env!("L3_ROOT")).join("config/sensors/rgbw-iset.toml");
     let mut design = SensorDesign::load(&path, None).unwrap();
     design.optics.samples_per_pixel = samples_per_pixel;
     let cam = Camera::new(&design, WavelengthGrid::default(), None).unwrap();

@@ -16,7 +16,7 @@ use l3::io::{
 use l3::test_support::tiny_table;
 
 fn root() -> PathBuf {
-    PathBuf::from(env!("CARGO_MANIFEST_DIR"))
+    PathBuf::from(env!("L3_ROOT"))
 }
 
 fn files_in(dir: &Path) -> Vec<PathBuf> {

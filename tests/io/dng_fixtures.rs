@@ -14,7 +14,7 @@ use l3::l3::render::{FastRenderer, Mosaic, WhiteLevel};
 use l3::test_support::tiny_table;
 
 fn fixtures() -> Vec<PathBuf> {
-    let dir = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("tests/fixtures/dng");
+    let dir = PathBuf::from(env!("L3_ROOT")).join("tests/fixtures/dng");
     let mut v: Vec<PathBuf> = std::fs::read_dir(&dir)
         .unwrap()
         .filter_map(|e| e.ok().map(|e| e.path()))
@@ -100,7 +100,7 @@ fn every_fixture_decodes_to_its_raw_twin_and_renders_identically() {
 }
 
 fn l3(args: &[&str], dir: &Path) -> std::process::Output {
-    Command::new(env!("CARGO_BIN_EXE_l3"))
+    Command::new(env!("L3_BIN"))
         .args(args)
         .current_dir(dir)
         .output()
@@ -112,7 +112,7 @@ fn l3_render_of_a_dng_equals_its_twin_and_checks_the_cfa() {
     let tmp = tempfile::tempdir().unwrap();
     let d = tmp.path();
     tiny_table().save(&d.join("t.safetensors")).unwrap();
-    let dir = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("tests/fixtures/dng");
+    let dir = PathBuf::from(env!("L3_ROOT")).join("tests/fixtures/dng");
     for stem in ["rgbw_16_raw", "rgbw_10_lj92"] {
         let mut outs = Vec::new();
         for ext in ["dng", "raw"] {

@@ -11,7 +11,7 @@ use l3::io::{DecodedMosaic, Limits, MosaicFormat, read_mosaic};
 use l3::test_support::tiny_table;
 
 fn dir() -> PathBuf {
-    PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("tests/fixtures/pidng")
+    PathBuf::from(env!("L3_ROOT")).join("tests/fixtures/pidng")
 }
 
 fn u16_of(m: DecodedMosaic) -> Vec<u16> {
@@ -82,7 +82,7 @@ fn pidng_camera_names_are_read() {
 }
 
 fn l3(args: &[&str], dir: &Path) -> std::process::Output {
-    Command::new(env!("CARGO_BIN_EXE_l3"))
+    Command::new(env!("L3_BIN"))
         .args(args)
         .current_dir(dir)
         .output()

@@ -54,7 +54,7 @@ impl Replica {
         envs: &[(&str, String)],
     ) -> Replica {
         let port = free_port();
-        let mut cmd = Command::new(env!("CARGO_BIN_EXE_l3"));
+        let mut cmd = Command::new(env!("L3_BIN"));
         cmd.arg("serve");
         if let Some(c) = config {
             cmd.arg("--config").arg(c);

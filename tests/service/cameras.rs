@@ -165,8 +165,7 @@ impl CameraCase<'_> {
     /// camera's table, and the same bytes as its raw twin rendered with that table by name.
     async fn a_pidng_frame_renders_as_its_raw_twin(&self, sony_id: &str) {
         let (c, server) = (self.c, self.server);
-        let fixtures =
-            std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/fixtures/pidng");
+        let fixtures = std::path::Path::new(env!("L3_ROOT")).join("tests/fixtures/pidng");
         let pidng = std::fs::read(fixtures.join("sony_macbeth.dng")).unwrap();
         let r = c
             .post(url(server, "/v1/render"))

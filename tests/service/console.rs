@@ -252,7 +252,7 @@ async fn screenshot(b: &Client, dir: &Path, name: &str) {
 
 /// A simulated RGBW DNG: `l3 simulate`'s Macbeth chart under tungsten, with its AsShotNeutral.
 fn simulated_dng(d: &Path) -> PathBuf {
-    let out = Command::new(env!("CARGO_BIN_EXE_l3"))
+    let out = Command::new(env!("L3_BIN"))
         .args(["simulate", "--scene", "macbeth", "--illuminant", "Tungsten"])
         .args(["--seed", "3", "--out", "sim"])
         .current_dir(d)

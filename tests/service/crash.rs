@@ -36,7 +36,7 @@ impl Service {
     /// The service gets no ISET data directory: it runs on the built-in spectral data.
     async fn start(data: &Path, pause_ms: u64) -> Service {
         let port = free_port();
-        let mut cmd = Command::new(env!("CARGO_BIN_EXE_l3"));
+        let mut cmd = Command::new(env!("L3_BIN"));
         cmd.arg("serve")
             .env("L3_BIND", format!("127.0.0.1:{port}"))
             .env("L3_DATA_DIR", data)

@@ -9,7 +9,7 @@ use serde_json::json;
 
 #[test]
 fn openapi_documents_exactly_the_served_routes() {
-    let text = std::fs::read_to_string(concat!(env!("CARGO_MANIFEST_DIR"), "/openapi.yaml"))
+    let text = std::fs::read_to_string(concat!(env!("L3_ROOT"), "/openapi.yaml"))
         .expect("read openapi.yaml");
     let doc: serde_yaml_ng::Value = serde_yaml_ng::from_str(&text).expect("openapi.yaml parses");
     assert!(doc["openapi"].as_str().unwrap().starts_with("3."));

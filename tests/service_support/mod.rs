@@ -49,9 +49,15 @@ pub fn tiny_table() -> &'static L3Table {
     })
 }
 
-/// A config for tests: port 0, the given data dir, no auto-training.
+/// A config for tests: port 0, the given data dir, no auto-training, and the ISET data the
+/// service would locate from the repository's root (`../shared/data/iset`, or `$L3_ISET_DIR`):
+/// the tests run in tests/, where its own lookup would not find it.
 pub fn test_config(data: &Path) -> ServiceConfig {
     let mut c = ServiceConfig::load_with_env(None, &[]).expect("default config");
+    let beside_the_repository = Path::new(concat!(env!("L3_ROOT"), "/../shared/data/iset"));
+    if std::env::var_os(l3::spectral::ISET_DIR_ENV).is_none() && beside_the_repository.is_dir() {
+        c.data.iset_dir = Some(beside_the_repository.to_path_buf());
+    }
     c.server.bind = "127.0.0.1:0".parse().unwrap();
     c.data.dir = data.to_path_buf();
     c.training.auto_train_default = false;

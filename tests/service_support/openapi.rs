@@ -16,7 +16,7 @@ const ANY_ROUTE: [u16; 3] = [405, 500, 504];
 fn document() -> &'static Value {
     static DOC: OnceLock<Value> = OnceLock::new();
     DOC.get_or_init(|| {
-        let path = concat!(env!("CARGO_MANIFEST_DIR"), "/openapi.yaml");
+        let path = concat!(env!("L3_ROOT"), "/openapi.yaml");
         let text = std::fs::read_to_string(path).expect("read openapi.yaml");
         let yaml: serde_yaml_ng::Value =
             serde_yaml_ng::from_str(&text).expect("openapi.yaml parses");

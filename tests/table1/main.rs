@@ -41,7 +41,7 @@ fn table1_on_the_papers_sensor() {
 
 /// The paper's Table 1 on its sensor, on the small training set, printed.
 fn run_table1() -> PaperTable {
-    let sensor = concat!(env!("CARGO_MANIFEST_DIR"), "/config/sensors/rgbw-iset.toml");
+    let sensor = concat!(env!("L3_ROOT"), "/config/sensors/rgbw-iset.toml");
     let design = SensorDesign::load(sensor, None).unwrap();
     let opts = PaperOptions {
         acquisitions: vec!["Tungsten".into()],
@@ -244,10 +244,7 @@ impl D65TableUnderTheLamp {
         use l3::l3::table::TableKind;
         use l3::spectral::WavelengthGrid;
 
-        let path = format!(
-            "{}/config/sensors/{sensor}.toml",
-            env!("CARGO_MANIFEST_DIR")
-        );
+        let path = format!("{}/config/sensors/{sensor}.toml", env!("L3_ROOT"));
         let design = SensorDesign::load(&path, None).unwrap();
         let spec = TrainingSpec {
             kind: TableKind::SameIlluminant,
@@ -357,7 +354,7 @@ fn chroma_classes_take_the_papers_sensor_under_its_targets() {
     use l3::l3::table::TableKind;
     use l3::spectral::WavelengthGrid;
 
-    let sensor = concat!(env!("CARGO_MANIFEST_DIR"), "/config/sensors/rgbw-iset.toml");
+    let sensor = concat!(env!("L3_ROOT"), "/config/sensors/rgbw-iset.toml");
     let design = SensorDesign::load(sensor, None).unwrap();
     let cancel = std::sync::atomic::AtomicBool::new(false);
     let train = |kind| {
@@ -435,7 +432,7 @@ fn held_out_lights_choose_the_fit_a_table_takes_to_a_foreign_light() {
     use l3::l3::learn::{TrainingSpec, train_table};
     use l3::spectral::WavelengthGrid;
 
-    let sensor = concat!(env!("CARGO_MANIFEST_DIR"), "/config/sensors/rgbw-iset.toml");
+    let sensor = concat!(env!("L3_ROOT"), "/config/sensors/rgbw-iset.toml");
     let design = SensorDesign::load(sensor, None).unwrap();
     let grid = WavelengthGrid::default();
     let camera = Camera::new(&design, grid, None).unwrap();

@@ -23,7 +23,7 @@ fn serve_takes_bind_and_data_dir_flags() {
         "[server]\nbind = \"127.0.0.1:1\"\n[data]\ndir = \"from-file\"\n",
     )
     .unwrap();
-    let mut child = Command::new(env!("CARGO_BIN_EXE_l3"))
+    let mut child = Command::new(env!("L3_BIN"))
         .args(["serve", "--config"])
         .arg(&config)
         .args(["--bind", &bind, "--data-dir"])
@@ -91,7 +91,7 @@ fn serve_names_a_bad_configuration_value() {
 /// Runs `l3 serve` with `env` until it exits (it must, within 60 s); returns its exit code
 /// and its standard error.
 fn serve_until_exit(dir: &Path, args: &[&str], env: &[(&str, &str)]) -> (Option<i32>, String) {
-    let mut cmd = Command::new(env!("CARGO_BIN_EXE_l3"));
+    let mut cmd = Command::new(env!("L3_BIN"));
     cmd.arg("serve")
         .args(args)
         .env("L3_AUTO_TRAIN", "false")

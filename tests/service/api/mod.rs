@@ -20,7 +20,7 @@ mod spd_lights;
 mod trust;
 
 fn l3_cli(args: &[&str], dir: &Path) {
-    let out = Command::new(env!("CARGO_BIN_EXE_l3"))
+    let out = Command::new(env!("L3_BIN"))
         .args(args)
         .current_dir(dir)
         .output()

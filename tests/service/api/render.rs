@@ -365,10 +365,9 @@ async fn query_wins_and_a_bayer_dng_is_refused(p: &Parity<'_>, dng: &[u8]) {
         .await
         .unwrap();
     assert_eq!(r.headers()["x-l3-illuminant-source"], "query");
-    let bayer = std::fs::read(
-        Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/fixtures/dng/bayer_12_lj92.dng"),
-    )
-    .unwrap();
+    let bayer =
+        std::fs::read(Path::new(env!("L3_ROOT")).join("tests/fixtures/dng/bayer_12_lj92.dng"))
+            .unwrap();
     let detail = problem(
         p.post_dng("/v1/render", bayer).await.unwrap(),
         422,
@@ -427,7 +426,7 @@ fn as_shot_neutral_of_a_tungsten_frame_corrects_natural100_like_tungsten() {
 /// leniencies) renders over HTTP as the same mosaic posted as raw bytes with its levels.
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn a_pidng_rgbw_dng_renders_as_its_raw_twin() {
-    let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/fixtures/pidng");
+    let dir = Path::new(env!("L3_ROOT")).join("tests/fixtures/pidng");
     let dng = std::fs::read(dir.join("rgbw_pidng.dng")).unwrap();
     let raw = std::fs::read(dir.join("rgbw_pidng.raw")).unwrap();
     let data = tempfile::tempdir().unwrap();
