@@ -84,16 +84,14 @@ impl RenderPipeline {
         cancel: &AtomicBool,
     ) -> Result<(Vec<f32>, RenderStats), RenderError> {
         let stage = self.chroma_for(mode, &mosaic);
-        let (xyz, stats) = self
+        let (mut xyz, stats) = self
             .renderer
             .render_xyz_until(mosaic, width, height, region, cancel)?;
-        match stage {
-            Some(c) => {
-                let (rw, rh) = region.map_or((width, height), |g| (g.width, g.height));
-                Ok((c.apply(&xyz, rw, rh)?, stats))
-            }
-            None => Ok((xyz, stats)),
+        if let Some(c) = stage {
+            let (rw, rh) = region.map_or((width, height), |g| (g.width, g.height));
+            c.apply_in_place(&mut xyz, rw, rh)?;
         }
+        Ok((xyz, stats))
     }
 
     /// The fast renderer behind the pipeline.
@@ -182,7 +180,7 @@ pub fn render_reference(
         return Err(PipelineError::WholeFrameOnly);
     }
     let t0 = Instant::now();
-    let (xyz, stats) = render_reference_under(
+    let (mut xyz, stats) = render_reference_under(
         table,
         &kernels.xyz,
         kernels.neutral.as_deref(),
@@ -192,10 +190,9 @@ pub fn render_reference(
     )?;
     let stage = ChromaStage::new(table, &kernels.xyz)?;
     let swing = table.meta.voltage_swing as f32;
-    let xyz = match stage.filter(|c| c.runs_on(opts.chroma, &Mosaic::Volts(volts), swing)) {
-        Some(c) => c.apply(&xyz, width, height)?,
-        None => xyz,
-    };
+    if let Some(c) = stage.filter(|c| c.runs_on(opts.chroma, &Mosaic::Volts(volts), swing)) {
+        c.apply_in_place(&mut xyz, width, height)?;
+    }
     let wy = if format.needs_white() {
         white_y(&xyz, width, height, opts.white)
     } else {

@@ -279,8 +279,30 @@ impl ChromaStage {
     }
 
     /// Filter the chroma of an interleaved `width × height` XYZ image (module doc); `Y` is
-    /// kept. Errors on a buffer of the wrong size or a non-finite result.
+    /// kept. Errors on a buffer of the wrong size or a non-finite result. A copy of
+    /// [`Self::apply_in_place`]'s.
     pub fn apply(&self, xyz: &[f32], width: usize, height: usize) -> Result<Vec<f32>, RenderError> {
+        let mut out = xyz.to_vec();
+        self.apply_in_place(&mut out, width, height)?;
+        Ok(out)
+    }
+
+    /// [`Self::apply`] over the image itself: no second frame. A 110 MP render through the
+    /// stage held two float XYZ frames of 1.3 GB each; it now holds one, and a copy of the
+    /// rows on either side of each strip's edges (`4r` rows per [`STRIP`]).
+    ///
+    /// Strips run in parallel, each over its own rows. A strip's filters read each input row
+    /// once, in order, and emit an output row only after reading the rows `2r` below it
+    /// ([`run_side_by_side`]), so within a strip a row is read before it is overwritten. Only
+    /// its neighbours' edge rows could change under it; those are read from the copy taken
+    /// before any strip starts. The result is the out-of-place filter's, bit for bit. On an
+    /// error (a non-finite result) the image is left part-filtered.
+    pub fn apply_in_place(
+        &self,
+        xyz: &mut [f32],
+        width: usize,
+        height: usize,
+    ) -> Result<(), RenderError> {
         if xyz.len() != width * height * 3 {
             return Err(RenderError::InvalidInput(format!(
                 "{} values for a {width}×{height} XYZ image",
@@ -288,16 +310,26 @@ impl ChromaStage {
             )));
         }
         if width == 0 || height == 0 {
-            return Ok(xyz.to_vec());
+            return Ok(());
         }
-        // (each strip copies its own rows and checks its own output, in parallel: a copy
-        // and a scan of the whole image in one thread were a serial part of every render
-        // that ran the stage)
-        let mut out = vec![0f32; xyz.len()];
         let [kx, _, kz] = D65_WHITE_XYZ.map(|v| v as f32);
         let white = [kx, kz];
         let row = width * 3;
-        let finite = out.par_chunks_mut(STRIP * row).enumerate().map_init(
+        // the rows within 2r of each strip edge, before any strip writes (the filters read
+        // input rows up to 2r beyond their strip)
+        let reach = 2 * self.radius;
+        let edges: Vec<EdgeRows> = (STRIP..height)
+            .step_by(STRIP)
+            .map(|b| {
+                let first = b.saturating_sub(reach);
+                let end = (b + reach).min(height);
+                EdgeRows {
+                    first,
+                    rows: xyz[first * row..end * row].to_vec(),
+                }
+            })
+            .collect();
+        let finite = xyz.par_chunks_mut(STRIP * row).enumerate().map_init(
             || {
                 [
                     SelfGuided::new(height, self.radius),
@@ -306,34 +338,47 @@ impl ChromaStage {
             },
             |filters, (strip, o)| {
                 let y0 = strip * STRIP;
-                o.copy_from_slice(&xyz[y0 * row..y0 * row + o.len()]);
-                let rows = y0..y0 + o.len() / row;
+                let y1 = y0 + o.len() / row;
+                let own = std::cell::Cell::from_mut(o).as_slice_of_cells();
+                // row t as it was before filtering: this strip's own, else its neighbour's copy
+                let load = |t: usize, dst: &mut Vec<f32>| {
+                    dst.clear();
+                    if (y0..y1).contains(&t) {
+                        let at = (t - y0) * row;
+                        dst.extend(own[at..at + row].iter().map(std::cell::Cell::get));
+                    } else {
+                        let e = &edges[if t < y0 { strip - 1 } else { strip }];
+                        let at = (t - e.first) * row;
+                        dst.extend_from_slice(&e.rows[at..at + row]);
+                    }
+                };
+                let (mut input_row, mut eps_row) = (Vec::new(), Vec::new());
                 run_side_by_side(
                     filters,
                     width,
-                    rows,
+                    y0..y1,
                     |k, t, plane| {
-                        let src = &xyz[t * row..(t + 1) * row];
-                        for (p, px) in plane.iter_mut().zip(src.chunks_exact(3)) {
+                        load(t, &mut input_row);
+                        for (p, px) in plane.iter_mut().zip(input_row.chunks_exact(3)) {
                             *p = px[2 * k] - white[k] * px[1];
                         }
                     },
                     |k, s, _, e| {
-                        let src = &xyz[s * row..(s + 1) * row];
+                        load(s, &mut eps_row);
                         let mut hint = 0;
-                        for (e, px) in e.iter_mut().zip(src.chunks_exact(3)) {
+                        for (e, px) in e.iter_mut().zip(eps_row.chunks_exact(3)) {
                             let var = self.variance_near(k, f64::from(px[1]), &mut hint);
                             *e = (self.strength * var as f32).max(f32::MIN_POSITIVE);
                         }
                     },
                     |k, y, filtered| {
                         let at = (y - y0) * row;
-                        for (px, &c) in o[at..at + row].chunks_exact_mut(3).zip(filtered) {
-                            px[2 * k] = c + white[k] * px[1];
+                        for (px, &c) in own[at..at + row].chunks_exact(3).zip(filtered) {
+                            px[2 * k].set(c + white[k] * px[1].get());
                         }
                     },
                 );
-                o.iter().all(|v| v.is_finite())
+                own.iter().all(|v| v.get().is_finite())
             },
         );
         // (a reduce, not `all`: every strip is filtered)
@@ -342,8 +387,15 @@ impl ChromaStage {
                 "the chroma stage produced a value that is not finite".into(),
             ));
         }
-        Ok(out)
+        Ok(())
     }
+}
+
+/// Rows `first..` of an image as they were before the chroma stage wrote any: the rows about
+/// one edge between two strips ([`ChromaStage::apply_in_place`]).
+struct EdgeRows {
+    first: usize,
+    rows: Vec<f32>,
 }
 
 #[cfg(test)]
