@@ -59,6 +59,9 @@ pub const AUTO_NOISE: f64 = 0.12;
 pub const AUTO_FRACTION: f64 = 0.5;
 /// Rows per parallel task (each task's filters start from its first rows' windows).
 const STRIP: usize = 128;
+// a strip's filters read at most 2r rows beyond it, so only its two neighbours' rows
+// ([`ChromaStage::apply_in_place`])
+const _: () = assert!(2 * RADIUS <= STRIP);
 /// [`ChromaMode::Auto`] decides on every `SAMPLE_STEP`th value of a mosaic.
 pub const SAMPLE_STEP: usize = 7;
 
@@ -279,8 +282,8 @@ impl ChromaStage {
     }
 
     /// Filter the chroma of an interleaved `width × height` XYZ image (module doc); `Y` is
-    /// kept. Errors on a buffer of the wrong size or a non-finite result. A copy of
-    /// [`Self::apply_in_place`]'s.
+    /// kept. Errors on a buffer of the wrong size or a non-finite result. This is
+    /// [`Self::apply_in_place`] on a copy.
     pub fn apply(&self, xyz: &[f32], width: usize, height: usize) -> Result<Vec<f32>, RenderError> {
         let mut out = xyz.to_vec();
         self.apply_in_place(&mut out, width, height)?;
