@@ -1,7 +1,7 @@
 //! The front of a render: the input decoded, a DNG's CFA checked against the table (a crop
-//! on another phase of the table's CFA moved to it: [`CfaShift`]), the DN
-//! levels (the request's, else the file's, else 0 and 65535) applied, and what the file says
-//! about the light.
+//! on another phase of the table's CFA moved to it: [`CfaShift`]), the DN levels applied (the
+//! request's, else the file's, else 0 and the container's largest value), and what the file
+//! says about the light.
 
 use bytes::Bytes;
 
@@ -260,8 +260,8 @@ fn check_levels(black: u16, white: u16) -> Result<(), PipelineError> {
     Ok(())
 }
 
-/// Decodes `input` for `table`: its levels (`levels` over the file's, else 0 and 65535)
-/// checked before and after decoding, a DNG's or a sidecar's CFA checked against the table's, the declared
+/// Decodes `input` for `table`: its levels (`levels` over the file's, else 0 and the largest
+/// value the container holds, 65535 for raw u16) checked before and after decoding, a DNG's or a sidecar's CFA checked against the table's, the declared
 /// size against the decoded one; integer samples scaled to volts as `scaling` says.
 pub fn decode(
     input: Input,
@@ -274,7 +274,7 @@ pub fn decode(
     if white <= black {
         return Err(PipelineError::GivenLevels { black, white });
     }
-    let (mosaic, meta, dng, declared) = match input {
+    let (mosaic, meta, dng, container_white, declared) = match input {
         Input::RawU16 {
             bytes,
             width,
@@ -282,7 +282,7 @@ pub fn decode(
         } => {
             let frame =
                 decode_raw_u16_le(&bytes, width, height, limits).map_err(PipelineError::Decode)?;
-            (DecodedMosaic::U16(frame), None, None, (None, None))
+            (DecodedMosaic::U16(frame), None, None, None, (None, None))
         }
         Input::Image {
             bytes,
@@ -290,13 +290,17 @@ pub fn decode(
             height,
         } => {
             let l = decode_mosaic_with_meta(&bytes, limits).map_err(PipelineError::Decode)?;
-            (l.mosaic, l.meta, l.dng, (width, height))
+            let container_white = l.info.max_value;
+            (l.mosaic, l.meta, l.dng, container_white, (width, height))
         }
         Input::Decoded(l) => {
             let LoadedMosaic {
-                mosaic, meta, dng, ..
+                mosaic,
+                meta,
+                dng,
+                info,
             } = *l;
-            (mosaic, meta, dng, (None, None))
+            (mosaic, meta, dng, info.max_value, (None, None))
         }
     };
     let cfa_shift = match (&meta, &dng) {
@@ -308,10 +312,14 @@ pub fn decode(
         _ => None,
     };
     let sensor_mismatch = frame_sensor_mismatch(meta.as_ref(), dng.as_ref(), table);
-    // the file's levels (a sidecar's or a DNG's) unless the request gives others
+    // the file's levels (a sidecar's or a DNG's) unless the request gives others; without
+    // them, white is the largest value the container holds (255 in an 8-bit PNG or TIFF, a
+    // PGM's maxval), else 65535
     if let Some(meta) = &meta {
         black = levels.black.unwrap_or(meta.black_level);
         white = levels.white.unwrap_or(meta.white_level);
+    } else if let (None, Some(max)) = (levels.white, container_white) {
+        white = max;
     }
     let neutral = dng.as_ref().and_then(|d| d.neutral());
     // a sidecar's illuminant; a DNG's AsShotWhiteXY when it has no AsShotNeutral

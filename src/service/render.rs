@@ -49,7 +49,7 @@ pub struct RenderQuery {
     pub height: Option<usize>,
     /// CFA of the input, e.g. `RG/WB`; must match the table's when given.
     pub cfa: Option<String>,
-    /// DN levels of integer input (default: a DNG's own, else 0 and 65535).
+    /// DN levels of integer input (default: the file's own, else 0 and the container's largest value).
     pub black_level: Option<u16>,
     pub white_level: Option<u16>,
     /// Acquisition illuminant (default: from a DNG's AsShotNeutral, else D65).

@@ -128,3 +128,59 @@ fn a_dng_crop_on_another_cfa_phase_is_moved_to_the_tables() {
         (w, h, FrameNotes::default())
     );
 }
+
+/// An 8-bit PNG-like input without a sidecar: samples 0..=255 in a container whose largest value
+/// is 255.
+fn png8_input(w: usize, h: usize) -> Input {
+    let data = (0..w * h).map(|i| (i * 37 % 256) as u16).collect();
+    Input::Decoded(Box::new(LoadedMosaic {
+        mosaic: DecodedMosaic::U16(RawFrame {
+            width: w,
+            height: h,
+            data,
+        }),
+        info: SourceInfo {
+            format: MosaicFormat::Png,
+            bits_per_sample: 8,
+            max_value: Some(255),
+        },
+        meta: None,
+        dng: None,
+    }))
+}
+
+fn dn_levels(frame: &DecodedFrame) -> (u16, u16) {
+    match &frame.samples {
+        Samples::Dn { black, white, .. } => (*black, *white),
+        Samples::Volts(_) => panic!("integer input stays in DN when the renderer scales it"),
+    }
+}
+
+#[test]
+fn without_levels_white_is_the_containers_largest_value() {
+    let (table, lim) = (tiny_table(), Limits::default());
+    let decoded = |levels| decode(png8_input(8, 6), levels, table, Scaling::InRenderer, &lim);
+    assert_eq!(dn_levels(&decoded(Levels::default()).unwrap()), (0, 255));
+    // the request's level wins over the container's
+    let given = Levels {
+        black: Some(16),
+        white: Some(4095),
+    };
+    assert_eq!(dn_levels(&decoded(given).unwrap()), (16, 4095));
+    // a black the container's white does not clear is the frame's levels' fault
+    let black_only = Levels {
+        black: Some(300),
+        white: None,
+    };
+    assert!(matches!(
+        decoded(black_only),
+        Err(PipelineError::Levels {
+            black: 300,
+            white: 255
+        })
+    ));
+    // a sidecar's (or DNG's) white still comes before the container's
+    let dng = dng_input(8, 6, &table_cfa(), DngInfo::default());
+    let frame = decode(dng, Levels::default(), table, Scaling::InRenderer, &lim).unwrap();
+    assert_eq!(dn_levels(&frame), (64, 4095));
+}

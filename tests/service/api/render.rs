@@ -69,6 +69,7 @@ async fn render_of_a_tungsten_frame_equals_l3_render_bit_for_bit() {
     };
     each_format_is_the_cli_file(&p, &table_id).await;
     png_input_gives_the_cli_tiff(&p).await;
+    an_8_bit_png_is_read_against_its_largest_value(&p).await;
     let ours = png_output_and_its_compressions(&p).await;
     jpeg_quality_and_subsampling(&p).await;
     chroma_denoise_on_request(&p).await;
@@ -167,6 +168,52 @@ async fn png_input_gives_the_cli_tiff(p: &Parity<'_>) {
         .unwrap();
     assert_eq!(r.status(), 200);
     assert!(r.bytes().await.unwrap()[..] == std::fs::read(d.join("cli.tiff")).unwrap()[..]);
+}
+
+/// A grayscale PNG of `w` × `h` samples at `depth` bits.
+fn gray_png(w: u64, h: u64, depth: png::BitDepth, samples: &[u16]) -> Vec<u8> {
+    let mut out = Vec::new();
+    let mut enc = png::Encoder::new(&mut out, w as u32, h as u32);
+    enc.set_color(png::ColorType::Grayscale);
+    enc.set_depth(depth);
+    let bytes: Vec<u8> = match depth {
+        png::BitDepth::Eight => samples.iter().map(|&v| v as u8).collect(),
+        _ => samples.iter().flat_map(|v| v.to_be_bytes()).collect(),
+    };
+    let mut writer = enc.write_header().unwrap();
+    writer.write_image_data(&bytes).unwrap();
+    writer.finish().unwrap();
+    out
+}
+
+/// Without levels, an 8-bit PNG's white is 255: it renders as the 16-bit PNG of the same
+/// samples times 257, and as itself with `white_level=255`.
+async fn an_8_bit_png_is_read_against_its_largest_value(p: &Parity<'_>) {
+    let high: Vec<u16> = p
+        .raw
+        .chunks_exact(2)
+        .map(|b| u16::from_le_bytes([b[0], b[1]]) >> 8)
+        .collect();
+    let wide: Vec<u16> = high.iter().map(|&v| v * 257).collect();
+    let xyz = |q: &'static str, body: Vec<u8>| async move {
+        let r =
+            p.c.post(url(p.server, &format!("/v1/render?illuminant=Tungsten{q}")))
+                .header("content-type", "image/png")
+                .header("accept", "image/tiff")
+                .body(body)
+                .send()
+                .await
+                .unwrap();
+        assert_eq!(r.status(), 200);
+        r.bytes().await.unwrap()
+    };
+    let narrow = gray_png(p.w, p.h, png::BitDepth::Eight, &high);
+    let by_default = xyz("", narrow.clone()).await;
+    assert!(by_default == xyz("&white_level=255", narrow.clone()).await);
+    let sixteen = gray_png(p.w, p.h, png::BitDepth::Sixteen, &wide);
+    assert!(by_default == xyz("", sixteen).await);
+    // the old default, white 65535, is a different (darker) frame
+    assert!(by_default != xyz("&white_level=65535", narrow).await);
 }
 
 /// PNG output: the same bytes as the CLI's PNG, with the default compression of both and with
