@@ -5,6 +5,7 @@ use super::ifd::{Ifd, Tiff, dng_err, required, tag_name};
 use super::ljpeg;
 use crate::io::IoResult;
 use crate::io::limits::Limits;
+use rayon::prelude::*;
 
 const TAG_STRIP_OFFSETS: u16 = 273;
 const TAG_ROWS_PER_STRIP: u16 = 278;
@@ -137,7 +138,9 @@ pub(super) fn check_chunks(
     Ok(())
 }
 
-/// Decodes every chunk into the `w × h` image.
+/// Decodes every chunk into the `w × h` image: each row of chunks (a strip, or a row of
+/// tiles) on its own rayon task, writing its own band of `out`. The first failing chunk in
+/// file order gives the error, whichever task met it first.
 pub(super) fn decode_chunks(
     t: &Tiff<'_>,
     lay: &Layout,
@@ -147,34 +150,46 @@ pub(super) fn decode_chunks(
     h: usize,
     out: &mut [u16],
 ) -> IoResult<()> {
-    for (k, (&off, &count)) in lay.offsets.iter().zip(&lay.counts).enumerate() {
-        let (x0, y0) = ((k % lay.across) * lay.tile_w, (k / lay.across) * lay.tile_h);
-        let chunk = Chunk {
-            k,
-            off,
-            count,
-            x0,
-            y0,
-            vis_w: lay.tile_w.min(w.saturating_sub(x0)),
-            vis_h: lay.tile_h.min(h.saturating_sub(y0)),
-            w,
-        };
-        if compression == 1 {
-            chunk.uncompressed(t, lay, bits, out)?;
-        } else {
-            chunk.lossless_jpeg(t, lay, out)?;
-        }
-    }
-    Ok(())
+    let band = lay.tile_h.saturating_mul(w).max(1);
+    let results: Vec<IoResult<()>> = out
+        .par_chunks_mut(band)
+        .enumerate()
+        .map(|(down, rows)| {
+            let y0 = down * lay.tile_h;
+            for across in 0..lay.across {
+                let k = down * lay.across + across;
+                let (Some(&off), Some(&count)) = (lay.offsets.get(k), lay.counts.get(k)) else {
+                    return Err(dng_err(format!("chunk {k} is not listed")));
+                };
+                let x0 = across * lay.tile_w;
+                let chunk = Chunk {
+                    k,
+                    off,
+                    count,
+                    x0,
+                    vis_w: lay.tile_w.min(w.saturating_sub(x0)),
+                    vis_h: lay.tile_h.min(h.saturating_sub(y0)),
+                    w,
+                };
+                if compression == 1 {
+                    chunk.uncompressed(t, lay, bits, rows)?;
+                } else {
+                    chunk.lossless_jpeg(t, lay, rows)?;
+                }
+            }
+            Ok(())
+        })
+        .collect();
+    results.into_iter().collect()
 }
 
-/// One chunk: its index, data, and the part of the `w`-wide image it covers.
+/// One chunk: its index, data, and the part of its band of the `w`-wide image it covers
+/// (from column `x0` of the band's first row).
 struct Chunk {
     k: usize,
     off: u64,
     count: u64,
     x0: usize,
-    y0: usize,
     vis_w: usize,
     vis_h: usize,
     w: usize,
@@ -182,7 +197,7 @@ struct Chunk {
 
 impl Chunk {
     fn put(&self, out: &mut [u16], r: usize, c: usize, v: u16) {
-        if let Some(o) = out.get_mut((self.y0 + r) * self.w + self.x0 + c) {
+        if let Some(o) = out.get_mut(r * self.w + self.x0 + c) {
             *o = v;
         }
     }
@@ -263,12 +278,10 @@ impl Chunk {
             )));
         }
         for r in 0..vis_h {
-            let row = j
-                .samples
-                .get(r * lay.tile_w..r * lay.tile_w + vis_w)
-                .unwrap_or(&[]);
-            for (c, &v) in row.iter().enumerate() {
-                self.put(out, r, c, v);
+            let from = j.samples.get(r * lay.tile_w..r * lay.tile_w + vis_w);
+            let at = r * self.w + self.x0;
+            if let (Some(from), Some(to)) = (from, out.get_mut(at..at + vis_w)) {
+                to.copy_from_slice(from);
             }
         }
         Ok(())

@@ -126,7 +126,7 @@ pub(super) fn decode(bytes: &[u8], limits: &Limits) -> IoResult<DngImage> {
     let crop = default_crop(&t, &raw, &area)?;
     limits.check(crop.width, crop.height)?;
     let levels = levels(&t, &raw, s.bits, &area)?;
-    let mut data = crop_and_level(&img, w, lin.as_deref(), &area, &crop, &levels);
+    let mut data = crop_and_level(img, w, lin.as_deref(), &area, &crop, &levels);
     if levels.black_level >= levels.white_level {
         return Err(dng_err(format!(
             "black level {} is not below the white level {}",
@@ -588,7 +588,7 @@ fn levels(t: &Tiff<'_>, raw: &Ifd, bits: u32, area: &ActiveArea) -> IoResult<Lev
 /// The default crop of the `w`-wide stored image, linearised and, unless every pixel has the
 /// frame's black level, rescaled to it.
 fn crop_and_level(
-    img: &[u16],
+    mut img: Vec<u16>,
     w: usize,
     lin: Option<&[u16]>,
     area: &ActiveArea,
@@ -598,30 +598,42 @@ fn crop_and_level(
     let (cx, cy, cw, ch) = (crop.x, crop.y, crop.width, crop.height);
     let (top, left) = (area.top, area.left);
     let (white, black_level) = (levels.white, levels.black_level);
-    let mut data = crate::buffers::zeroed::<u16>(cw * ch);
+    // In place: crop row r moves from (top + cy + r, left + cx) of the w-wide image to r × cw,
+    // never past where it is read from, and rows are moved in order, so every sample is read
+    // before anything is written over it.
+    // (the crop lies inside the stored image; rows that would not are zeros)
+    let mut kept = 0;
     for r in 0..ch {
         let (ar, sr) = (cy + r, top + cy + r);
-        for c in 0..cw {
-            let (ac, sc) = (cx + c, left + cx + c);
-            let mut v = img.get(sr * w + sc).copied().unwrap_or(0);
-            if let Some(l) = lin {
-                v = l.get(usize::from(v)).or(l.last()).copied().unwrap_or(v);
+        let from = sr * w + left + cx;
+        if from + cw > img.len() {
+            break;
+        }
+        img.copy_within(from..from + cw, r * cw);
+        kept = r + 1;
+        let Some(row) = img.get_mut(r * cw..(r + 1) * cw) else {
+            break;
+        };
+        if let Some(l) = lin {
+            for v in row.iter_mut() {
+                *v = l.get(usize::from(*v)).or(l.last()).copied().unwrap_or(*v);
             }
-            if !levels.exact {
+        }
+        if !levels.exact {
+            for (c, v) in row.iter_mut().enumerate() {
                 // one black level for the frame: rescale (v − b) / (white − b) to
                 // (white − black_level) so that every pixel keeps its place between its own
                 // black and the white
-                let b = levels.black_at(ar, ac);
+                let b = levels.black_at(ar, cx + c);
                 let scale = (white - f64::from(black_level)) / (white - b).max(1e-9);
-                let x = (f64::from(v) - b) * scale + f64::from(black_level);
-                v = x.round().clamp(0.0, 65535.0) as u16;
-            }
-            if let Some(o) = data.get_mut(r * cw + c) {
-                *o = v;
+                let x = (f64::from(*v) - b) * scale + f64::from(black_level);
+                *v = x.round().clamp(0.0, 65535.0) as u16;
             }
         }
     }
-    data
+    img.truncate(kept * cw);
+    img.resize(cw * ch, 0);
+    img
 }
 
 /// The camera metadata of IFD0.
