@@ -2,23 +2,36 @@ use super::*;
 use crate::io::{DngInfo, MosaicFormat, SourceInfo};
 use crate::test_support::tiny_table;
 
-/// A decoded DNG of `w` × `h` with the CFA `cfa` and `info`, as the reader returns it.
-fn dng_input(w: usize, h: usize, cfa: &str, info: DngInfo) -> Input {
-    let data = (0..w * h).map(|i| (i % 997) as u16 + 64).collect();
+/// A decoded file of `w` × `h` samples `data`, as the readers return it.
+fn decoded(
+    (w, h): (usize, usize),
+    data: Vec<u16>,
+    info: SourceInfo,
+    meta: Option<RawMeta>,
+    dng: Option<DngInfo>,
+) -> Input {
     Input::Decoded(Box::new(LoadedMosaic {
         mosaic: DecodedMosaic::U16(RawFrame {
             width: w,
             height: h,
             data,
         }),
-        info: SourceInfo {
-            format: MosaicFormat::Dng,
-            bits_per_sample: 16,
-            max_value: None,
-        },
-        meta: Some(RawMeta::new(w, h, cfa, 64, 4095, 1.0)),
-        dng: Some(info),
+        info,
+        meta,
+        dng,
     }))
+}
+
+/// A decoded DNG of `w` × `h` with the CFA `cfa` and `info`, as the reader returns it.
+fn dng_input(w: usize, h: usize, cfa: &str, info: DngInfo) -> Input {
+    let data = (0..w * h).map(|i| (i % 997) as u16 + 64).collect();
+    let source = SourceInfo {
+        format: MosaicFormat::Dng,
+        bits_per_sample: 16,
+        max_value: None,
+    };
+    let meta = RawMeta::new(w, h, cfa, 64, 4095, 1.0);
+    decoded((w, h), data, source, Some(meta), Some(info))
 }
 
 fn table_cfa() -> String {
@@ -133,20 +146,12 @@ fn a_dng_crop_on_another_cfa_phase_is_moved_to_the_tables() {
 /// is 255.
 fn png8_input(w: usize, h: usize) -> Input {
     let data = (0..w * h).map(|i| (i * 37 % 256) as u16).collect();
-    Input::Decoded(Box::new(LoadedMosaic {
-        mosaic: DecodedMosaic::U16(RawFrame {
-            width: w,
-            height: h,
-            data,
-        }),
-        info: SourceInfo {
-            format: MosaicFormat::Png,
-            bits_per_sample: 8,
-            max_value: Some(255),
-        },
-        meta: None,
-        dng: None,
-    }))
+    let source = SourceInfo {
+        format: MosaicFormat::Png,
+        bits_per_sample: 8,
+        max_value: Some(255),
+    };
+    decoded((w, h), data, source, None, None)
 }
 
 fn dn_levels(frame: &DecodedFrame) -> (u16, u16) {
