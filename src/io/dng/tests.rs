@@ -229,7 +229,7 @@ fn tiles_with_partial_edges_and_lossless_jpeg() {
                 }
                 // lossless JPEG in the DNG way: 2 components of half the tile's width
                 let d = if compression == 7 {
-                    super::ljpeg::tests::encode(&t, tw / 2, th, 2, 12, 1, 0)
+                    super::ljpeg::tests::encode(&t, (tw / 2, th, 2), 12, 1, 0)
                 } else {
                     pack(&t, tw, 12)
                 };

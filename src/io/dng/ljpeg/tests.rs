@@ -10,12 +10,11 @@ const FIVE_BITS: [u8; 16] = [0, 0, 0, 0, 17, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0];
 const ALL_LENGTHS: [u8; 16] = [0, 2, 1, 1, 1, 1, 1, 1, 1, 1, 1, 1, 1, 1, 1, 2];
 
 /// A minimal lossless JPEG encoder (predictor 1 or 6, one table for every component,
-/// SSSS codes of fixed length 5), to test the decoder on streams built here.
+/// SSSS codes of fixed length 5), to test the decoder on streams built here: `shape` is
+/// (width, height, components).
 pub(crate) fn encode(
     samples: &[u16],
-    width: usize,
-    height: usize,
-    nc: usize,
+    shape: (usize, usize, usize),
     precision: u8,
     predictor: u8,
     restart_rows: usize,
@@ -23,10 +22,9 @@ pub(crate) fn encode(
     encode_with(
         FIVE_BITS,
         samples,
-        (width, height, nc),
+        shape,
         precision,
-        predictor,
-        restart_rows,
+        (predictor, restart_rows),
     )
 }
 
@@ -37,8 +35,7 @@ fn encode_with(
     samples: &[u16],
     (width, height, nc): (usize, usize, usize),
     precision: u8,
-    predictor: u8,
-    restart_rows: usize,
+    (predictor, restart_rows): (u8, usize),
 ) -> Vec<u8> {
     let s = Stream {
         samples,
@@ -224,7 +221,7 @@ fn round_trips_components_predictors_and_restarts() {
         (2, 2, 3, 16, 1, 1),
     ] {
         let s = ramp(w * h * nc, u32::from(p));
-        let j = encode(&s, w, h, nc, p, pred, rst);
+        let j = encode(&s, (w, h, nc), p, pred, rst);
         let d = decode(&j, 1 << 20).unwrap();
         assert_eq!((d.width, d.height, d.components), (w, h, nc));
         assert_eq!(d.samples, s, "{w}×{h}×{nc} {p}-bit predictor {pred}");
@@ -241,12 +238,12 @@ fn codes_longer_than_the_lookup_table_decode() {
         let w = 40 / nc * 3;
         let h = s.len() / (w * nc);
         let s = &s[..w * h * nc];
-        let j = encode_with(ALL_LENGTHS, s, (w, h, nc), 16, pred, rst);
+        let j = encode_with(ALL_LENGTHS, s, (w, h, nc), 16, (pred, rst));
         let d = decode(&j, 1 << 20).unwrap();
         assert_eq!(d.samples, s, "{w}×{h}×{nc} predictor {pred}");
         // the same samples with 5-bit codes
         assert_eq!(
-            decode(&encode(s, w, h, nc, 16, pred, rst), 1 << 20).unwrap(),
+            decode(&encode(s, (w, h, nc), 16, pred, rst), 1 << 20).unwrap(),
             d
         );
     }
@@ -255,7 +252,7 @@ fn codes_longer_than_the_lookup_table_decode() {
 #[test]
 fn hostile_streams_are_errors() {
     let s = ramp(64, 12);
-    let j = encode(&s, 8, 8, 1, 12, 1, 0);
+    let j = encode(&s, (8, 8, 1), 12, 1, 0);
     // too many samples for the caller
     let e = decode(&j, 63).unwrap_err().to_string();
     assert!(e.contains("at most 63"), "{e}");
