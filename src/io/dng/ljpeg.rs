@@ -15,8 +15,8 @@
 //! Why not a crate: `jpeg-decoder` 0.3.2 refuses two-component frames, which is how DNG
 //! writers store a Bayer tile. The `ljpeg` crate 0.1.2 decodes such a tile as fast (95
 //! Msamples/s in the same run), but on that tile cut short or corrupted it panicked once in
-//! 56 cases and returned an image for 36 of them without an error, and a header claiming
-//! 65535 × 65535 × 2 samples made it allocate 16 GB.
+//! 56 cases and returned an image for 36 of them without an error (this decoder refuses all
+//! 56), and a header claiming 65535 × 65535 × 2 samples made it allocate 16 GB.
 
 use super::ifd::dng_err;
 use crate::io::IoResult;
