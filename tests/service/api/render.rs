@@ -32,6 +32,21 @@ impl Parity<'_> {
             .await
     }
 
+    /// A PNG mosaic posted with `q`: its float XYZ TIFF (the answer must be 200).
+    async fn png_as_tiff(&self, q: &str, png: Vec<u8>) -> bytes::Bytes {
+        let r = self
+            .c
+            .post(url(self.server, q))
+            .header("content-type", "image/png")
+            .header("accept", "image/tiff")
+            .body(png)
+            .send()
+            .await
+            .unwrap();
+        assert_eq!(r.status(), 200);
+        r.bytes().await.unwrap()
+    }
+
     /// A DNG posted with `q` for a float XYZ TIFF.
     async fn post_dng(&self, q: &str, body: Vec<u8>) -> reqwest::Result<reqwest::Response> {
         self.c
@@ -156,18 +171,9 @@ async fn each_format_is_the_cli_file(p: &Parity<'_>, table_id: &str) {
 
 /// The 16-bit PNG of the same frame gives the same float XYZ.
 async fn png_input_gives_the_cli_tiff(p: &Parity<'_>) {
-    let (d, server, c) = (p.d, p.server, &p.c);
-    let png = std::fs::read(d.join("sim/mosaic.png")).unwrap();
-    let r = c
-        .post(url(server, "/v1/render?illuminant=Tungsten"))
-        .header("content-type", "image/png")
-        .header("accept", "image/tiff")
-        .body(png)
-        .send()
-        .await
-        .unwrap();
-    assert_eq!(r.status(), 200);
-    assert!(r.bytes().await.unwrap()[..] == std::fs::read(d.join("cli.tiff")).unwrap()[..]);
+    let png = std::fs::read(p.d.join("sim/mosaic.png")).unwrap();
+    let tiff = p.png_as_tiff("/v1/render?illuminant=Tungsten", png).await;
+    assert!(tiff[..] == std::fs::read(p.d.join("cli.tiff")).unwrap()[..]);
 }
 
 /// A grayscale PNG of `w` × `h` samples at `depth` bits.
@@ -196,16 +202,8 @@ async fn an_8_bit_png_is_read_against_its_largest_value(p: &Parity<'_>) {
         .collect();
     let wide: Vec<u16> = high.iter().map(|&v| v * 257).collect();
     let xyz = |q: &'static str, body: Vec<u8>| async move {
-        let r =
-            p.c.post(url(p.server, &format!("/v1/render?illuminant=Tungsten{q}")))
-                .header("content-type", "image/png")
-                .header("accept", "image/tiff")
-                .body(body)
-                .send()
-                .await
-                .unwrap();
-        assert_eq!(r.status(), 200);
-        r.bytes().await.unwrap()
+        p.png_as_tiff(&format!("/v1/render?illuminant=Tungsten{q}"), body)
+            .await
     };
     let narrow = gray_png(p.w, p.h, png::BitDepth::Eight, &high);
     let by_default = xyz("", narrow.clone()).await;
