@@ -19,8 +19,7 @@ use crate::l3::table::TableKind;
 use crate::pipeline::{
     CorrectionMode, DecodedFrame, FrameNotes, Input, Levels, LightChoice, LightOrigin,
     OutputFormat, PipelineError, RenderContext, RenderOptions, RenderOutcome, RenderRequest,
-    Renderer, Scaling, StoredTables, TableChoice, check_preview, choose_table, decode,
-    parse_region,
+    Renderer, StoredTables, TableChoice, check_preview, choose_table, decode, parse_region,
 };
 use crate::spectral::IsetData;
 
@@ -165,7 +164,7 @@ pub(crate) fn light_source(origin: LightOrigin) -> &'static str {
     }
 }
 
-/// The mosaic file `path` decoded for `table` (in volts, a DNG's CFA checked), with the light
+/// The mosaic file `path` decoded for `table` (a DNG's CFA checked), with the light
 /// to render it under: `named`, else the file's metadata, else an estimate from its pixels.
 pub(crate) fn frame_and_light(
     path: &Path,
@@ -175,8 +174,8 @@ pub(crate) fn frame_and_light(
 ) -> Result<(DecodedFrame, String, &'static str), CliError> {
     let limits = Limits::default();
     let input = Input::Decoded(Box::new(read_mosaic(path, &limits)?));
-    let frame = decode(input, Levels::default(), table, Scaling::Upfront, &limits)
-        .map_err(|e| input_error(e, path))?;
+    let frame =
+        decode(input, Levels::default(), table, &limits).map_err(|e| input_error(e, path))?;
     warn_of(&frame.notes, path);
     let (spec, origin) = match named {
         Some(s) => (s.to_string(), LightOrigin::Named),
@@ -248,8 +247,6 @@ fn render_request(
         options,
         format,
         renderer,
-        // the light estimate reads volts, as it always has here
-        scaling: Scaling::Upfront,
         limits: Limits::with_max_pixels(a.max_pixels),
     })
 }
@@ -343,7 +340,6 @@ pub(crate) fn render_file_xyz(
         options: RenderOptions::default(),
         format: OutputFormat::F32,
         renderer: Renderer::Fast,
-        scaling: Scaling::Upfront,
         limits: Limits::default(),
     };
     run_request(request, table, iset, path)

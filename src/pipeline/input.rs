@@ -44,27 +44,16 @@ pub struct Levels {
     pub white: Option<u16>,
 }
 
-/// How integer samples become volts.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
-pub enum Scaling {
-    /// Inside the renderer, tile by tile: no volts copy of the frame (the service). The light
-    /// estimate then reads the DN.
-    #[default]
-    InRenderer,
-    /// The whole frame before anything else (`l3 render`, `l3 eval --frame`): the light
-    /// estimate reads the clamped volts.
-    Upfront,
-}
-
 /// A decoded frame's samples.
 pub enum Samples {
-    /// Integer DN with their levels.
+    /// Integer DN with their levels: the renderers scale them to volts tile by tile, so no
+    /// volts copy of the frame is made (the light estimate reads the same volts from them).
     Dn {
         data: Vec<u16>,
         black: u16,
         white: u16,
     },
-    /// Volts (float input, or DN scaled up front).
+    /// Volts (float input).
     Volts(Vec<f32>),
 }
 
@@ -262,12 +251,11 @@ fn check_levels(black: u16, white: u16) -> Result<(), PipelineError> {
 
 /// Decodes `input` for `table`: its levels (`levels` over the file's, else 0 and the largest
 /// value the container holds, 65535 for raw u16) checked before and after decoding, a DNG's or a sidecar's CFA checked against the table's, the declared
-/// size against the decoded one; integer samples scaled to volts as `scaling` says.
+/// size against the decoded one. Integer samples stay integers ([`Samples::Dn`]).
 pub fn decode(
     input: Input,
     levels: Levels,
     table: &L3Table,
-    scaling: Scaling,
     limits: &Limits,
 ) -> Result<DecodedFrame, PipelineError> {
     let (mut black, mut white) = (levels.black.unwrap_or(0), levels.white.unwrap_or(65535));
@@ -346,9 +334,6 @@ pub fn decode(
     };
     check_levels(black, white)?;
     let samples = match mosaic {
-        DecodedMosaic::U16(frame) if scaling == Scaling::Upfront => {
-            Samples::Volts(to_volts(&frame, black, white, table.meta.voltage_swing)?)
-        }
         DecodedMosaic::U16(frame) => Samples::Dn {
             data: frame.data,
             black,

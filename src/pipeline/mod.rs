@@ -36,9 +36,7 @@ use std::time::Instant;
 pub use choice::{StoredTables, TableChoice, choose_table};
 pub use error::{CfaOrigin, PipelineError};
 pub use fit::{SensorMismatch, check_cfa, check_declared_cfa, design_fit};
-pub use input::{
-    CfaShift, DecodedFrame, FrameNotes, Input, Levels, Samples, Scaling, cfa_phase, decode,
-};
+pub use input::{CfaShift, DecodedFrame, FrameNotes, Input, Levels, Samples, cfa_phase, decode};
 pub use kernels::{
     CorrectionMode, KernelChoice, KernelKey, KernelSource, Kernels, correction_for, kernels_for,
     uses_own_kernels,
@@ -97,7 +95,6 @@ pub struct RenderRequest {
     pub options: RenderOptions,
     pub format: OutputFormat,
     pub renderer: Renderer,
-    pub scaling: Scaling,
     /// Limits of the decoders.
     pub limits: Limits,
 }
@@ -198,7 +195,7 @@ impl Prepared {
         let Prepared { request: r, named } = self;
         let table = ctx.table();
         let t0 = Instant::now();
-        let frame = decode(r.input, r.levels, table, r.scaling, &r.limits)?;
+        let frame = decode(r.input, r.levels, table, &r.limits)?;
         let (entry, light_origin) = match named {
             Some(entry) => (entry, LightOrigin::Named),
             None => {

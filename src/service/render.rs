@@ -36,7 +36,7 @@ use crate::l3::render::WhiteLevel;
 use crate::pipeline::{
     CorrectionMode, Encoded, Input, KernelChoice, Levels, LightChoice, LightOrigin, OutputFormat,
     PipelineError, RenderContext, RenderOptions, RenderOutcome, RenderPipeline, RenderRequest,
-    Renderer, Scaling, TableChoice, check_preview, parse_region,
+    Renderer, TableChoice, check_preview, parse_region,
 };
 use crate::spectral::IsetData;
 
@@ -383,7 +383,6 @@ pub(super) fn render_request(
         options,
         format,
         renderer: Renderer::Fast,
-        scaling: Scaling::InRenderer,
         limits: Limits {
             max_pixels: server.max_pixels,
             ..Limits::default()

@@ -46,7 +46,7 @@ fn as_shot_white_xy_is_the_light_when_there_is_no_neutral() {
         ..DngInfo::default()
     };
     let input = dng_input(8, 6, &table_cfa(), info.clone());
-    let frame = decode(input, Levels::default(), table, Scaling::InRenderer, &lim).unwrap();
+    let frame = decode(input, Levels::default(), table, &lim).unwrap();
     assert_eq!(frame.illuminant.as_deref(), Some("xy:0.447600,0.407400"));
     let (spec, source) = frame.light(table, None).unwrap();
     assert_eq!(
@@ -60,7 +60,7 @@ fn as_shot_white_xy_is_the_light_when_there_is_no_neutral() {
         ..info
     };
     let input = dng_input(8, 6, &table_cfa(), both);
-    let frame = decode(input, Levels::default(), table, Scaling::InRenderer, &lim).unwrap();
+    let frame = decode(input, Levels::default(), table, &lim).unwrap();
     assert_eq!(frame.illuminant, None);
     assert!(frame.neutral.is_some());
 }
@@ -93,7 +93,6 @@ fn a_dng_crop_on_another_cfa_phase_is_moved_to_the_tables() {
         dng_input(w, h, &shifted, info),
         Levels::default(),
         table,
-        Scaling::InRenderer,
         &lim,
     )
     .unwrap();
@@ -121,7 +120,6 @@ fn a_dng_crop_on_another_cfa_phase_is_moved_to_the_tables() {
         dng_input(w, h, other, DngInfo::default()),
         Levels::default(),
         table,
-        Scaling::InRenderer,
         &lim,
     )
     .err()
@@ -132,7 +130,6 @@ fn a_dng_crop_on_another_cfa_phase_is_moved_to_the_tables() {
         dng_input(w, h, &cfa, DngInfo::default()),
         Levels::default(),
         table,
-        Scaling::InRenderer,
         &lim,
     )
     .unwrap();
@@ -164,7 +161,7 @@ fn dn_levels(frame: &DecodedFrame) -> (u16, u16) {
 #[test]
 fn without_levels_white_is_the_containers_largest_value() {
     let (table, lim) = (tiny_table(), Limits::default());
-    let decoded = |levels| decode(png8_input(8, 6), levels, table, Scaling::InRenderer, &lim);
+    let decoded = |levels| decode(png8_input(8, 6), levels, table, &lim);
     assert_eq!(dn_levels(&decoded(Levels::default()).unwrap()), (0, 255));
     // the request's level wins over the container's
     let given = Levels {
@@ -186,6 +183,6 @@ fn without_levels_white_is_the_containers_largest_value() {
     ));
     // a sidecar's (or DNG's) white still comes before the container's
     let dng = dng_input(8, 6, &table_cfa(), DngInfo::default());
-    let frame = decode(dng, Levels::default(), table, Scaling::InRenderer, &lim).unwrap();
+    let frame = decode(dng, Levels::default(), table, &lim).unwrap();
     assert_eq!(dn_levels(&frame), (64, 4095));
 }
