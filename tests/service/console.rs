@@ -2,8 +2,8 @@
 //! end in headless Chromium driven through chromedriver (WebDriver): the status, a simulated
 //! RGBW DNG rendered with its light and timings, a tiny training job to 100 %, an evaluation's
 //! figure, a light added and removed. The browser test prints `skipped:` without Chromium or
-//! chromedriver (fails under `CI`); it writes screenshots to a temporary folder and prints its
-//! path.
+//! chromedriver (fails under `CI`); it writes screenshots to a temporary folder, kept (and its
+//! path printed) when the test fails or `L3_KEEP_SCREENSHOTS` is set, else removed.
 
 use std::path::{Path, PathBuf};
 use std::process::{Child, Command, Stdio};
@@ -15,6 +15,26 @@ use serde_json::{Value, json};
 use crate::service_support::*;
 
 const TOKEN: &str = "console-secret";
+
+/// The screenshots' folder: removed after a passing run; kept, and its path printed, after a
+/// failing one or with `L3_KEEP_SCREENSHOTS` set.
+struct Shots(Option<tempfile::TempDir>);
+
+impl Shots {
+    fn path(&self) -> &Path {
+        self.0.as_ref().map(|d| d.path()).unwrap()
+    }
+}
+
+impl Drop for Shots {
+    fn drop(&mut self) {
+        if std::thread::panicking() || std::env::var_os("L3_KEEP_SCREENSHOTS").is_some() {
+            if let Some(dir) = self.0.take() {
+                println!("console screenshots in {}", dir.keep().display());
+            }
+        }
+    }
+}
 
 /// A config whose mutating routes need [`TOKEN`].
 fn config_with_token(d: &Path) -> l3::service::ServiceConfig {
@@ -451,12 +471,13 @@ async fn the_console_renders_trains_and_evaluates_in_chromium() {
     std::fs::create_dir_all(&data).unwrap();
     let (server, _) = server_with_table(&data, Some(config_with_token(&data))).await;
     let dng = simulated_dng(tmp.path());
-    let shots = tempfile::Builder::new()
-        .prefix("l3-console-")
-        .tempdir()
-        .unwrap()
-        .keep();
-    println!("console screenshots in {}", shots.display());
+    let shots_dir = Shots(Some(
+        tempfile::Builder::new()
+            .prefix("l3-console-")
+            .tempdir()
+            .unwrap(),
+    ));
+    let shots = shots_dir.path().to_path_buf();
     let driver = Driver::start(&chromedriver, &shots.join("chromedriver.log")).await;
     let b = session(&driver, &chromium, &tmp.path().join("profile")).await;
     b.goto(&url(&server, "/")).await.unwrap();
