@@ -490,8 +490,8 @@ fn negative_noise_in_a_curve_is_zero() {
 /// limit) and resolves as the file does.
 #[test]
 fn a_fine_csv_inlines_within_the_limit() {
-    let dir = std::env::temp_dir().join(format!("l3-inline-{}", std::process::id()));
-    std::fs::create_dir_all(&dir).unwrap();
+    let tmp = tempfile::tempdir().unwrap();
+    let dir = tmp.path();
     let csv = dir.join("fine.csv");
     let mut text = String::from("wavelength_nm,R,G,B\n");
     for i in 0..=8000 {
@@ -525,5 +525,4 @@ fn a_fine_csv_inlines_within_the_limit() {
             assert!((x - y).abs() < 1e-12, "{x} {y}");
         }
     }
-    std::fs::remove_dir_all(&dir).ok();
 }
