@@ -297,7 +297,7 @@ impl SensorDesign {
     }
 
     /// Parse and validate TOML text: a design file, which must give its `name`
-    /// ([`Self::check_given`]).
+    /// (`Self::check_given`).
     pub fn from_toml_str(text: &str) -> Result<Self, CameraError> {
         let toml_err = |e: toml::de::Error| CameraError::Toml {
             path: "<text>".into(),
@@ -312,7 +312,7 @@ impl SensorDesign {
     }
 
     /// A design as a JSON object with the TOML file's keys (a training job's `sensor`),
-    /// checked as a file is ([`Self::check_given`], [`Self::validate`]).
+    /// checked as a file is (`Self::check_given`, [`Self::validate`]).
     pub fn from_json(value: serde_json::Value) -> Result<Self, CameraError> {
         let given = |k: &str| value.get(k).is_some_and(|v| !v.is_null());
         let keys = ["name", "description", "cfa", "filters"];

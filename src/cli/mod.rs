@@ -67,7 +67,7 @@ pub enum CliError {
     /// Bad arguments or configuration, found by the command itself.
     #[error("{0}")]
     Usage(String),
-    /// An error about a value a flag gave (made at the flag, [`CliError::argument`]): a
+    /// An error about a value a flag gave (made at the flag, `CliError::argument`): a
     /// refused value is a usage error, whatever the layer that refused it.
     #[error(transparent)]
     Argument(Box<CliError>),

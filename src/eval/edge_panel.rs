@@ -139,7 +139,7 @@ impl EdgeCurve {
 
 impl EdgeCrop {
     /// The central [`CROP_SIDE`]² pixels of `xyz` (or the whole image when smaller), scaled so
-    /// the brighter half's mean luminance is [`CROP_WHITE_Y`], as an sRGB PNG.
+    /// the brighter half's mean luminance is `CROP_WHITE_Y`, as an sRGB PNG.
     pub fn centre(xyz: &[f32], width: usize, height: usize) -> Result<Self, EvalError> {
         if width == 0 || height == 0 || xyz.len() != width * height * 3 {
             return Err(EvalError::Invalid(format!(

@@ -17,7 +17,7 @@ pub struct Limits {
 pub const DEFAULT_MAX_PIXELS: usize = 150_000_000;
 
 impl Default for Limits {
-    /// [`DEFAULT_MAX_PIXELS`], at most 30000 pixels per side.
+    /// `DEFAULT_MAX_PIXELS`, at most 30000 pixels per side.
     fn default() -> Self {
         Limits {
             max_pixels: DEFAULT_MAX_PIXELS,

@@ -21,7 +21,7 @@ const DECODER_INTERNAL_BYTES: usize = 32 << 20;
 /// PNG compression effort.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
 pub enum PngCompression {
-    /// Fastest useful compression: 8-bit RGB by the band encoder ([`super::png_bands`]:
+    /// Fastest useful compression: 8-bit RGB by the band encoder (`png_bands`:
     /// `Up` filter, per-band Huffman codes, on all cores), 16-bit gray by fdeflate; for
     /// interactive responses.
     Fast,

@@ -140,7 +140,7 @@ impl ServiceError {
     }
 
     /// The problem document. Its detail names no directory of the server
-    /// ([`without_server_paths`]).
+    /// (`without_server_paths`).
     pub fn problem(&self) -> serde_json::Value {
         let status = self.status();
         serde_json::json!({

@@ -95,7 +95,7 @@ impl Server {
             .map_err(|e| ServiceError::Internal(format!("server task: {e}")))?
     }
 
-    /// Runs until the server stops (after [`begin_shutdown`] or a signal given to `start_with`).
+    /// Runs until the server stops (after `begin_shutdown` or a signal given to `start_with`).
     pub async fn wait(mut self) -> Result<(), ServiceError> {
         let r = (&mut self.task)
             .await

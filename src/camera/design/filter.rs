@@ -28,6 +28,8 @@ const PARAMETRIC_SUBSAMPLES: usize = 20;
 /// from a file, [`SensorDesign::with_curves_beside`]), then as a table of the
 /// spectral data ([`IsetData::table`]: the ISET data directory's file, else the
 /// built-in copy).
+///
+/// [`SensorDesign::with_curves_beside`]: crate::camera::SensorDesign::with_curves_beside
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(try_from = "FilterToml", into = "FilterToml")]
 pub enum FilterSpec {

@@ -1,7 +1,7 @@
 //! A real ColorChecker capture against published values: the frame rendered as `l3 render`
 //! renders it (to XYZ referred to D65), the 24 patches found from the chart's four corners
 //! ([`geometry`]), each sampled in its middle, scaled so the white patch matches the
-//! reference's white, and compared in CIELAB (D65 white) with CIEDE2000 ([`reference`]).
+//! reference's white, and compared in CIELAB (D65 white) with CIEDE2000 ([`mod@reference`]).
 //!
 //! Exposure is normalised on the white patch (patch 19): the rendered image is scaled so its
 //! white patch has the reference white's Y (0.880 for X-Rite's, 0.815 for ISET's). It is the

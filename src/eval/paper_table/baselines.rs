@@ -117,6 +117,8 @@ impl PaperTable {
     }
 
     /// The captures a run was evaluated on: 1, or [`PaperOptions::captures`].
+    ///
+    /// [`PaperOptions::captures`]: crate::eval::PaperOptions::captures
     pub fn n_captures(&self) -> usize {
         self.rows
             .iter()

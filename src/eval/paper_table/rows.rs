@@ -34,7 +34,7 @@ pub struct PaperOptions {
     /// exposure: 1 (the table as the paper gives it, one capture), or
     /// [`crate::eval::MIN_CAPTURES`]..=[`crate::eval::MAX_CAPTURES`], which adds each row's mean over
     /// the captures (chart seeds `chart.seed`, `chart.seed + 1`, …) and its
-    /// matching linear map's ([`CaptureSpread`]).
+    /// matching linear map's (`CaptureSpread`).
     #[serde(default = "one")]
     pub captures: usize,
     /// The side of the slanted edge and the texture every row's spatial metrics are measured

@@ -239,7 +239,7 @@ fn encode(rgb: &[u8], w: u16, h: u16, opts: JpegOptions, strips: bool) -> IoResu
 }
 
 /// Encodes interleaved 8-bit sRGB (`width × height × 3` bytes) as an in-memory JPEG. Frames
-/// taller than one strip are encoded in strips on all cores ([`encode`]); the strip
+/// taller than one strip are encoded in strips on all cores (`encode`); the strip
 /// height is fixed, so the bytes never depend on the thread count.
 pub fn encode_jpeg_rgb8(
     width: usize,

@@ -103,7 +103,7 @@ pub fn delta_e_weights(xyz: [f64; 3], white: [f64; 3]) -> [[f64; 3]; 3] {
 }
 
 /// Minimises `Σ_light (Σ_i e_i)²` over `n` samples, `e_i` sample i's
-/// smoothed error (`sqrt(square_error + s²)`, `s` [`MEAN_LOSS_SMOOTHING`]),
+/// smoothed error (`sqrt(square_error + s²)`, `s` `MEAN_LOSS_SMOOTHING`),
 /// by iteratively reweighted least squares: `solve(weights)` solves the
 /// problem whose loss is `Σ_i weights[i] · square_error_i`, and
 /// `square_error(x, i)` is sample i's squared error under solution `x`. The

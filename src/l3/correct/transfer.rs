@@ -47,7 +47,7 @@ impl L3Table {
 
     /// [`Self::trained_under`] for a light whose white is known (`white_xy`): the name must
     /// match, and, where the table recorded that training light's white, the white too
-    /// (within [`TRAINING_WHITE_TOLERANCE`]). A light registered later under a training
+    /// (within `TRAINING_WHITE_TOLERANCE`). A light registered later under a training
     /// light's name with other samples is then not the table's own.
     pub fn trained_under_light(&self, name: &str, white_xy: Option<[f64; 2]>) -> bool {
         let recorded = &self.meta.train_white_xy;

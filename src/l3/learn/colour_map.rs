@@ -104,7 +104,7 @@ pub fn level_maps(
 
 /// One colour map per band (level × chroma classes + class, see
 /// [`chroma`](crate::l3::classify::chroma)): each level's map fitted on each chroma class's
-/// samples, with a ridge ([`PRIOR_WEIGHT`]) toward `pooled`, the level's map over every
+/// samples, with a ridge (`PRIOR_WEIGHT`) toward `pooled`, the level's map over every
 /// sample ([`level_maps`] on the same samples). A class's surfaces span a narrow cone of channel space, so on its
 /// own a class map is free in the directions across the cone and takes large,
 /// noisy weights there; the ridge leaves those directions to the pooled map.

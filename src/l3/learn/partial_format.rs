@@ -231,7 +231,7 @@ fn range_of(h: &Header) -> Range<usize> {
 }
 
 impl SurveyPartial {
-    /// The partial's bytes (format in [`self`](super::partial_format)).
+    /// The partial's bytes (format in the `partial_format` module's docs).
     pub fn to_bytes(&self) -> Result<Vec<u8>, LearnError> {
         let cells: Vec<u32> = (0..self.hist.len())
             .filter(|&k| !self.hist[k].is_empty())
@@ -326,7 +326,7 @@ impl SurveyPartial {
 }
 
 impl GramPartial {
-    /// The partial's bytes (format in [`self`](super::partial_format)).
+    /// The partial's bytes (format in the `partial_format` module's docs).
     pub fn to_bytes(&self) -> Result<Vec<u8>, LearnError> {
         let dim = self.n_features + 3;
         let mut tensors = Vec::new();

@@ -204,7 +204,7 @@ impl TrainingSpec {
     }
 
     /// Batches of a run of this spec (one training scene each): what a run
-    /// can be split into ([`TrainingRun::plan`]).
+    /// can be split into ([`TrainingRun::plan`](crate::l3::learn::TrainingRun::plan)).
     pub fn n_batches(&self) -> usize {
         // A fixed scene budget: scene s is lit by illuminant s mod n (an
         // ensemble is a mixture of scenes, not every scene under every

@@ -98,7 +98,7 @@ impl<'a> Ticker<'a> {
 /// sums of every unsaturated kernel (how it renders a uniform patch); `None` leaves every
 /// kernel to plain ridge regression on the patches.
 ///
-/// This is the sharded path of [`super::shards`] with one shard: survey,
+/// This is the sharded path of the `shards` module with one shard: survey,
 /// classes, accumulation, merge, solve.
 pub fn learn<F>(
     geo: &PatchGeometry,
@@ -280,7 +280,7 @@ pub fn classes_from_survey(
 
 /// Stage 2 on batches `batches` of a run: the normal equations of every
 /// class, as the sums of the tree nodes tiling the range (each node's
-/// halves in parallel; see [`super::shards`] for why the sums do not
+/// halves in parallel; see the `shards` module for why the sums do not
 /// depend on the split). `ctl` sees this shard's progress (0 to 1).
 pub fn accumulate_batches<F>(
     setup: &TrainSetup,

@@ -292,11 +292,11 @@ impl ChromaStage {
 
     /// [`Self::apply`] over the image itself: no second frame. A 110 MP render through the
     /// stage held two float XYZ frames of 1.3 GB each; it now holds one, and a copy of the
-    /// rows on either side of each strip's edges (`4r` rows per [`STRIP`]).
+    /// rows on either side of each strip's edges (`4r` rows per `STRIP`).
     ///
     /// Strips run in parallel, each over its own rows. A strip's filters read each input row
     /// once, in order, and emit an output row only after reading the rows `2r` below it
-    /// ([`run_side_by_side`]), so within a strip a row is read before it is overwritten. Only
+    /// (`run_side_by_side`), so within a strip a row is read before it is overwritten. Only
     /// its neighbours' edge rows could change under it; those are read from the copy taken
     /// before any strip starts. The result is the out-of-place filter's, bit for bit. On an
     /// error (a non-finite result) the image is left part-filtered.
