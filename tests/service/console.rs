@@ -28,10 +28,9 @@ impl Shots {
 
 impl Drop for Shots {
     fn drop(&mut self) {
-        if std::thread::panicking() || std::env::var_os("L3_KEEP_SCREENSHOTS").is_some() {
-            if let Some(dir) = self.0.take() {
-                println!("console screenshots in {}", dir.keep().display());
-            }
+        let keep = std::thread::panicking() || std::env::var_os("L3_KEEP_SCREENSHOTS").is_some();
+        if keep && let Some(dir) = self.0.take() {
+            println!("console screenshots in {}", dir.keep().display());
         }
     }
 }
