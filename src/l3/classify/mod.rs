@@ -6,7 +6,9 @@ pub mod chroma;
 mod patch;
 
 pub use chroma::{ChromaClasses, MAX_CHROMA_CLASSES, MIN_SURFACES_PER_CHANNEL, chromaticity};
-pub use patch::{MAX_CHANNELS, PatchGeometry, PatchStats, mirror, sat_case_index};
+pub use patch::{
+    LANES, LaneChannels, MAX_CHANNELS, PatchGeometry, PatchStats, mirror, sat_case_index,
+};
 
 /// Errors of the classification: parameters that make no geometry or no chroma classes,
 /// and inputs (a light's neutral, a response set) that cannot be classified.

@@ -6,11 +6,15 @@ use crate::camera::Cfa;
 
 use super::ClassifyError;
 
+mod lanes;
+
+pub use lanes::{LANES, LaneChannels};
+
 /// The most CFA channels a table can classify (saturation cases are bit masks).
 pub const MAX_CHANNELS: usize = 8;
 
 /// Statistics of one patch that decide its class.
-#[derive(Clone, Copy, Debug, PartialEq)]
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
 pub struct PatchStats {
     /// Mean over channels of each channel's mean over its unsaturated pixels, volts.
     pub luminance: f32,

@@ -27,7 +27,7 @@ use super::shards::{
     tree_sum,
 };
 use super::solve::solve_learned;
-use crate::l3::classify::{MAX_CHANNELS, PatchGeometry, sat_case_index};
+use crate::l3::classify::{LANES, MAX_CHANNELS, PatchGeometry, PatchStats, sat_case_index};
 use crate::l3::correct::NoiseModel;
 use crate::l3::params::L3Params;
 
@@ -404,6 +404,9 @@ struct IndexedStats {
     channel_means: [f32; MAX_CHANNELS],
 }
 
+/// Visits every pixel of `f` in raster order with its CFA position, stats and patch. Interior
+/// pixels are classified [`LANES`] at a time ([`PatchGeometry::stats_run`], the same stats bit
+/// for bit), the borders one by one.
 fn for_each_patch(
     geo: &PatchGeometry,
     f: &TrainingFrame,
@@ -414,11 +417,30 @@ fn for_each_patch(
     if f.volts.len() != f.width * f.height || f.xyz.len() != f.volts.len() * 3 {
         return;
     }
+    let lanes = geo.lane_channels();
+    let (rows, cols) = (geo.cfa.rows, geo.cfa.cols);
+    // the stats of the row's run of LANES pixels from column `run.0` (interior pixels only)
+    let mut run = (usize::MAX, [PatchStats::default(); LANES]);
     for r in 0..f.height {
+        run.0 = usize::MAX;
         for c in 0..f.width {
             geo.gather(&f.volts, f.width, f.height, r, c, &mut patch);
             let pos = geo.position(r + dr, c + dc);
-            let s = geo.stats(&patch, pos);
+            if !(run.0..run.0.saturating_add(LANES)).contains(&c) {
+                // the run from here, else the row's last run that holds this pixel
+                let start = c.min((f.width + geo.radius).saturating_sub(LANES + 2 * geo.radius));
+                let inside = c >= geo.radius && c + geo.radius < f.width;
+                if inside && geo.run_is_interior(f.width, f.height, r, start) {
+                    let phase = ((r + dr) % rows, (start + dc) % cols);
+                    geo.stats_run(&lanes, phase, &f.volts, f.width, (r, start), &mut run.1);
+                    run.0 = start;
+                }
+            }
+            let s = if (run.0..run.0.saturating_add(LANES)).contains(&c) {
+                run.1[c - run.0]
+            } else {
+                geo.stats(&patch, pos)
+            };
             let st = IndexedStats {
                 index: r * f.width + c,
                 luminance: s.luminance,
@@ -427,6 +449,74 @@ fn for_each_patch(
                 channel_means: s.channel_means,
             };
             visit(pos, &st, &patch);
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::camera::Cfa;
+
+    /// Every pixel is visited once, in raster order, with its position, its gathered patch
+    /// and the stats `stats` gives that patch, bit for bit: whichever path (runs of lanes or
+    /// one pixel) classified it, on frames narrower than a run, as wide as one, and with a
+    /// tail shorter than one.
+    #[test]
+    fn each_patch_is_visited_once_with_its_own_stats() {
+        let geo =
+            PatchGeometry::new(5, &Cfa::parse("RG/WB").unwrap(), &[0.01, 0.1, 1.0], 1.5).unwrap();
+        let mut state = 0x9e37_79b9_u32;
+        for (width, height) in [
+            (3, 4),
+            (19, 6),
+            (20, 7),
+            (21, 5),
+            (22, 9),
+            (37, 8),
+            (45, 11),
+        ] {
+            for cfa_shift in [(0, 0), (1, 1), (0, 1)] {
+                let volts: Vec<f32> = (0..width * height)
+                    .map(|_| {
+                        state ^= state << 13;
+                        state ^= state >> 17;
+                        state ^= state << 5;
+                        (state % 2000) as f32 / 1000.0
+                    })
+                    .collect();
+                let f = TrainingFrame {
+                    width,
+                    height,
+                    xyz: vec![0.0; volts.len() * 3],
+                    volts,
+                    cfa_shift,
+                    neutral: None,
+                };
+                let mut next = 0;
+                let mut patch = vec![0f32; 25];
+                for_each_patch(&geo, &f, |pos, st, got| {
+                    let (r, c) = (next / width, next % width);
+                    assert_eq!(st.index, next);
+                    geo.gather(&f.volts, width, height, r, c, &mut patch);
+                    assert_eq!(got, &patch[..]);
+                    assert_eq!(pos, geo.position(r + cfa_shift.0, c + cfa_shift.1));
+                    let want = geo.stats(&patch, pos);
+                    let bits = |m: &[f32; MAX_CHANNELS]| m.map(f32::to_bits);
+                    assert_eq!(
+                        (st.luminance.to_bits(), st.contrast.to_bits(), st.sat_mask),
+                        (
+                            want.luminance.to_bits(),
+                            want.contrast.to_bits(),
+                            want.sat_mask
+                        ),
+                        "{width}×{height} ({r}, {c})"
+                    );
+                    assert_eq!(bits(&st.channel_means), bits(&want.channel_means));
+                    next += 1;
+                });
+                assert_eq!(next, width * height);
+            }
         }
     }
 }
