@@ -430,9 +430,9 @@ fn for_each_patch(
                 // the run from here, else the row's last run that holds this pixel
                 let start = c.min((f.width + geo.radius).saturating_sub(LANES + 2 * geo.radius));
                 let inside = c >= geo.radius && c + geo.radius < f.width;
-                if inside && geo.run_is_interior(f.width, f.height, r, start) {
-                    let phase = ((r + dr) % rows, (start + dc) % cols);
-                    geo.stats_run(&lanes, phase, &f.volts, f.width, (r, start), &mut run.1);
+                let phase = ((r + dr) % rows, (start + dc) % cols);
+                if inside && geo.stats_run(&lanes, phase, &f.volts, f.width, (r, start), &mut run.1)
+                {
                     run.0 = start;
                 }
             }

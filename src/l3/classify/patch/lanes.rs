@@ -110,8 +110,9 @@ impl PatchGeometry {
     }
 
     /// [`Self::stats`] of the [`LANES`] pixels `(r, c0 + j)` of `img` (`width` wide), whose
-    /// first pixel is at CFA phase `phase` (row, column); every patch must be inside the image
-    /// ([`Self::run_is_interior`]). Bit for bit what `stats` gives each pixel's patch.
+    /// first pixel is at CFA phase `phase` (row, column). Bit for bit what `stats` gives each
+    /// pixel's patch. Returns `false`, and writes nothing, unless every patch is inside the
+    /// image ([`Self::run_is_interior`]) and `lanes` and `phase` are this geometry's.
     pub fn stats_run(
         &self,
         lanes: &LaneChannels,
@@ -120,7 +121,17 @@ impl PatchGeometry {
         width: usize,
         at: (usize, usize),
         out: &mut [PatchStats; LANES],
-    ) {
+    ) -> bool {
+        let fits = width > 0
+            && self.run_is_interior(width, img.len() / width, at.0, at.1)
+            && phase.0 < self.cfa.rows
+            && phase.1 < self.cfa.cols
+            && lanes.cols == self.cfa.cols
+            && lanes.chans.len() == self.cfa.rows * self.cfa.cols
+            && lanes.chans.iter().all(|c| c.len() == self.size * self.size);
+        if !fits {
+            return false;
+        }
         let run = Run {
             geo: self,
             lanes,
@@ -138,6 +149,7 @@ impl PatchGeometry {
             Isa::Avx2 => unsafe { run.avx2(out) },
             Isa::Baseline => run.stats(out),
         }
+        true
     }
 }
 
@@ -337,7 +349,7 @@ mod tests {
                     continue;
                 }
                 let (pr, pc) = ((r + shift.0) % cfa.rows, (c0 + shift.1) % cfa.cols);
-                g.stats_run(lanes, (pr, pc), img, width, (r, c0), &mut out);
+                assert!(g.stats_run(lanes, (pr, pc), img, width, (r, c0), &mut out));
                 for (j, got) in out.iter().enumerate() {
                     g.gather(img, width, height, r, c0 + j, &mut patch);
                     let want = g.stats(&patch, g.position(r + shift.0, c0 + j + shift.1));
@@ -362,6 +374,18 @@ mod tests {
             }
         }
         assert!(runs > 0);
+        // a run touching the border, or a phase outside the CFA, is refused
+        let first = out;
+        assert!(!g.stats_run(lanes, (0, 0), img, width, (0, g.radius), &mut out));
+        assert!(!g.stats_run(
+            lanes,
+            (cfa.rows, 0),
+            img,
+            width,
+            (g.radius, g.radius),
+            &mut out
+        ));
+        assert!(out == first, "a refused run wrote its stats");
     }
 
     fn image(seed: u64, width: usize, height: usize) -> Vec<f32> {
