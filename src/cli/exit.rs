@@ -291,7 +291,9 @@ impl FaultOf for PipelineError {
         use PipelineError::*;
         match self {
             Options(_) | WholeFrameOnly | CfaMismatch { .. } | GivenLevels { .. } => Fault::Usage,
-            Levels { .. } | SizeMismatch { .. } | FrameLight(_) => Fault::Invalid,
+            Levels { .. } | SizeMismatch { .. } | CfaShiftTooSmall { .. } | FrameLight(_) => {
+                Fault::Invalid
+            }
             UntrainedCamera { .. } => Fault::Failure,
             Decode(e) | Encode(e) => e.fault(),
             Correction(e) => e.fault(),

@@ -157,6 +157,7 @@ impl From<crate::pipeline::PipelineError> for CliError {
             )),
             e @ (Options(_)
             | CfaMismatch { .. }
+            | CfaShiftTooSmall { .. }
             | Levels { .. }
             | GivenLevels { .. }
             | SizeMismatch { .. }) => CliError::Pipeline(e),

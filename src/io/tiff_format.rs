@@ -538,7 +538,18 @@ pub(crate) fn decode_tiff_mosaic(
         },
         1,
         "a single-channel 16-bit (or 8-bit) unsigned or 32-bit float grayscale mosaic",
-    )?;
+    )
+    .map_err(|e| {
+        if super::dng::is_cfa_tiff_without_dng_version(bytes) {
+            IoError::Tiff(
+                "a CFA image (CFAPattern or PhotometricInterpretation 32803) without DNGVersion (50706): \
+                 raw CFA files are read as DNG, so the file needs the DNG tags (docs/dng.md)"
+                    .to_string(),
+            )
+        } else {
+            e
+        }
+    })?;
     if let TiffPixels::F32(v) = &px {
         check_finite("float TIFF", v, w, 1)?;
     }

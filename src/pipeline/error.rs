@@ -48,6 +48,18 @@ pub enum PipelineError {
         input: String,
         table: String,
     },
+    /// A DNG whose CFA is the table's seen from another pixel, in a frame too small to leave
+    /// out the rows or columns that would move it onto the table's.
+    #[error(
+        "the DNG's CFA '{input}' is the table's '{table}' seen from another pixel, but its {}×{} frame is too small to leave out its first {left_out}",
+        size.0, size.1
+    )]
+    CfaShiftTooSmall {
+        input: String,
+        table: String,
+        size: (usize, usize),
+        left_out: String,
+    },
     /// Black and white levels that leave no range, the file's or the file's with the
     /// request's.
     #[error("white level {white} must exceed black level {black}")]

@@ -98,6 +98,15 @@ pub struct CfaShift {
 impl CfaShift {
     /// The shift as a sentence, for warnings.
     pub fn describe(&self) -> String {
+        format!(
+            "the DNG's crop starts on CFA {}: its first {} left out so that the frame starts on the table's CFA",
+            self.from,
+            self.left_out()
+        )
+    }
+
+    /// What is left out: "1 row", "2 columns", "1 row and 1 column".
+    fn left_out(&self) -> String {
         let plural = |n: usize, what: &str| format!("{n} {what}{}", if n == 1 { "" } else { "s" });
         let mut parts = Vec::new();
         if self.rows > 0 {
@@ -106,11 +115,7 @@ impl CfaShift {
         if self.cols > 0 {
             parts.push(plural(self.cols, "column"));
         }
-        format!(
-            "the DNG's crop starts on CFA {}: its first {} left out so that the frame starts on the table's CFA",
-            self.from,
-            parts.join(" and ")
-        )
+        parts.join(" and ")
     }
 }
 
@@ -164,14 +169,15 @@ fn check_dng_cfa(cfa: &str, table_cfa: &Cfa) -> Result<Option<CfaShift>, Pipelin
 }
 
 /// `frame` without its first `shift.rows` rows and `shift.cols` columns.
-fn shift_frame(frame: RawFrame, shift: &CfaShift) -> Result<RawFrame, PipelineError> {
+fn shift_frame(frame: RawFrame, shift: &CfaShift, table: &Cfa) -> Result<RawFrame, PipelineError> {
     let (w, h) = (frame.width, frame.height);
     let (nw, nh) = (w.saturating_sub(shift.cols), h.saturating_sub(shift.rows));
     if nw == 0 || nh == 0 {
-        return Err(PipelineError::CfaMismatch {
-            origin: CfaOrigin::Dng,
+        return Err(PipelineError::CfaShiftTooSmall {
             input: shift.from.clone(),
-            table: format!("(the {w}×{h} frame is too small to move to the table's CFA)"),
+            table: table.to_string(),
+            size: (w, h),
+            left_out: shift.left_out(),
         });
     }
     let data = frame
@@ -323,7 +329,9 @@ pub fn decode(
         });
     }
     let mosaic = match (mosaic, &cfa_shift) {
-        (DecodedMosaic::U16(frame), Some(shift)) => DecodedMosaic::U16(shift_frame(frame, shift)?),
+        (DecodedMosaic::U16(frame), Some(shift)) => {
+            DecodedMosaic::U16(shift_frame(frame, shift, &table.meta.cfa)?)
+        }
         (mosaic, _) => mosaic,
     };
     let (width, height) = mosaic.dims();

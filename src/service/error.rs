@@ -352,6 +352,7 @@ impl From<crate::pipeline::PipelineError> for ServiceError {
                 input,
                 table,
             },
+            CfaShiftTooSmall { .. } => ServiceError::InvalidImage(e.to_string()),
             Levels { black, white } => ServiceError::InvalidImage(format!(
                 "white_level {white} must exceed black_level {black}"
             )),

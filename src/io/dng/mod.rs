@@ -37,7 +37,7 @@ use super::error::{IoError, IoResult};
 use super::limits::Limits;
 use super::raw::{RawFrame, RawMeta, check_len};
 
-pub use read::is_dng;
+pub use read::{is_cfa_tiff_without_dng_version, is_dng};
 
 /// The letter of a DNG CFA colour code this crate takes: 0 R, 1 G, 2 B, 6 W.
 fn cfa_letter(code: u64) -> Option<char> {

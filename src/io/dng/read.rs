@@ -54,6 +54,21 @@ pub fn is_dng(bytes: &[u8]) -> bool {
     Tiff::parse(bytes).is_ok_and(|t| t.ifd_has(t.first_ifd_offset(), TAG_DNG_VERSION))
 }
 
+/// Whether `bytes` is a TIFF whose first IFD holds a CFA image (a CFAPattern, or the CFA
+/// photometric interpretation) but no DNGVersion: a raw mosaic the DNG reader would take,
+/// written without the tag that makes it a DNG.
+pub fn is_cfa_tiff_without_dng_version(bytes: &[u8]) -> bool {
+    Tiff::parse(bytes).is_ok_and(|t| {
+        let first = t.first_ifd_offset();
+        let cfa = t.ifd_has(first, TAG_CFA_PATTERN)
+            || t.ifd(first)
+                .ok()
+                .and_then(|ifd| t.uint(&ifd, TAG_PHOTOMETRIC).ok().flatten())
+                == Some(PHOTOMETRIC_CFA);
+        cfa && !t.ifd_has(first, TAG_DNG_VERSION)
+    })
+}
+
 /// The raw image's IFD: IFD0 or one of its SubIFDs (two levels deep) with NewSubFileType 0
 /// and CFA photometric interpretation.
 fn find_raw(t: &Tiff<'_>, ifd0: &Ifd) -> IoResult<Ifd> {
@@ -329,6 +344,7 @@ fn cfa_pattern(t: &Tiff<'_>, raw: &Ifd) -> IoResult<CfaPattern> {
             "CFAPattern uses {l}, which CFAPlaneColor ({plane_colors}) does not list"
         )));
     }
+    let (rows, cols, pattern) = smallest_repeat(rows, cols, pattern);
     Ok(CfaPattern {
         rows,
         cols,
@@ -336,6 +352,24 @@ fn cfa_pattern(t: &Tiff<'_>, raw: &Ifd) -> IoResult<CfaPattern> {
         plane_colors,
         planes_from,
     })
+}
+
+/// The smallest tile that repeats to `pattern` (`rows` × `cols`, row-major): a Bayer pattern
+/// written as a 4 × 4 repeat is the 2 × 2 one, so that it matches a table's CFA as it is.
+fn smallest_repeat(rows: usize, cols: usize, pattern: Vec<char>) -> (usize, usize, Vec<char>) {
+    let at = |r: usize, c: usize| pattern.get(r * cols + c);
+    let repeats =
+        |pr: usize, pc: usize| (0..rows).all(|r| (0..cols).all(|c| at(r, c) == at(r % pr, c % pc)));
+    let pr = (1..=rows)
+        .find(|&p| rows % p == 0 && repeats(p, cols))
+        .unwrap_or(rows);
+    let pc = (1..=cols)
+        .find(|&p| cols % p == 0 && repeats(pr, p))
+        .unwrap_or(cols);
+    let tile = (0..pr)
+        .flat_map(|r| (0..pc).filter_map(move |c| at(r, c).copied()))
+        .collect();
+    (pr, pc, tile)
 }
 
 /// CFARepeatPatternDim as (rows, columns). Without it, a CFAPattern of 4 values is 2×2 (as

@@ -439,6 +439,31 @@ fn unsupported_content_is_named() {
     }
 }
 
+/// A CFA image in a TIFF without DNGVersion is no DNG: the TIFF reader refuses it, saying
+/// what the file lacks rather than what the TIFF decoder tripped on.
+#[test]
+fn a_cfa_tiff_without_dng_version_is_named() {
+    let img = ramp(4, 4, 16);
+    for be in [false, true] {
+        let f = strips_dng(be, &img, 4, 4, 16, 4, vec![(50706, 0, 0, vec![])]);
+        assert!(!is_dng(&f) && is_cfa_tiff_without_dng_version(&f));
+        let e = crate::io::decode_mosaic(&f, &lim())
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("without DNGVersion (50706)"), "{e}");
+    }
+    // a DNG, and a grayscale TIFF, are neither
+    let dng = strips_dng(false, &img, 4, 4, 16, 4, vec![]);
+    assert!(!is_cfa_tiff_without_dng_version(&dng));
+    let frame = crate::io::RawFrame {
+        width: 4,
+        height: 4,
+        data: img,
+    };
+    let gray = crate::io::encode_tiff_gray16(&frame).unwrap();
+    assert!(!is_cfa_tiff_without_dng_version(&gray));
+}
+
 #[test]
 fn hostile_sizes_fail_before_allocating() {
     let img = ramp(4, 4, 16);

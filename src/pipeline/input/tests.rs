@@ -125,6 +125,23 @@ fn a_dng_crop_on_another_cfa_phase_is_moved_to_the_tables() {
     .err()
     .unwrap();
     assert!(matches!(e, PipelineError::CfaMismatch { .. }), "{e}");
+    // a frame too small to move says so, naming both CFAs
+    for (w, h) in [(1, 6), (8, 1), (1, 1)] {
+        let e = decode(
+            dng_input(w, h, &shifted, DngInfo::default()),
+            Levels::default(),
+            table,
+            &lim,
+        )
+        .err()
+        .unwrap();
+        assert_eq!(
+            e.to_string(),
+            format!(
+                "the DNG's CFA '{shifted}' is the table's '{cfa}' seen from another pixel, but its {w}×{h} frame is too small to leave out its first 1 row and 1 column"
+            )
+        );
+    }
     // the same CFA: nothing moved
     let frame = decode(
         dng_input(w, h, &cfa, DngInfo::default()),

@@ -165,6 +165,41 @@ fn a_four_value_pattern_without_repeat_dim_is_2x2() {
     assert!(e.contains("no CFARepeatPatternDim"), "{e}");
 }
 
+/// A pattern written as a repeat of a smaller one is that one: `R G / W B` as 4 × 4, 2 × 4 or
+/// 4 × 2 reads as 2 × 2 (the same pixels as the 2 × 2 file), a 1 × 2 repeat of one column
+/// stays as it is written.
+#[test]
+fn a_pattern_written_as_a_repeat_is_its_smallest_tile() {
+    let img = ramp(8, 8, 16);
+    let want = decode_dng(&strips_dng(false, &img, 8, 8, 16, 8, vec![]), &lim()).unwrap();
+    let tile = |rows: usize, cols: usize| -> Vec<u8> {
+        let base = [[0u8, 1], [6, 2]];
+        (0..rows)
+            .flat_map(|r| (0..cols).map(move |c| base[r % 2][c % 2]))
+            .collect()
+    };
+    for (rows, cols) in [(4usize, 4usize), (2, 4), (4, 2), (2, 6)] {
+        let p = tile(rows, cols);
+        let b = Builder::new(false);
+        let extra = vec![
+            b.short(33421, &[rows as u16, cols as u16]),
+            (33422, 1, p.len() as u32, p),
+        ];
+        let d = decode_dng(&strips_dng(false, &img, 8, 8, 16, 8, extra), &lim()).unwrap();
+        assert_eq!(d.cfa, "RG/WB", "{rows}×{cols}");
+        assert_eq!(d.frame, want.frame, "{rows}×{cols}");
+    }
+    // not a repeat: a 2 × 4 tile whose halves differ
+    let b = Builder::new(false);
+    let extra = vec![
+        b.short(33421, &[2, 4]),
+        (33422, 1, 8, vec![0, 1, 1, 0, 6, 2, 2, 6]),
+        (50710, 1, 4, vec![0, 1, 2, 6]),
+    ];
+    let d = decode_dng(&strips_dng(false, &img, 8, 8, 16, 8, extra), &lim()).unwrap();
+    assert_eq!(d.cfa, "RGGR/WBBW");
+}
+
 #[test]
 fn equal_black_levels_need_no_repeat_dim() {
     let img = ramp(4, 2, 10);
