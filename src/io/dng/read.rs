@@ -361,10 +361,10 @@ fn smallest_repeat(rows: usize, cols: usize, pattern: Vec<char>) -> (usize, usiz
     let repeats =
         |pr: usize, pc: usize| (0..rows).all(|r| (0..cols).all(|c| at(r, c) == at(r % pr, c % pc)));
     let pr = (1..=rows)
-        .find(|&p| rows % p == 0 && repeats(p, cols))
+        .find(|&p| rows.is_multiple_of(p) && repeats(p, cols))
         .unwrap_or(rows);
     let pc = (1..=cols)
-        .find(|&p| cols % p == 0 && repeats(pr, p))
+        .find(|&p| cols.is_multiple_of(p) && repeats(pr, p))
         .unwrap_or(cols);
     let tile = (0..pr)
         .flat_map(|r| (0..pc).filter_map(move |c| at(r, c).copied()))
