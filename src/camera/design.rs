@@ -296,6 +296,18 @@ impl SensorDesign {
         Ok(self)
     }
 
+    /// The design as a table records it: every curve [`FilterSpec::portable`], so that the
+    /// table needs none of the files it was trained from.
+    pub fn portable(mut self, iset: Option<&IsetData>) -> Self {
+        let name = self.name.clone();
+        for (ch, f) in self.filters.iter_mut() {
+            *f = f.portable(iset, &format!("'{name}': filter '{ch}'"));
+        }
+        self.ir_cut = self.ir_cut.portable(iset, &format!("'{name}': ir_cut"));
+        self.qe = self.qe.portable(iset, &format!("'{name}': qe"));
+        self
+    }
+
     /// Parse and validate TOML text: a design file, which must give its `name`
     /// (`Self::check_given`).
     pub fn from_toml_str(text: &str) -> Result<Self, CameraError> {
@@ -392,6 +404,31 @@ impl SensorDesign {
                 "offset_v = {} must be at most {max_offset} V in magnitude (half the swing \
                  {} V: the signal needs the rest)",
                 self.offset_v, self.voltage_swing_v
+            ));
+        }
+        // the simulation takes the swing as the pixel's largest signal (auto-exposure aims at
+        // 95 % of it, the saturation classes start just below it): a well that fills first
+        // would clip unseen, below both
+        let volts_per_e = self.conversion_gain_v() * self.analog_gain;
+        let full_well_v = self.well_capacity_e * volts_per_e + self.offset_v;
+        if full_well_v < self.voltage_swing_v * (1.0 - 1e-6) {
+            return err(format!(
+                "well_capacity_e = {} fills at {:.4} V (× {} µV/e⁻ × analog_gain {}{}), \
+                 below voltage_swing_v = {} V: the pixel would clip before its swing, which \
+                 the simulation takes as its largest signal; set voltage_swing_v = {:.4} (the \
+                 full well's voltage) or well_capacity_e ≥ {:.0}",
+                self.well_capacity_e,
+                full_well_v,
+                self.conversion_gain_uv_per_e,
+                self.analog_gain,
+                if self.offset_v != 0.0 {
+                    format!(" + offset {} V", self.offset_v)
+                } else {
+                    String::new()
+                },
+                self.voltage_swing_v,
+                full_well_v,
+                ((self.voltage_swing_v - self.offset_v) / volts_per_e * (1.0 - 1e-9)).ceil()
             ));
         }
         if looks_like_bayer_in_one_row(&self.cfa) {

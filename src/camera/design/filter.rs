@@ -477,6 +477,35 @@ impl FilterSpec {
     }
 }
 
+impl FilterSpec {
+    /// The curve as a table records it: a CSV column that only this machine's files give (an
+    /// absolute path, or a table of `iset` that the built-in data lacks or holds otherwise)
+    /// replaced by its samples ([`Self::inlined`]), so that the table renders and evaluates
+    /// wherever it is copied and whatever becomes of the file; a column of the built-in data
+    /// keeps its name. A curve that cannot be inlined (too many samples) keeps its path.
+    pub fn portable(&self, iset: Option<&IsetData>, what: &str) -> Self {
+        let FilterSpec::Csv { path, column, .. } = self else {
+            return self.clone();
+        };
+        let built_in = || csv_samples(path, column, None, what).ok();
+        let same = |a: &Samples, b: &Samples| {
+            a.wavelengths() == b.wavelengths() && a.values() == b.values()
+        };
+        let keep = !Path::new(path).is_absolute()
+            && match (built_in(), iset) {
+                (None, _) => false,
+                (Some(_), None) => true,
+                (Some(b), Some(_)) => {
+                    csv_samples(path, column, iset, what).is_ok_and(|theirs| same(&b, &theirs))
+                }
+            };
+        if keep {
+            return self.clone();
+        }
+        self.inlined(iset, what).unwrap_or_else(|_| self.clone())
+    }
+}
+
 /// Column `column` of the CSV file `path`: absolute, that file; relative, a table of the
 /// spectral data.
 fn csv_samples(

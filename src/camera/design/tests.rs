@@ -300,6 +300,53 @@ fn a_design_must_name_itself_and_give_filters_with_its_own_cfa() {
     assert!(matches!(e, CameraError::Json(_)), "{e}");
 }
 
+/// A table records its design's curves: a CSV of the user's (an absolute path once loaded)
+/// as its samples, a table of the built-in data by its name; either way the recorded design
+/// resolves to the curves it was trained on, and keeps doing so when the file goes.
+#[test]
+fn a_portable_design_needs_only_the_built_in_data() {
+    let dir = tempfile::tempdir().unwrap();
+    let csv = dir.path().join("mine.csv");
+    let rows: String = (380..=780)
+        .step_by(5)
+        .map(|nm| {
+            let x = (nm as f64 - 560.0) / 60.0;
+            format!("{nm},{:.6}\n", (-0.5 * x * x).exp())
+        })
+        .collect();
+    std::fs::write(&csv, format!("wavelength,G\n{rows}")).unwrap();
+    let toml = dir.path().join("mine.toml");
+    std::fs::write(
+        &toml,
+        "name = \"mine\"\ncfa = \"RG/WB\"\n[filters]\n\
+         R = { csv = \"sensor/colorfilters/RGBW.csv\", column = \"rDefault\" }\n\
+         G = { csv = \"mine.csv\", column = \"G\" }\n\
+         B = { gaussian = { center_nm = 445.0, sigma_nm = 30.0, peak = 1.0 } }\n\
+         W = { constant = 1.0 }\n",
+    )
+    .unwrap();
+    let d = SensorDesign::load(&toml, None).unwrap();
+    let grid = WavelengthGrid::default();
+    let want = d.resolve_curves(&grid, None).unwrap();
+    let p = d.clone().portable(None);
+    assert!(matches!(p.filters["G"], FilterSpec::Samples { .. }));
+    assert_eq!(
+        p.filters["R"], d.filters["R"],
+        "a built-in table keeps its name"
+    );
+    assert_eq!(p.filters["B"], d.filters["B"]);
+    drop(dir);
+    let back: SensorDesign = serde_json::from_value(serde_json::to_value(&p).unwrap()).unwrap();
+    back.validate().unwrap();
+    let got = back.resolve_curves(&grid, None).unwrap();
+    for (a, b) in want.iter().zip(&got) {
+        assert_eq!(a.values(), b.values());
+    }
+    // a design of the built-in data alone is recorded as it is
+    let shipped = SensorDesign::load(config_path("rgbw-ar0132at.toml"), None).unwrap();
+    assert_eq!(shipped.clone().portable(None), shipped);
+}
+
 #[test]
 fn inlined_curves_resolve_as_their_csv_and_survive_json() {
     let d = SensorDesign::load(config_path("rgbw-ar0132at.toml"), None).unwrap();
@@ -457,6 +504,20 @@ fn a_file_states_its_cfa_and_description() {
         ("name = \"../escaped\"", "identifier"),
         ("name = \"a b\"", "identifier"),
         ("name = \"s\"\noffset_v = 1.71", "half the swing"),
+        // a well that fills below the swing (6000 e⁻ × 200 µV = 1.2 V), or an analog gain
+        // that keeps the full well below it, would clip unseen
+        (
+            "name = \"s\"\nwell_capacity_e = 6000.0",
+            "fills at 1.2000 V (× 200 µV/e⁻ × analog_gain 1), below voltage_swing_v = 1.8 V",
+        ),
+        (
+            "name = \"s\"\nanalog_gain = 0.5",
+            "set voltage_swing_v = 0.9000",
+        ),
+        (
+            "name = \"s\"\nwell_capacity_e = 6000.0",
+            "well_capacity_e ≥ 9000",
+        ),
     ] {
         let e = SensorDesign::from_toml_str(toml).unwrap_err();
         assert!(e.to_string().contains(needle), "{toml}: {e}");
@@ -467,6 +528,13 @@ fn a_file_states_its_cfa_and_description() {
     stored.name = "My Sensor".into();
     stored.offset_v = 1.0;
     stored.validate().unwrap();
+    // a well that fills at the swing or above it is the pixel's own business
+    for toml in [
+        "name = \"s\"\nwell_capacity_e = 20000.0",
+        "name = \"s\"\nanalog_gain = 2.0",
+    ] {
+        SensorDesign::from_toml_str(toml).unwrap();
+    }
 }
 
 /// Small negatives in a measured curve's tails are noise, taken as zero; larger ones are

@@ -169,7 +169,8 @@ impl TrainingRun {
         let run_key = run_key(design, spec, iset.is_some());
         Ok(Self {
             spec: spec.clone(),
-            design: design.clone(),
+            // the curves as the table records them: no file it was trained from is needed
+            design: design.clone().portable(iset),
             started,
             grid,
             camera,
