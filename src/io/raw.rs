@@ -81,7 +81,7 @@ impl RawMeta {
     /// Checks the levels, the voltage swing, the exposure and the CFA pattern (not the size).
     pub fn validate(&self) -> IoResult<()> {
         self.check_levels()?;
-        self.cfa_rows()?;
+        self.cfa_cells()?;
         if let Some(t) = self.exposure_s
             && !(t.is_finite() && t >= 0.0)
         {
@@ -109,18 +109,38 @@ impl RawMeta {
         Ok(())
     }
 
-    /// The CFA rows, e.g. `["RG", "WB"]` for `"RG/WB"`: non-empty rows of equal length made of
-    /// ASCII letters or digits.
-    pub fn cfa_rows(&self) -> IoResult<Vec<&str>> {
-        let rows: Vec<&str> = self.cfa.split('/').collect();
-        let cols = rows.first().map_or(0, |r| r.len());
+    /// The CFA's channel names row by row: `[[R, G], [W, B]]` for `"RG/WB"`, and for names of
+    /// more than one character separated by spaces, as a sensor design may write them,
+    /// `[[C1, C2], [C3, C4]]` for `"C1 C2 / C3 C4"`. Rows are non-empty and of equal length,
+    /// names made of ASCII letters, digits or `_`.
+    pub fn cfa_cells(&self) -> IoResult<Vec<Vec<&str>>> {
+        let spaced = self
+            .cfa
+            .split('/')
+            .any(|r| r.trim().contains(char::is_whitespace));
+        let rows: Vec<Vec<&str>> = self
+            .cfa
+            .split('/')
+            .map(|r| {
+                if spaced {
+                    r.split_whitespace().collect()
+                } else {
+                    let r = r.trim();
+                    r.char_indices()
+                        .map(|(i, c)| &r[i..i + c.len_utf8()])
+                        .collect()
+                }
+            })
+            .collect();
+        let cols = rows.first().map_or(0, Vec::len);
+        let name_ok = |n: &&str| n.bytes().all(|b| b.is_ascii_alphanumeric() || b == b'_');
         let ok = cols > 0
             && rows
                 .iter()
-                .all(|r| r.len() == cols && r.bytes().all(|b| b.is_ascii_alphanumeric()));
+                .all(|r| r.len() == cols && r.iter().all(name_ok));
         if !ok {
             return Err(IoError::InvalidMeta(format!(
-                "cfa {:?} is not a pattern like \"RG/WB\" (rows of equal length, letters, separated by '/')",
+                "cfa {:?} is not a pattern like \"RG/WB\" or \"C1 C2 / C3 C4\" (rows of equal length, separated by '/', of letters or of names separated by spaces)",
                 self.cfa
             )));
         }
@@ -489,8 +509,13 @@ mod tests {
     #[test]
     fn cfa_patterns() {
         let mut m = meta(1, 1);
-        assert_eq!(m.cfa_rows().unwrap(), vec!["RG", "WB"]);
-        for bad in ["", "RG/W", "R G/WB", "/", "RG//WB"] {
+        assert_eq!(m.cfa_cells().unwrap(), vec![vec!["R", "G"], vec!["W", "B"]]);
+        m.cfa = "C1 C2 / C3 C4".into();
+        assert_eq!(
+            m.cfa_cells().unwrap(),
+            vec![vec!["C1", "C2"], vec!["C3", "C4"]]
+        );
+        for bad in ["", "RG/W", "R G/WB", "/", "RG//WB", "R-/WB", "C1 C2 / C3"] {
             m.cfa = bad.into();
             assert!(m.validate().is_err(), "{bad:?} accepted");
         }

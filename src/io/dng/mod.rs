@@ -260,13 +260,18 @@ pub fn encode_dng(frame: &RawFrame, meta: &RawMeta, info: &DngWriteInfo) -> IoRe
         )));
     }
     meta.validate()?;
-    let rows = meta.cfa_rows()?;
+    let rows = meta.cfa_cells()?;
     let mut pattern = Vec::new();
     for row in &rows {
-        for l in row.chars() {
-            pattern.push(cfa_code(l).ok_or_else(|| {
+        for name in row {
+            let mut letters = name.chars();
+            let code = match (letters.next(), letters.next()) {
+                (Some(l), None) => cfa_code(l),
+                _ => None,
+            };
+            pattern.push(code.ok_or_else(|| {
                 IoError::InvalidMeta(format!(
-                    "cfa {:?}: a DNG CFA holds R, G, B and W; '{l}' has no DNG colour code",
+                    "cfa {:?}: a DNG CFA holds R, G, B and W; '{name}' has no DNG colour code",
                     meta.cfa
                 ))
             })?);
