@@ -269,7 +269,8 @@ pub struct CameraMatch {
     pub make: String,
     pub model: String,
     /// Which tag matched: `unique_camera_model` or `make_model`, with `+alias` when
-    /// rawtoaces' table of alternative names was needed.
+    /// rawtoaces' table of alternative names was needed; `sensor_name` for a UniqueCameraModel
+    /// that is a camera's catalogue name, as `l3 simulate` writes it.
     pub by: String,
 }
 
@@ -412,6 +413,17 @@ pub fn match_camera(id: &CameraId) -> Option<CameraMatch> {
             tag.to_string()
         },
     };
+    // `l3 simulate --sensor bayer-sony-ilce-9` names the sensor it simulated
+    if let Some(e) = id.unique_model.as_deref().and_then(find)
+        && let (Some(make), Some(model)) = (&e.make, &e.model)
+    {
+        return Some(CameraMatch {
+            sensors: vec![e.name.as_str()],
+            make: make.clone(),
+            model: model.clone(),
+            by: "sensor_name".into(),
+        });
+    }
     if let Some(u) = id.unique_model.as_deref() {
         let k = kebab(u);
         let mut makers = camera_makers();
@@ -509,6 +521,13 @@ mod tests {
         let m = match_camera(&id(Some("Sony ILCE-9"), None, None)).unwrap();
         assert_eq!(m.sensors, ["bayer-sony-ilce-9"]);
         assert_eq!(m.by, "unique_camera_model");
+        // a simulated frame names its sensor; a sensor that is no camera matches none
+        let m = match_camera(&id(Some("bayer-nikon-d5100-rawtoaces"), None, None)).unwrap();
+        assert_eq!(
+            (m.sensors.as_slice(), m.by.as_str()),
+            (["bayer-nikon-d5100-rawtoaces"].as_slice(), "sensor_name")
+        );
+        assert!(match_camera(&id(Some("rgbw-paper"), None, None)).is_none());
         let m = match_camera(&id(None, Some("SONY"), Some("ILCE-9"))).unwrap();
         assert_eq!(
             (m.sensors[0], m.by.as_str()),
