@@ -574,6 +574,16 @@ fn run_colour_class_study(
             "--colour-classes studies one --sensor at a time".into(),
         ));
     }
+    if a.colour_classes.contains(&0) {
+        return Err(CliError::Usage(format!(
+            "--colour-classes {}: each count must be at least 1",
+            a.colour_classes
+                .iter()
+                .map(usize::to_string)
+                .collect::<Vec<_>>()
+                .join(",")
+        )));
+    }
     let sensor = a.sensor.first().cloned();
     let design = load_sensor(&sensor, iset)?;
     let camera = Camera::new(&design, WavelengthGrid::default(), iset)?;

@@ -98,7 +98,8 @@ impl SpectralTable {
                     .into(),
             ));
         }
-        check_wavelength_header(&head.remove(0)).map_err(|m| err(1, m))?;
+        let wavelength_column = head.remove(0);
+        check_wavelength_header(&wavelength_column).map_err(|m| err(1, m))?;
         let mut wavelengths = Vec::new();
         let mut columns = vec![Vec::new(); head.len()];
         for row in rows {
@@ -115,9 +116,19 @@ impl SpectralTable {
                     format!("{} cells, header has {}{hint}", cells.len(), head.len() + 1),
                 ));
             }
+            let first_row = wavelengths.is_empty();
             let parse = |s: &str, column: &str| -> Result<f64, SpectralError> {
                 let v: f64 = dialect.number(s).parse().map_err(|_| {
-                    err(line, format!("'{s}' in column '{column}' is not a number"))
+                    // a row of units under the header ("nm, rel, …") is a common sight
+                    let hint = if first_row {
+                        " (a row of units? comment it out with '#')"
+                    } else {
+                        ""
+                    };
+                    err(
+                        line,
+                        format!("'{s}' in column '{column}' is not a number{hint}"),
+                    )
                 })?;
                 if !v.is_finite() {
                     return Err(err(
@@ -127,7 +138,7 @@ impl SpectralTable {
                 }
                 Ok(v)
             };
-            let w = parse(&cells[0], "wavelength")?;
+            let w = parse(&cells[0], wavelength_column.trim())?;
             if let Some(&prev) = wavelengths.last()
                 && w <= prev
             {
