@@ -131,8 +131,9 @@ pub struct RenderOutcome {
     pub light: String,
     pub light_origin: LightOrigin,
     /// The correction applied: the request's mode, except that a light given only as a
-    /// matrix (no spectrum, so no camera-aware C) is corrected colorimetrically (its T).
-    pub correction: CorrectionMode,
+    /// matrix (no spectrum, so no camera-aware C) is corrected colorimetrically (its T);
+    /// `None` for a cross-illuminant table, whose own kernels render to D65 under any light.
+    pub correction: Option<CorrectionMode>,
     /// The input frame's size.
     pub input_width: usize,
     pub input_height: usize,
@@ -208,8 +209,9 @@ impl Prepared {
         let t1 = Instant::now();
         let choice = KernelChoice::new(table, &entry, r.correction);
         let correction = match r.correction {
-            CorrectionMode::Camera if entry.spd.is_none() => CorrectionMode::Colorimetric,
-            mode => mode,
+            _ if uses_own_kernels(table) => None,
+            CorrectionMode::Camera if entry.spd.is_none() => Some(CorrectionMode::Colorimetric),
+            mode => Some(mode),
         };
         let (rendered, t2) = match r.renderer {
             Renderer::Fast => {

@@ -104,11 +104,15 @@ impl Admission {
         self.queued.load(Ordering::Acquire)
     }
 
-    fn too_large(&self) -> ServiceError {
+    fn too_large(&self, limit: usize) -> ServiceError {
         ServiceError::PayloadTooLarge(format!(
-            "the request body is larger than the limit of {} bytes",
-            self.max_body_bytes
+            "the request body is larger than the limit of {limit} bytes"
         ))
+    }
+
+    /// The most a body may hold: `max_body_bytes`, or less (`limit`).
+    fn limit(&self, limit: usize) -> usize {
+        limit.min(self.max_body_bytes)
     }
 
     fn budget_spent(&self, bytes: usize, counters: &AdmissionCounters) -> ServiceError {
@@ -121,19 +125,22 @@ impl Admission {
         }
     }
 
-    /// Step 1: reserves `declared` bytes of the budget, or refuses at once.
+    /// Step 1: reserves `declared` bytes of the budget, or refuses at once (413 past `limit`,
+    /// itself at most `max_body_bytes`).
     pub fn reserve(
         &self,
         declared: usize,
+        limit: usize,
         counters: &AdmissionCounters,
     ) -> Result<BodyReservation, ServiceError> {
-        if declared > self.max_body_bytes {
-            return Err(self.too_large());
+        let limit = self.limit(limit);
+        if declared > limit {
+            return Err(self.too_large(limit));
         }
         if declared == 0 {
             return Ok(BodyReservation(None));
         }
-        let n = u32::try_from(units(declared)).map_err(|_| self.too_large())?;
+        let n = u32::try_from(units(declared)).map_err(|_| self.too_large(limit))?;
         self.body_budget
             .clone()
             .try_acquire_many_owned(n)
@@ -153,7 +160,7 @@ impl Admission {
         if need <= have {
             return Ok(());
         }
-        let more = u32::try_from(need - have).map_err(|_| self.too_large())?;
+        let more = u32::try_from(need - have).map_err(|_| self.too_large(self.max_body_bytes))?;
         let p = self
             .body_budget
             .clone()
@@ -181,18 +188,20 @@ impl Admission {
         ))
     }
 
-    /// Step 2: reads the body within the size limit and the deadline, growing the
-    /// reservation if the body is longer than declared.
+    /// Step 2: reads the body within the size limit (`limit`, at most `max_body_bytes`) and
+    /// the deadline, growing the reservation if the body is longer than declared.
     pub async fn read_body(
         &self,
         mut body: Body,
         declared: Option<usize>,
+        limit: usize,
         reservation: &mut BodyReservation,
         counters: &AdmissionCounters,
     ) -> Result<Bytes, ServiceError> {
+        let limit = self.limit(limit);
         let started = Instant::now();
         let deadline = started + self.body_timeout;
-        let mut buf = bytes::BytesMut::with_capacity(declared.unwrap_or(0));
+        let mut buf = bytes::BytesMut::with_capacity(declared.unwrap_or(0).min(limit));
         loop {
             let now = Instant::now();
             let elapsed = now - started;
@@ -220,8 +229,8 @@ impl Admission {
                 Ok(Some(Ok(frame))) => {
                     if let Ok(data) = frame.into_data() {
                         let len = buf.len() + data.len();
-                        if len > self.max_body_bytes {
-                            return Err(self.too_large());
+                        if len > limit {
+                            return Err(self.too_large(limit));
                         }
                         self.grow(reservation, len, counters)?;
                         buf.extend_from_slice(&data);
@@ -287,12 +296,17 @@ mod tests {
     fn the_budget_refuses_past_its_size_and_refills() {
         let a = Admission::new(&cfg());
         let n = AdmissionCounters::default();
-        let r1 = a.reserve(4096, &n).unwrap();
-        let r2 = a.reserve(3000, &n).unwrap();
-        assert_eq!(a.reserve(2000, &n).unwrap_err().status(), 503);
-        assert_eq!(a.reserve(5000, &n).unwrap_err().status(), 413);
+        let max = usize::MAX;
+        let r1 = a.reserve(4096, max, &n).unwrap();
+        let r2 = a.reserve(3000, max, &n).unwrap();
+        assert_eq!(a.reserve(2000, max, &n).unwrap_err().status(), 503);
+        assert_eq!(a.reserve(5000, max, &n).unwrap_err().status(), 413);
+        // a lower limit of the request's own
+        let e = a.reserve(1001, 1000, &n).unwrap_err();
+        assert_eq!(e.status(), 413);
+        assert!(e.to_string().contains("limit of 1000 bytes"), "{e}");
         drop(r1);
-        let mut r3 = a.reserve(1, &n).unwrap();
+        let mut r3 = a.reserve(1, max, &n).unwrap();
         a.grow(&mut r3, 4096, &n).unwrap();
         drop((r2, r3));
         assert_eq!(n.budget_refusals.get(), 1);

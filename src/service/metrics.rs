@@ -61,7 +61,8 @@ impl Default for AdmissionCounters {
             ),
             renders_canceled: counter(
                 "l3_renders_canceled_total",
-                "Renders abandoned by their request and stopped early.",
+                "Renders abandoned by their request (timed out, or the client gone) after \
+                 admission, while waiting for a CPU turn or running (stopped early).",
             ),
         }
     }

@@ -127,13 +127,19 @@ const IMAGE_TYPES: [&str; 8] = [
 ];
 
 /// Sets its flag when dropped unless disarmed: a render whose request is dropped (timed
-/// out, or its client gone) tells its CPU work to stop.
-struct CancelOnDrop(Arc<AtomicBool>, bool);
+/// out, or its client gone) tells its CPU work to stop, and is counted once in
+/// `l3_renders_canceled_total`, whether it was running or still waiting for its turn.
+struct CancelOnDrop {
+    flag: Arc<AtomicBool>,
+    done: bool,
+    canceled: prometheus::IntCounter,
+}
 
 impl Drop for CancelOnDrop {
     fn drop(&mut self) {
-        if !self.1 {
-            self.0.store(true, Ordering::Relaxed);
+        if !self.done {
+            self.flag.store(true, Ordering::Relaxed);
+            self.canceled.inc();
         }
     }
 }
@@ -168,26 +174,21 @@ pub async fn admit(State(state): State<AppState>, req: Request, next: Next) -> R
     let counters = &state.metrics.admission;
     let (mut parts, body) = req.into_parts();
     let declared = super::admission::content_length(&parts.headers);
-    let close = |e: ServiceError| {
-        let mut resp = e.into_response();
-        resp.headers_mut()
-            .insert(header::CONNECTION, HeaderValue::from_static("close"));
-        resp
-    };
+    let limit = state.config.server.max_body_bytes;
     // a declared size past the limits is refused before the body is read
     if let Err(e) = declared_size_limits(parts.uri.query(), &state.config.server) {
-        return close(e);
+        return closing(e);
     }
-    let mut reservation = match adm.reserve(declared.unwrap_or(0), counters) {
+    let mut reservation = match adm.reserve(declared.unwrap_or(0), limit, counters) {
         Ok(r) => r,
-        Err(e) => return close(e),
+        Err(e) => return closing(e),
     };
     let body = match adm
-        .read_body(body, declared, &mut reservation, counters)
+        .read_body(body, declared, limit, &mut reservation, counters)
         .await
     {
         Ok(b) => b,
-        Err(e) => return close(e),
+        Err(e) => return closing(e),
     };
     let queued = Instant::now();
     let slot = match adm.render_slot(counters).await {
@@ -203,6 +204,50 @@ pub async fn admit(State(state): State<AppState>, req: Request, next: Next) -> R
         .run(Request::from_parts(parts, axum::body::Body::empty()))
         .await;
     drop(reservation);
+    resp
+}
+
+/// The most a body other than a mosaic may hold: a training job's design with every curve
+/// inlined (at most 4096 samples each) or an illuminant's samples take well under a megabyte.
+pub const MAX_JSON_BODY_BYTES: usize = 8 << 20;
+
+/// Admission of the other bodies (training jobs, illuminants, evaluations): the body budget,
+/// deadline and rate of a render's body ([`super::admission`], steps 1 and 2), within
+/// `max_body_bytes` for a mosaic (a ColorChecker capture) and [`MAX_JSON_BODY_BYTES`] for
+/// anything else. No render slot is taken; the reservation is held until the answer.
+pub async fn admit_body(State(state): State<AppState>, req: Request, next: Next) -> Response {
+    let adm = &state.admission;
+    let counters = &state.metrics.admission;
+    let (parts, body) = req.into_parts();
+    let declared = super::admission::content_length(&parts.headers);
+    let limit = if is_mosaic(&parts.headers) {
+        state.config.server.max_body_bytes
+    } else {
+        MAX_JSON_BODY_BYTES
+    };
+    let mut reservation = match adm.reserve(declared.unwrap_or(0), limit, counters) {
+        Ok(r) => r,
+        Err(e) => return closing(e),
+    };
+    let body = match adm
+        .read_body(body, declared, limit, &mut reservation, counters)
+        .await
+    {
+        Ok(b) => b,
+        Err(e) => return closing(e),
+    };
+    let resp = next
+        .run(Request::from_parts(parts, axum::body::Body::from(body)))
+        .await;
+    drop(reservation);
+    resp
+}
+
+/// The error's answer, closing the connection: the rest of a refused body is never read.
+fn closing(e: ServiceError) -> Response {
+    let mut resp = e.into_response();
+    resp.headers_mut()
+        .insert(header::CONNECTION, HeaderValue::from_static("close"));
     resp
 }
 
@@ -429,6 +474,12 @@ pub async fn render(
         .ok_or_else(|| ServiceError::Internal("render slot missing".into()))?;
     // renders execute in arrival order, a few at a time (each one is parallel inside), so
     // latency under load grows evenly instead of in a long tail
+    let cancel = Arc::new(AtomicBool::new(false));
+    let mut cancel_on_drop = CancelOnDrop {
+        flag: cancel.clone(),
+        done: false,
+        canceled: state.metrics.admission.renders_canceled.clone(),
+    };
     let queued = Instant::now();
     let gate = state
         .cpu_gate
@@ -437,8 +488,6 @@ pub async fn render(
         .await
         .map_err(|_| ServiceError::Internal("the render gate is closed".into()))?;
     let queue_ms = admitted.queue_ms + queued.elapsed().as_secs_f64() * 1e3;
-    let cancel = Arc::new(AtomicBool::new(false));
-    let mut cancel_on_drop = CancelOnDrop(cancel.clone(), false);
     #[cfg(feature = "fault-injection")]
     let inject_panic = super::fault_injection::render_panic_requested(&headers);
     let r = super::cpu::run(&state.pools.render, "the render", move || {
@@ -452,16 +501,13 @@ pub async fn render(
             }
             prepared.run(&ctx, &cancel)
         };
-        if cancel.load(Ordering::Relaxed) {
-            ctx.state.metrics.admission.renders_canceled.inc();
-        }
         // free the slots before answering, so a client's next request finds them free
         drop(gate);
         drop(permit);
         result
     })
     .await;
-    cancel_on_drop.1 = true;
+    cancel_on_drop.done = true;
     let out = r??;
     state
         .metrics
@@ -519,8 +565,14 @@ fn respond(
             ),
         );
     }
-    // what was applied (a matrix-only light keeps its T whatever the request's mode)
-    put("x-l3-correction", out.correction.as_str().to_string());
+    // what was applied (a matrix-only light keeps its T whatever the request's mode; a
+    // cross-illuminant table applies none)
+    put(
+        "x-l3-correction",
+        out.correction
+            .map_or("none", CorrectionMode::as_str)
+            .to_string(),
+    );
     put("x-l3-width", r.width.to_string());
     put("x-l3-height", r.height.to_string());
     let input_pixels = out.input_width * out.input_height;

@@ -49,6 +49,13 @@ pub const ROUTES: &[(&str, &str)] = &[
     ("GET", "/console/console.js"),
 ];
 
+/// The routes besides `/v1/render` whose POST or PUT reads a body ([`render::admit_body`]).
+const BODY_ROUTES: &[&str] = &[
+    "/v1/training-jobs",
+    "/v1/illuminants/{name}",
+    "/v1/evaluations",
+];
+
 /// The committed OpenAPI document, served at `/openapi.yaml`.
 pub const OPENAPI_YAML: &str = include_str!("../../openapi.yaml");
 
@@ -252,6 +259,12 @@ pub fn router(state: AppState) -> Router {
             if *p == "/v1/render" {
                 // the body is read, then the request queues for a render slot
                 h = h.route_layer(middleware::from_fn_with_state(state.clone(), render::admit));
+            } else if matches!(*m, "POST" | "PUT") && BODY_ROUTES.contains(p) {
+                // the body is read within the same budget and deadline
+                h = h.route_layer(middleware::from_fn_with_state(
+                    state.clone(),
+                    render::admit_body,
+                ));
             }
             r = r.route(p, h);
         } else {

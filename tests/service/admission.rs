@@ -17,9 +17,22 @@ fn gradient_raw(w: usize, h: usize) -> Vec<u8> {
 /// Opens a connection and sends a render request's head declaring `length` body bytes, then
 /// `first` of them.
 async fn start_upload(server: &l3::service::Server, length: usize, first: &[u8]) -> TcpStream {
+    let head = "POST /v1/render?width=16&height=16";
+    start_request(server, head, "application/octet-stream", length, first).await
+}
+
+/// Opens a connection and sends `head` ("POST /path") with a body of `ctype` declaring
+/// `length` bytes, then `first` of them.
+async fn start_request(
+    server: &l3::service::Server,
+    head: &str,
+    ctype: &str,
+    length: usize,
+    first: &[u8],
+) -> TcpStream {
     let mut s = TcpStream::connect(server.addr()).await.unwrap();
     let head = format!(
-        "POST /v1/render?width=16&height=16 HTTP/1.1\r\nhost: l3\r\ncontent-type: application/octet-stream\r\ncontent-length: {length}\r\n\r\n"
+        "{head} HTTP/1.1\r\nhost: l3\r\ncontent-type: {ctype}\r\ncontent-length: {length}\r\n\r\n"
     );
     s.write_all(head.as_bytes()).await.unwrap();
     s.write_all(first).await.unwrap();
@@ -91,6 +104,71 @@ async fn a_slow_body_gets_408_and_holds_no_render_slot() {
     assert!(answer.contains("\"code\":\"body_timeout\""), "{answer}");
     assert_eq!(metric(&server, "l3_render_body_timeouts_total").await, 1.0);
     assert_eq!(render_16(&server).await.status(), 200);
+    server.shutdown().await.unwrap();
+}
+
+/// The other bodies (a training job, an illuminant, an evaluation's JSON or mosaic) are read
+/// under the same rules: a JSON body past its own limit gets 413 before it is sent, a slow
+/// one 408, and a mosaic evaluation's body counts against the body budget while it is read.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn job_illuminant_and_evaluation_bodies_are_admitted_as_render_bodies() {
+    let data = tempfile::tempdir().unwrap();
+    let mut cfg = test_config(data.path());
+    cfg.server.body_timeout_s = 2.0;
+    let (server, _) = server_with_table(data.path(), Some(cfg)).await;
+    let json = "application/json";
+    let heads = [
+        "POST /v1/training-jobs",
+        "PUT /v1/illuminants/mine",
+        "POST /v1/evaluations",
+    ];
+    for head in heads {
+        let mut s = start_request(&server, head, json, 9 << 20, &[]).await;
+        let answer = read_answer(&mut s).await;
+        assert!(answer.starts_with("HTTP/1.1 413"), "{head}: {answer}");
+        assert!(
+            answer.contains("limit of 8388608 bytes"),
+            "{head}: {answer}"
+        );
+    }
+    for head in heads {
+        let mut s = start_request(&server, head, json, 1000, b"{").await;
+        let answer = read_answer(&mut s).await;
+        assert!(answer.starts_with("HTTP/1.1 408"), "{head}: {answer}");
+        assert!(
+            answer.contains("\"code\":\"body_timeout\""),
+            "{head}: {answer}"
+        );
+    }
+    assert_eq!(metric(&server, "l3_render_body_timeouts_total").await, 3.0);
+    // a ColorChecker frame may be as large as a render's, and is reserved while it is read
+    let head = "POST /v1/evaluations?chart=colorchecker&corners=0,0,99,0,99,99,0,99&width=2000&height=2000";
+    let frame = start_request(
+        &server,
+        head,
+        "application/octet-stream",
+        8_000_000,
+        &[0; 64],
+    )
+    .await;
+    eventually("the frame's body is reserved", || async {
+        metric(&server, "l3_render_body_bytes_reserved").await >= 8_000_000.0
+    })
+    .await;
+    drop(frame);
+    eventually("the reservation returns", || async {
+        metric(&server, "l3_render_body_bytes_reserved").await == 0.0
+    })
+    .await;
+    // and a small, prompt body is read as before
+    let r = client()
+        .put(url(&server, "/v1/illuminants/mine"))
+        .header("content-type", json)
+        .body(r#"{"cct": 4000}"#)
+        .send()
+        .await
+        .unwrap();
+    assert_eq!(r.status(), 201);
     server.shutdown().await.unwrap();
 }
 
@@ -189,12 +267,15 @@ async fn a_render_abandoned_by_its_request_is_canceled() {
     server.state().pools.render.spawn(move || {
         let _ = wait.recv();
     });
-    let r = render_16(&server).await;
-    problem(r, 504, "request_timeout").await;
+    // three renders at once: one waits for the pool's thread, two for their turn at the CPU
+    let (a, b, c) = tokio::join!(render_16(&server), render_16(&server), render_16(&server));
+    for r in [a, b, c] {
+        problem(r, 504, "request_timeout").await;
+    }
     release.send(()).unwrap();
-    // the render, queued on the pool when its request gave up, stops without rendering
-    eventually("the render is canceled", || async {
-        metric(&server, "l3_renders_canceled_total").await == 1.0
+    // the renders, abandoned where they waited, stop without rendering; each counts once
+    eventually("the renders are canceled", || async {
+        metric(&server, "l3_renders_canceled_total").await == 3.0
     })
     .await;
     assert_eq!(metric(&server, "l3_renders_total").await, 0.0);
