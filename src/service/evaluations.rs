@@ -282,7 +282,20 @@ pub async fn create(
         let row = super::colorchecker::evaluate(&state, &headers, q, body, slot).await?;
         return store_and_answer(&state, row).await;
     }
-    super::render::require_json(&headers)?;
+    super::render::require_json(&headers).map_err(|_| {
+        ServiceError::UnsupportedMediaType(
+            "POST /v1/evaluations takes application/json (an evaluation request) or a mosaic \
+             (application/octet-stream, image/png, image/tiff, image/x-adobe-dng, \
+             image/x-portable-graymap: a ColorChecker capture)"
+                .into(),
+        )
+    })?;
+    if let Some(q) = uri.query().filter(|q| !q.is_empty()) {
+        return Err(ServiceError::BadRequest(format!(
+            "a JSON evaluation request takes its parameters in the body, not the query ('{q}'); \
+             the query's parameters are a ColorChecker capture's, sent as a mosaic body"
+        )));
+    }
     let body = super::render::body_bytes(body, state.config.server.max_body_bytes)?;
     let req = parse_request(&body)?;
     let checked = req.check()?;

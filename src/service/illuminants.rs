@@ -71,6 +71,14 @@ pub fn apply(
         {
             return Err(bad("spd has non-finite numbers".into()));
         }
+        // as many as a job or an evaluation takes of a light given by its samples
+        let max = crate::spectral::MAX_INLINE_SPD_SAMPLES;
+        if s.values.len() > max {
+            return Err(bad(format!(
+                "spd has {} samples; at most {max}",
+                s.values.len()
+            )));
+        }
         let samples = Samples::new(s.wavelengths_nm.clone(), s.values.clone())
             .map_err(|e| bad(e.to_string()))?;
         reg.insert_spd(name, &samples, CorrectionSource::Spd)
@@ -205,6 +213,7 @@ pub async fn get(
     State(state): State<AppState>,
     UrlPath(name): UrlPath<String>,
 ) -> Result<Json<Value>, ServiceError> {
+    checked_name(&name)?;
     let users = user_names(&state).await?;
     let e = state
         .registry()
@@ -215,6 +224,12 @@ pub async fn get(
         &e,
         users.contains(&e.name.to_ascii_lowercase()),
     )))
+}
+
+/// A path's illuminant name that no light could have is the request's mistake (400), as
+/// `PUT` says of it, not a light that is missing (404).
+fn checked_name(name: &str) -> Result<(), ServiceError> {
+    IlluminantRegistry::check_name(name).map_err(|e| ServiceError::BadRequest(e.to_string()))
 }
 
 /// `PUT /v1/illuminants/{name}`: create or replace from a matrix, an SPD or a CCT.
@@ -287,6 +302,7 @@ pub async fn delete(
     State(state): State<AppState>,
     UrlPath(name): UrlPath<String>,
 ) -> Result<StatusCode, ServiceError> {
+    checked_name(&name)?;
     let lower = name.to_ascii_lowercase();
     if lower == "d65" {
         return Err(ServiceError::Conflict(

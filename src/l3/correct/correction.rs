@@ -268,7 +268,9 @@ impl IlluminantRegistry {
         self.entries.is_empty()
     }
 
-    fn check_name(name: &str) -> Result<(), CorrectError> {
+    /// A name a light may be registered under: 1–64 characters of letters, digits, `-`, `_`,
+    /// `.` and `:`.
+    pub fn check_name(name: &str) -> Result<(), CorrectError> {
         let ok = !name.is_empty()
             && name.len() <= 64
             && name

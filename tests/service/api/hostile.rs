@@ -309,6 +309,48 @@ async fn hostile_evaluation_and_illuminant_bodies(h: &Hostile<'_>) {
         .await
         .unwrap();
     problem(r, 400, "bad_request").await;
+    // more samples than a job or an evaluation takes of a light
+    let n = l3::spectral::MAX_INLINE_SPD_SAMPLES + 1;
+    let wl: Vec<f64> = (0..n).map(|i| 300.0 + i as f64 * 0.1).collect();
+    let r = c
+        .put(url(server, "/v1/illuminants/Bad"))
+        .json(&serde_json::json!({"spd": {"wavelengths_nm": wl, "values": vec![1.0; n]}}))
+        .send()
+        .await
+        .unwrap();
+    problem_naming(r, 400, "bad_request", &["4097 samples; at most 4096"]).await;
+    // a JSON evaluation request takes no query (a ColorChecker capture's parameters are for
+    // a mosaic body)
+    let r = c
+        .post(url(server, "/v1/evaluations?chart=colorchecker"))
+        .json(&serde_json::json!({"acquisition_illuminant": "D65"}))
+        .send()
+        .await
+        .unwrap();
+    problem_naming(r, 400, "bad_request", &["chart=colorchecker", "query"]).await;
+    let r = c
+        .post(url(server, "/v1/evaluations"))
+        .header("content-type", "text/plain")
+        .body("x")
+        .send()
+        .await
+        .unwrap();
+    problem_naming(
+        r,
+        415,
+        "unsupported_media_type",
+        &["application/json", "ColorChecker"],
+    )
+    .await;
+    // a name no light can have is the path's mistake on every method
+    let long = "x".repeat(65);
+    for path in [
+        "/v1/illuminants/bad%20name".to_string(),
+        format!("/v1/illuminants/{long}"),
+    ] {
+        problem_of(c.get(url(server, &path)), 400, "bad_request").await;
+        problem_of(c.delete(url(server, &path)), 400, "bad_request").await;
+    }
     let r = c
         .put(url(server, "/v1/illuminants/bad%20name"))
         .json(&serde_json::json!({"cct": 3000}))
