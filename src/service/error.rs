@@ -297,6 +297,11 @@ impl IntoResponse for ServiceError {
             resp.headers_mut()
                 .insert(header::WWW_AUTHENTICATE, HeaderValue::from_static("Bearer"));
         }
+        if let ServiceError::NotAcceptable(_) = &self {
+            // the answer depends on Accept, as a 200's would
+            resp.headers_mut()
+                .insert(header::VARY, HeaderValue::from_static("Accept"));
+        }
         resp
     }
 }

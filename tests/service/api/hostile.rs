@@ -226,6 +226,7 @@ async fn hostile_size_types_and_negotiation(h: &Hostile<'_>) {
         .send()
         .await
         .unwrap();
+    assert_eq!(r.headers()["vary"], "Accept");
     let detail = problem(r, 406, "not_acceptable").await;
     assert!(detail.contains("image/jpeg"), "{detail}");
 }
