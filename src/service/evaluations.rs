@@ -257,9 +257,22 @@ fn evaluation_slot(state: &AppState) -> Result<tokio::sync::OwnedSemaphorePermit
         })
 }
 
-/// Stores the evaluation and answers 201 with it and its Location.
-async fn store_and_answer(state: &AppState, row: EvaluationRow) -> Result<Response, ServiceError> {
-    state.store.insert_evaluation(&row).await?;
+/// Runs `evaluation` and stores its row on a task of its own, then answers 201 with it and
+/// its Location. An evaluation whose request is dropped meanwhile (timed out, or its client
+/// gone) still completes and is stored, so nothing it computed is lost: its CPU time is spent
+/// either way (it holds its evaluation slot until then), and `GET /v1/evaluations` lists it.
+async fn complete_and_store<F>(state: &AppState, evaluation: F) -> Result<Response, ServiceError>
+where
+    F: std::future::Future<Output = Result<EvaluationRow, ServiceError>> + Send + 'static,
+{
+    let st = state.clone();
+    let row = tokio::spawn(async move {
+        let row = evaluation.await?;
+        st.store.insert_evaluation(&row).await?;
+        Ok::<_, ServiceError>(row)
+    })
+    .await
+    .map_err(|e| ServiceError::Internal(format!("the evaluation's task: {e}")))??;
     let mut resp = (StatusCode::CREATED, Json(evaluation_json(&row)?)).into_response();
     if let Ok(v) = HeaderValue::from_str(&format!("/v1/evaluations/{}", row.id)) {
         resp.headers_mut().insert(header::LOCATION, v);
@@ -279,8 +292,11 @@ pub async fn create(
         let body = super::render::body_bytes(body, state.config.server.max_body_bytes)?;
         let q = super::colorchecker::query(&uri)?;
         let slot = evaluation_slot(&state)?;
-        let row = super::colorchecker::evaluate(&state, &headers, q, body, slot).await?;
-        return store_and_answer(&state, row).await;
+        let (st, h) = (state.clone(), headers.clone());
+        return complete_and_store(&state, async move {
+            super::colorchecker::evaluate(&st, &h, q, body, slot).await
+        })
+        .await;
     }
     super::render::require_json(&headers).map_err(|_| {
         ServiceError::UnsupportedMediaType(
@@ -308,35 +324,39 @@ pub async fn create(
     let slot = evaluation_slot(&state)?;
     let table_id = table.as_ref().map(|t| t.id.clone());
     let (st, light) = (state.clone(), req.acquisition_illuminant.clone());
-    let report = super::cpu::run(&state.pools.background, "the evaluation", move || {
-        // its correction (fitted here for a light given by its samples)
-        let report = st.resolve_light(&light).and_then(|correction| {
-            evaluate(
-                table.as_deref(),
-                &acquisition,
-                &correction,
-                st.iset.as_ref(),
-                &checked.setup,
-            )
-        });
-        drop(slot);
-        report
+    let pools = state.clone();
+    complete_and_store(&state, async move {
+        let report = super::cpu::run(&pools.pools.background, "the evaluation", move || {
+            // its correction (fitted here for a light given by its samples)
+            let report = st.resolve_light(&light).and_then(|correction| {
+                evaluate(
+                    table.as_deref(),
+                    &acquisition,
+                    &correction,
+                    st.iset.as_ref(),
+                    &checked.setup,
+                )
+            });
+            drop(slot);
+            report
+        })
+        .await??;
+        let report_json = serde_json::to_string(&report)
+            .map_err(|e| ServiceError::Internal(format!("report: {e}")))?;
+        let row = EvaluationRow {
+            id: new_id("eval"),
+            table_id,
+            method: checked.method,
+            chart: checked.chart,
+            acquisition_illuminant: req.acquisition_illuminant,
+            mean_delta_e: report.summary.mean,
+            request_json: String::from_utf8_lossy(&body).to_string(),
+            report_json,
+            created_at: now_ms(),
+        };
+        Ok(row)
     })
-    .await??;
-    let report_json = serde_json::to_string(&report)
-        .map_err(|e| ServiceError::Internal(format!("report: {e}")))?;
-    let row = EvaluationRow {
-        id: new_id("eval"),
-        table_id,
-        method: checked.method,
-        chart: checked.chart,
-        acquisition_illuminant: req.acquisition_illuminant,
-        mean_delta_e: report.summary.mean,
-        request_json: String::from_utf8_lossy(&body).to_string(),
-        report_json,
-        created_at: now_ms(),
-    };
-    store_and_answer(&state, row).await
+    .await
 }
 
 /// `GET /v1/evaluations`

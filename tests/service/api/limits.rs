@@ -197,5 +197,25 @@ async fn a_request_over_the_time_limit_gets_504() {
         .await
         .unwrap();
     problem_naming(r, 504, "request_timeout", &["0.02 s"]).await;
+    // the evaluation its request gave up on still ends, and is stored for GET to find
+    let deadline = std::time::Instant::now() + std::time::Duration::from_secs(120);
+    loop {
+        let list: serde_json::Value = client()
+            .get(url(&server, "/v1/evaluations"))
+            .send()
+            .await
+            .unwrap()
+            .json()
+            .await
+            .unwrap();
+        let items = list["items"].as_array().cloned().unwrap_or_default();
+        if let Some(e) = items.first() {
+            assert_eq!(items.len(), 1, "{list}");
+            assert_eq!(e["acquisition_illuminant"], "A", "{e}");
+            break;
+        }
+        assert!(std::time::Instant::now() < deadline, "never stored: {list}");
+        tokio::time::sleep(std::time::Duration::from_millis(100)).await;
+    }
     server.shutdown().await.unwrap();
 }
