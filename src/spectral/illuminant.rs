@@ -155,6 +155,13 @@ impl IlluminantSpec {
         if s.is_empty() {
             return Err(bad("empty name"));
         }
+        if s.get(..3).is_some_and(|p| p.eq_ignore_ascii_case("xy:")) {
+            // a chromaticity renders (as its nearest colour temperature) but is no spectrum
+            return Err(bad(
+                "a chromaticity gives no spectrum, which simulating or training under a light \
+                 needs; give its colour temperature (cct:K) or its samples (spd:NAME:W=V,…)",
+            ));
+        }
         let up = s.to_ascii_uppercase();
         if CIE_ILLUMINANT_NAMES.contains(&up.as_str()) {
             return Ok(Self::Cie(up));
@@ -292,6 +299,12 @@ mod tests {
         ] {
             assert!(IlluminantSpec::parse(bad).is_err(), "{bad}");
         }
+        // a chromaticity is a render's light, not a spectrum: the error says what to give
+        let e = IlluminantSpec::parse("XY:0.3,0.3").unwrap_err().to_string();
+        assert!(
+            e.contains("gives no spectrum") && e.contains("cct:K"),
+            "{e}"
+        );
     }
 
     #[test]
