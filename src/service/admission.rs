@@ -240,6 +240,23 @@ impl Admission {
         }
     }
 
+    /// Steps 1 and 2 for a request with `headers`: its reservation, and its body read within
+    /// `limit` (at most `max_body_bytes`). The reservation is held until dropped.
+    pub async fn take_body(
+        &self,
+        body: Body,
+        headers: &HeaderMap,
+        limit: usize,
+        counters: &AdmissionCounters,
+    ) -> Result<(Bytes, BodyReservation), ServiceError> {
+        let declared = content_length(headers);
+        let mut reservation = self.reserve(declared.unwrap_or(0), limit, counters)?;
+        let body = self
+            .read_body(body, declared, limit, &mut reservation, counters)
+            .await?;
+        Ok((body, reservation))
+    }
+
     /// Step 3: waits in the FIFO queue for a render slot.
     pub async fn render_slot(
         &self,

@@ -173,20 +173,12 @@ pub async fn admit(State(state): State<AppState>, req: Request, next: Next) -> R
     let adm = &state.admission;
     let counters = &state.metrics.admission;
     let (mut parts, body) = req.into_parts();
-    let declared = super::admission::content_length(&parts.headers);
     let limit = state.config.server.max_body_bytes;
     // a declared size past the limits is refused before the body is read
     if let Err(e) = declared_size_limits(parts.uri.query(), &state.config.server) {
         return closing(e);
     }
-    let mut reservation = match adm.reserve(declared.unwrap_or(0), limit, counters) {
-        Ok(r) => r,
-        Err(e) => return closing(e),
-    };
-    let body = match adm
-        .read_body(body, declared, limit, &mut reservation, counters)
-        .await
-    {
+    let (body, reservation) = match adm.take_body(body, &parts.headers, limit, counters).await {
         Ok(b) => b,
         Err(e) => return closing(e),
     };
@@ -216,23 +208,17 @@ pub const MAX_JSON_BODY_BYTES: usize = 8 << 20;
 /// `max_body_bytes` for a mosaic (a ColorChecker capture) and [`MAX_JSON_BODY_BYTES`] for
 /// anything else. No render slot is taken; the reservation is held until the answer.
 pub async fn admit_body(State(state): State<AppState>, req: Request, next: Next) -> Response {
-    let adm = &state.admission;
-    let counters = &state.metrics.admission;
     let (parts, body) = req.into_parts();
-    let declared = super::admission::content_length(&parts.headers);
     let limit = if is_mosaic(&parts.headers) {
         state.config.server.max_body_bytes
     } else {
         MAX_JSON_BODY_BYTES
     };
-    let mut reservation = match adm.reserve(declared.unwrap_or(0), limit, counters) {
-        Ok(r) => r,
-        Err(e) => return closing(e),
-    };
-    let body = match adm
-        .read_body(body, declared, limit, &mut reservation, counters)
-        .await
-    {
+    let counters = &state.metrics.admission;
+    let taken = state
+        .admission
+        .take_body(body, &parts.headers, limit, counters);
+    let (body, reservation) = match taken.await {
         Ok(b) => b,
         Err(e) => return closing(e),
     };
