@@ -482,6 +482,7 @@ impl ServiceConfig {
         if self.training.max_concurrent_jobs == 0 {
             return Err(bad("max_concurrent_jobs must be at least 1".into()));
         }
+        super::store::Store::check_url(&self.data.database_url).map_err(|e| bad(e.to_string()))?;
         Ok(())
     }
 }

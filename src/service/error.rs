@@ -317,6 +317,9 @@ impl From<StoreError> for ServiceError {
             StoreError::UnknownValue { .. } => ServiceError::BadRequest(e.to_string()),
             StoreError::CorruptRow { .. } => ServiceError::Database(e.to_string()),
             StoreError::Url(m) => ServiceError::Config(m),
+            StoreError::Connect { url, source } => {
+                ServiceError::Database(format!("cannot connect to {url}: {source}"))
+            }
             StoreError::Migration(e) => ServiceError::Database(format!("migration failed: {e}")),
             StoreError::Database(e) => ServiceError::Database(e.to_string()),
         }

@@ -97,8 +97,9 @@ impl Default for CacheCounters {
 /// The values a scrape reads from elsewhere: the database's job counts and the service's
 /// state at that moment.
 pub struct Scrape<'a> {
-    /// (state, count) pairs read from the database.
-    pub jobs: &'a [(JobStatus, i64)],
+    /// (state, count) pairs read from the database; `None` when it did not answer (the job
+    /// gauges keep their last values and `l3_database_up` is 0).
+    pub jobs: Option<&'a [(JobStatus, i64)]>,
     /// Whether a table is active.
     pub ready: bool,
     /// Body budget held by render bodies in flight (bytes).
@@ -113,6 +114,7 @@ pub struct Scrape<'a> {
 /// The gauges a [`Scrape`] sets.
 struct Gauges {
     training_jobs: IntGaugeVec,
+    database_up: IntGauge,
     ready: IntGauge,
     body_bytes_reserved: IntGauge,
     queue_length: IntGauge,
@@ -162,6 +164,11 @@ impl Metrics {
                 Opts::new("l3_training_jobs", "Training jobs by state."),
                 &["state"],
             )?,
+            database_up: IntGauge::new(
+                "l3_database_up",
+                "Whether the database answered this scrape's job counts (1) or not (0, the \
+                 l3_training_jobs gauges then keep their last values).",
+            )?,
             ready: IntGauge::new("l3_ready", "Whether a table is active (1) or not (0).")?,
             body_bytes_reserved: IntGauge::new(
                 "l3_render_body_bytes_reserved",
@@ -195,6 +202,7 @@ impl Metrics {
             Box::new(cache.evictions.clone()),
             Box::new(gauges.training_jobs.clone()),
             Box::new(gauges.ready.clone()),
+            Box::new(gauges.database_up.clone()),
             Box::new(gauges.body_bytes_reserved.clone()),
             Box::new(gauges.queue_length.clone()),
             Box::new(gauges.cache_bytes.clone()),
@@ -231,13 +239,15 @@ impl Metrics {
     /// The exposition text, with the gauges set from `s`.
     pub fn render(&self, s: &Scrape<'_>) -> Result<String, prometheus::Error> {
         let g = &self.gauges;
-        for state in JobStatus::ALL {
-            let n = s
-                .jobs
-                .iter()
-                .find(|(st, _)| *st == state)
-                .map_or(0, |(_, n)| *n);
-            g.training_jobs.with_label_values(&[state.as_str()]).set(n);
+        g.database_up.set(i64::from(s.jobs.is_some()));
+        if let Some(jobs) = s.jobs {
+            for state in JobStatus::ALL {
+                let n = jobs
+                    .iter()
+                    .find(|(st, _)| *st == state)
+                    .map_or(0, |(_, n)| *n);
+                g.training_jobs.with_label_values(&[state.as_str()]).set(n);
+            }
         }
         let int = |v: usize| i64::try_from(v).unwrap_or(i64::MAX);
         g.ready.set(i64::from(s.ready));
@@ -258,7 +268,7 @@ mod tests {
 
     fn scrape(jobs: &[(JobStatus, i64)]) -> Scrape<'_> {
         Scrape {
-            jobs,
+            jobs: Some(jobs),
             ready: true,
             body_bytes_reserved: 4096,
             queue_length: 3,
@@ -298,6 +308,7 @@ mod tests {
             "l3_training_jobs{state=\"running\"} 0",
             "# TYPE l3_training_jobs gauge",
             "l3_ready 1",
+            "l3_database_up 1",
         ] {
             assert!(text.lines().any(|l| l == line), "no {line:?} in\n{text}");
         }
@@ -307,6 +318,16 @@ mod tests {
             .filter(|l| l.starts_with("l3_http_request_duration_seconds_bucket{"))
             .count();
         assert_eq!(buckets, LATENCY_BUCKETS_S.len() + 1);
+        // a database that does not answer: the job gauges keep their values, the scrape goes on
+        let mut down = scrape(&[]);
+        down.jobs = None;
+        let text = m.render(&down).unwrap();
+        assert!(text.lines().any(|l| l == "l3_database_up 0"), "{text}");
+        assert!(
+            text.lines()
+                .any(|l| l == "l3_training_jobs{state=\"queued\"} 2"),
+            "{text}"
+        );
     }
 
     #[test]

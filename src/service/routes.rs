@@ -125,12 +125,26 @@ async fn readyz(State(state): State<AppState>) -> Result<Response, ServiceError>
     }
 }
 
+/// How long a scrape waits for the database's job counts: a database that is down must not
+/// take every other metric with it (nor hold the scrape for the pool's 10 s).
+const SCRAPE_DATABASE_WAIT: Duration = Duration::from_secs(2);
+
 async fn metrics(State(state): State<AppState>) -> Result<Response, ServiceError> {
-    let counts = jobs::counts(&state).await?;
+    let counts = match tokio::time::timeout(SCRAPE_DATABASE_WAIT, jobs::counts(&state)).await {
+        Ok(Ok(c)) => Some(c),
+        Ok(Err(e)) => {
+            tracing::warn!("metrics: the job counts are not available: {e}");
+            None
+        }
+        Err(_) => {
+            tracing::warn!("metrics: the database did not give the job counts within 2 s");
+            None
+        }
+    };
     let text = state
         .metrics
         .render(&super::metrics::Scrape {
-            jobs: &counts,
+            jobs: counts.as_deref(),
             ready: state.active.load().is_some(),
             body_bytes_reserved: state.admission.reserved_bytes(),
             queue_length: state.admission.queued(),

@@ -48,6 +48,13 @@ pub enum StoreError {
     /// A `database_url` that names no backend (or that the backend refuses).
     #[error("{0}")]
     Url(String),
+    /// No connection to the database opened at start: where to, and why.
+    #[error("database: cannot connect to {url}: {source}")]
+    Connect {
+        /// The URL without its password.
+        url: String,
+        source: sqlx::Error,
+    },
     /// The migrations could not be applied.
     #[error("database: migration failed: {0}")]
     Migration(#[from] sqlx::migrate::MigrateError),

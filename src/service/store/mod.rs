@@ -91,6 +91,27 @@ pub enum Store {
     Postgres(PgPool),
 }
 
+/// `url` with the password of its `user:password@` part, if any, shown as `***` (for
+/// messages and logs).
+pub fn redacted(url: &str) -> String {
+    // after the scheme's `//` (also in a URL whose scheme is misspelt), else from the start
+    let scheme_end = url.find("//").map_or(0, |i| i + 2);
+    let rest = &url[scheme_end..];
+    let authority_end = rest.find(['/', '?', '#']).unwrap_or(rest.len());
+    let Some(at) = rest[..authority_end].rfind('@') else {
+        return url.to_string();
+    };
+    match rest[..at].find(':') {
+        Some(colon) => format!(
+            "{}{}:***{}",
+            &url[..scheme_end],
+            &rest[..colon],
+            &rest[at..]
+        ),
+        None => url.to_string(),
+    }
+}
+
 /// The embedded SQLite database's file in the data directory.
 pub const SQLITE_FILE: &str = "l3.sqlite";
 
@@ -117,19 +138,59 @@ impl Store {
             sqlx::migrate!("./migrations/sqlite").run(&pool).await?;
             Store::Sqlite(pool)
         } else if url.starts_with("postgres://") || url.starts_with("postgresql://") {
-            let pool = PgPoolOptions::new()
+            let pool = match PgPoolOptions::new()
                 .max_connections(8)
                 .acquire_timeout(Duration::from_secs(10))
                 .connect(url)
-                .await?;
+                .await
+            {
+                Ok(pool) => pool,
+                Err(sqlx::Error::PoolTimedOut) => {
+                    // the pool says only that it timed out: one direct attempt says why
+                    use sqlx::Connection;
+                    let source = match sqlx::PgConnection::connect(url).await {
+                        Err(e) => e,
+                        Ok(_) => sqlx::Error::PoolTimedOut,
+                    };
+                    return Err(StoreError::Connect {
+                        url: redacted(url),
+                        source,
+                    });
+                }
+                Err(e) => return Err(e.into()),
+            };
             sqlx::migrate!("./migrations/postgres").run(&pool).await?;
             Store::Postgres(pool)
         } else {
             return Err(StoreError::Url(format!(
-                "database_url '{url}': expected sqlite://… or postgres://…"
+                "database_url '{}': expected sqlite://… or postgres://…",
+                redacted(url)
             )));
         };
         Ok(store)
+    }
+
+    /// Whether `url` is a database URL the service takes, checked without connecting: empty
+    /// (SQLite in the data directory), `sqlite:…`, or a `postgres://` URL that parses. The
+    /// error shows the URL without its password.
+    pub fn check_url(url: &str) -> Result<(), StoreError> {
+        let url = url.trim();
+        let bad = |why: String| StoreError::Url(format!("database_url '{}': {why}", redacted(url)));
+        if url.is_empty() || url.starts_with("sqlite:") {
+            return SqliteConnectOptions::from_str(if url.is_empty() {
+                "sqlite::memory:"
+            } else {
+                url
+            })
+            .map(|_| ())
+            .map_err(|e| bad(e.to_string()));
+        }
+        if url.starts_with("postgres://") || url.starts_with("postgresql://") {
+            return sqlx::postgres::PgConnectOptions::from_str(url)
+                .map(|_| ())
+                .map_err(|e| bad(redacted(&e.to_string())));
+        }
+        Err(bad("expected sqlite://… or postgres://…".into()))
     }
 
     /// The backend's name, for logs.
@@ -194,5 +255,33 @@ mod tests {
         let e = Store::connect("mysql://x", dir.path()).await.unwrap_err();
         assert!(matches!(e, StoreError::Url(_)), "{e:?}");
         assert!(e.to_string().contains("expected sqlite://"), "{e}");
+    }
+
+    #[test]
+    fn urls_are_checked_without_connecting_and_shown_without_their_password() {
+        for ok in [
+            "",
+            "sqlite://data/l3.sqlite",
+            "postgres://l3:pw@db:5432/l3",
+            "postgresql://db/l3",
+        ] {
+            Store::check_url(ok).unwrap();
+        }
+        for bad in [
+            "mysql://u:s3cret@y/z",
+            "not a url",
+            "postgres//l3:s3cret@h/l3",
+            "postgres://l3:s3cret@h:notaport/l3",
+        ] {
+            let e = Store::check_url(bad).unwrap_err().to_string();
+            assert!(e.contains("database_url"), "{e}");
+            assert!(!e.contains("s3cret"), "{e}");
+        }
+        assert_eq!(
+            redacted("postgres://l3:pw@db:5432/l3"),
+            "postgres://l3:***@db:5432/l3"
+        );
+        assert_eq!(redacted("postgres://l3@db/l3"), "postgres://l3@db/l3");
+        assert_eq!(redacted("postgres://db/a@b"), "postgres://db/a@b");
     }
 }
