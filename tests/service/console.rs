@@ -1,7 +1,8 @@
 //! The console at `/`: served as small, self-contained files without a token, and used end to
 //! end in headless Chromium driven through chromedriver (WebDriver): the status, a simulated
-//! RGBW DNG rendered with its light and timings, a tiny training job to 100 %, an evaluation's
-//! figure, a light added and removed. The browser test prints `skipped:` without Chromium or
+//! RGBW DNG rendered with its light and timings (and taken off the page by a failed render), a
+//! tiny training job to 100 % (its card kept, focus and all, through a refresh), an evaluation's
+//! figure, the job's table activated from its card, a light added and removed. The browser test prints `skipped:` without Chromium or
 //! chromedriver (fails under `CI`); it writes screenshots to a temporary folder, kept (and its
 //! path printed) when the test fails or `L3_KEEP_SCREENSHOTS` is set, else removed.
 
@@ -323,6 +324,22 @@ async fn render_a_dng(b: &Client, dng: &Path, shots: &Path) {
     );
     assert_eq!(link.attr("download").await.unwrap().unwrap(), "mosaic.png");
     screenshot(b, shots, "console-render.png").await;
+    // a failed render takes the previous one off the page: its image, values and download
+    let bad = dng.with_file_name("broken.dng");
+    std::fs::write(&bad, b"not a DNG").unwrap();
+    let file = b.find(Locator::Css("#render-file")).await.unwrap();
+    file.send_keys(&bad.to_string_lossy()).await.unwrap();
+    click(b, "#render-go").await;
+    wait_js(
+        b,
+        "the failed render's message, and the old render gone",
+        "return document.querySelector('#render-msg').classList.contains('error') \
+         && document.querySelector('#render-figure').hidden \
+         && document.querySelector('#render-download').hidden \
+         && document.querySelector('#render-info').children.length == 0",
+        60,
+    )
+    .await;
 }
 
 async fn train_a_tiny_table(b: &Client, shots: &Path) -> String {
@@ -387,7 +404,64 @@ async fn train_a_tiny_table(b: &Client, shots: &Path) -> String {
         .unwrap()
         .unwrap();
     screenshot(b, shots, "console-jobs.png").await;
+    // a refresh updates the cards in place: the same card, its button still focused
+    let card = format!(".job[data-id=\"{id}\"]");
+    b.execute(
+        &format!(
+            "const c = document.querySelector('{card}'); c.l3Mark = 1; \
+             c.querySelector('.table button').focus(); \
+             document.querySelector('[data-refresh=\"jobs\"]').click()"
+        ),
+        vec![],
+    )
+    .await
+    .unwrap();
+    tokio::time::sleep(Duration::from_millis(1500)).await;
+    wait_js(
+        b,
+        "the same card, its button focused, after a refresh",
+        &format!(
+            "const c = document.querySelector('{card}'); \
+             return c.l3Mark === 1 && document.activeElement === c.querySelector('.table button')"
+        ),
+        5,
+    )
+    .await;
     id
+}
+
+/// Activates the job's table from its card: the outcome on the card, which (like the header)
+/// then marks that table active.
+async fn activate_from_the_job_card(b: &Client, job: &str, shots: &Path) -> String {
+    click(b, "button[data-tab=\"jobs\"]").await;
+    let card = format!(".job[data-id=\"{job}\"]");
+    let table = b
+        .find(Locator::Css(&format!("{card} .table [data-id]")))
+        .await
+        .unwrap()
+        .attr("data-id")
+        .await
+        .unwrap()
+        .unwrap();
+    click(b, &format!("{card} .table button:last-child")).await;
+    wait_js(
+        b,
+        "the activation said on the job's card",
+        &format!(
+            "const c = document.querySelector('{card}'); \
+             return c.querySelector('.table ~ .msg.ok') != null \
+             && !c.querySelector('.table .tag.ok').hidden \
+             && document.querySelector('#st-table').textContent == '{table}'"
+        ),
+        30,
+    )
+    .await;
+    assert_eq!(
+        text(b, &format!("{card} .table ~ .msg")).await,
+        format!("{table} is now the active table.")
+    );
+    screenshot(b, shots, "console-activated.png").await;
+    table
 }
 
 async fn evaluate(b: &Client, shots: &Path) {
@@ -492,6 +566,7 @@ async fn the_console_renders_trains_and_evaluates_in_chromium() {
     render_a_dng(&b, &dng, &shots).await;
     let job = train_a_tiny_table(&b, &shots).await;
     evaluate(&b, &shots).await;
+    let activated = activate_from_the_job_card(&b, &job, &shots).await;
     // the tables: the active one and the job's, each with the sensor it was trained for
     click(&b, "button[data-tab=\"tables\"]").await;
     wait_js(
@@ -520,6 +595,16 @@ async fn the_console_renders_trains_and_evaluates_in_chromium() {
     assert_eq!(j["status"], "succeeded");
     assert_eq!(j["request"]["scenes"], 4);
     assert_eq!(j["shards"]["done"], 4);
+    assert_eq!(j["table_id"], activated.as_str());
+    let t = json(
+        client()
+            .get(url(&server, "/v1/tables"))
+            .send()
+            .await
+            .unwrap(),
+    )
+    .await;
+    assert_eq!(t["active_table_id"], activated.as_str());
     b.close().await.unwrap();
     drop(driver);
     server.shutdown().await.unwrap();

@@ -154,6 +154,8 @@ async function refreshStatus() {
     say(detail, new ApiError("The service cannot be reached", e.message));
     return;
   }
+  // back from being unreachable: the jobs' poll (backing off meanwhile) picks up at once
+  if (jobsPoll.failures) loadJobs();
   if (resp.ok) {
     pill.dataset.state = "ready";
     pill.textContent = "ready";
@@ -185,6 +187,7 @@ function showActive() {
   const t = cache.tables.find((x) => x.id === cache.activeId);
   $("#st-table").textContent = cache.activeId || "none";
   $("#st-sensor").textContent = t ? t.sensor_name : "—";
+  markActiveJobs();
 }
 
 // ---------------------------------------------------------------- tabs
@@ -248,7 +251,7 @@ async function loadLights() {
       h(
         "tr",
         {},
-        h("td", {}, h("strong", { text: l.name })),
+        h("td", { class: "name" }, h("strong", { text: l.name })),
         h("td", {}, l.source, l.user_defined ? h("span", { class: "tag", text: "user" }) : null),
         h("td", { text: l.cct ? `${Math.round(l.cct)} K` : "—" }),
         h("td", { class: "mono", text: l.white_xy ? l.white_xy.map((v) => v.toFixed(4)).join(", ") : "—" }),
@@ -267,6 +270,7 @@ async function loadLights() {
 async function addLight(ev) {
   ev.preventDefault();
   const msg = $("#light-msg");
+  quiet(msg);
   const name = $("#light-name").value.trim();
   await guarded(msg, async () => {
     const cct = Number($("#light-cct").value);
@@ -353,6 +357,7 @@ async function doRender(ev) {
   const format = FORMATS[$("#render-format").value];
   button.disabled = true;
   say(msg, "Rendering…", "info");
+  $("#render-result").classList.add("stale"); // the previous render's, until this one is in
   try {
     const q = renderQuery(file, format);
     const post = (accept, query) =>
@@ -385,10 +390,29 @@ async function doRender(ev) {
     $("#render-empty").hidden = true;
     quiet(msg);
   } catch (e) {
+    clearRender();
     say(msg, e);
   } finally {
     button.disabled = false;
+    $("#render-result").classList.remove("stale");
   }
+}
+
+/** Takes the previous render off the page: its image, its x-l3-* values and its download. */
+function clearRender() {
+  $("#render-figure").hidden = true;
+  $("#render-img").removeAttribute("src");
+  $("#render-note").textContent = "";
+  $("#render-info").replaceChildren();
+  const link = $("#render-download");
+  link.hidden = true;
+  link.removeAttribute("href");
+  for (const key of ["shown", "download"]) {
+    if (blobUrls[key]) URL.revokeObjectURL(blobUrls[key]);
+    delete blobUrls[key];
+  }
+  $("#render-empty").textContent = "The render failed: no image (see the message beside the form).";
+  $("#render-empty").hidden = false;
 }
 
 function showRenderInfo(headers) {
@@ -472,7 +496,7 @@ async function loadTables() {
         h("td", {}, shortId(t.id), t.active ? h("span", { class: "tag ok", text: "active" }) : null),
         h("td", { text: t.kind }),
         h("td", { text: t.sensor_name }),
-        h("td", { text: t.train_illuminants.join(", ") }),
+        h("td", { class: "name", text: t.train_illuminants.join(", ") }),
         h("td", { text: fmtTime(t.created_at_ms) }),
         h("td", { text: fmtBytes(t.size_bytes) }),
         h("td", {}, t.status === "ok" ? "ok" : h("span", { class: "tag bad", title: t.status_detail || "", text: t.status })),
@@ -549,6 +573,7 @@ function numberField(sel) {
 async function submitJob(ev) {
   ev.preventDefault();
   const msg = $("#job-msg");
+  quiet(msg);
   await guarded(msg, async () => {
     const illuminants = [...document.querySelectorAll("#job-lights input:checked")].map((i) => i.value);
     if (!illuminants.length) throw new Error("choose at least one illuminant");
@@ -574,117 +599,252 @@ async function submitJob(ev) {
 const ONE_PIECE = ["queued", "starting", "survey", "accumulate", "solve", "done"];
 const SHARDED = ["queued", "survey", "accumulate", "merge"];
 const ACTIVE = new Set(["queued", "running"]);
-let jobsTimer = null;
+// The list is polled every second while a job runs (and the tab shows), else every 5 s, so jobs
+// submitted elsewhere appear; while the service cannot be reached, the last jobs stay on screen
+// marked stale and the poll backs off (2, 4, 8 … 30 s) until it answers again.
+const JOBS_BUSY_MS = 1000;
+const JOBS_IDLE_MS = 5000;
+const jobsPoll = { timer: null, seq: 0, failures: 0, shown: null, cards: new Map(), status: new Map() };
 
 async function loadJobs() {
-  clearTimeout(jobsTimer);
-  const list = (await guarded($("#job-msg"), () => getJson("/v1/training-jobs?limit=20"))) || { items: [] };
-  // a running job's own description carries its shards
-  const jobs = await Promise.all(
-    list.items.map((j) => (ACTIVE.has(j.status) ? getJson(`/v1/training-jobs/${j.id}`).catch(() => j) : j)),
-  );
-  drawJobs(jobs);
-  if (jobs.some((j) => ACTIVE.has(j.status))) {
-    jobsTimer = setTimeout(loadJobs, 1000);
-  } else if (jobs.some((j) => j.table_id && !cache.tables.some((t) => t.id === j.table_id))) {
-    refreshStatus();
+  clearTimeout(jobsPoll.timer);
+  const seq = ++jobsPoll.seq;
+  let delay;
+  try {
+    const list = await getJson("/v1/training-jobs?limit=20");
+    // a running job's own description carries its shards
+    const jobs = await Promise.all(
+      list.items.map((j) => (ACTIVE.has(j.status) ? getJson(`/v1/training-jobs/${j.id}`).catch(() => j) : j)),
+    );
+    if (seq !== jobsPoll.seq) return; // a newer load took over (and set the timer)
+    jobsPoll.failures = 0;
+    jobsPoll.shown = Date.now();
+    quiet($("#jobs-msg"));
+    $("#jobs-list").classList.remove("stale");
+    // a job that ended may have made or activated a table: the header, the tables and the cards follow
+    const ended = jobs.some((j) => !ACTIVE.has(j.status) && ACTIVE.has(jobsPoll.status.get(j.id)));
+    jobsPoll.status = new Map(jobs.map((j) => [j.id, j.status]));
+    drawJobs(jobs);
+    const busy = jobs.some((j) => ACTIVE.has(j.status));
+    delay = busy && !$("#tab-jobs").hidden ? JOBS_BUSY_MS : JOBS_IDLE_MS;
+    if (ended || jobs.some((j) => j.table_id && !cache.tables.some((t) => t.id === j.table_id))) {
+      refreshStatus();
+    }
+  } catch (e) {
+    if (seq !== jobsPoll.seq) return;
+    jobsPoll.failures += 1;
+    delay = Math.min(30000, 1000 * 2 ** jobsPoll.failures);
+    const box = $("#jobs-msg");
+    say(box, e);
+    const when = jobsPoll.shown
+      ? `Showing the jobs as of ${new Date(jobsPoll.shown).toLocaleTimeString()}`
+      : "No jobs loaded yet";
+    box.append(h("br"), h("small", { text: `${when}; trying again in ${delay / 1000} s.` }));
+    if (jobsPoll.shown) $("#jobs-list").classList.add("stale");
   }
+  jobsPoll.timer = setTimeout(loadJobs, delay);
 }
 
 function bar(fraction, label) {
-  const pct = Math.round(Math.min(1, Math.max(0, fraction)) * 100);
   const fill = h("div");
-  fill.style.width = `${pct}%`; // through the CSSOM: the page's CSP allows no inline style
-  return h(
-    "div",
-    { class: "bar", role: "progressbar", "aria-valuemin": 0, "aria-valuemax": 100, "aria-valuenow": pct, "aria-label": label },
-    fill,
-  );
+  const b = h("div", { class: "bar", role: "progressbar", "aria-valuemin": 0, "aria-valuemax": 100, "aria-label": label }, fill);
+  setBar(b, fraction);
+  return b;
 }
 
-function stages(job) {
+function setBar(b, fraction) {
+  const pct = Math.round(Math.min(1, Math.max(0, fraction || 0)) * 100);
+  b.setAttribute("aria-valuenow", pct);
+  b.firstChild.style.width = `${pct}%`; // through the CSSOM: the page's CSP allows no inline style
+}
+
+/** Sets `el`'s text only when it changed (a node replaced under a pointer or focus loses it). */
+function setText(el, text) {
+  if (el.textContent !== text) el.textContent = text;
+}
+
+function drawStages(box, job) {
   const order = job.shards ? SHARDED : ONE_PIECE;
   const now = order.indexOf(job.stage);
   const finished = job.status === "succeeded";
-  return h(
-    "div",
-    { class: "stages" },
-    order.map((s, i) =>
+  const sig = `${order.join()}|${now}|${finished}`;
+  if (box.dataset.sig === sig) return;
+  box.dataset.sig = sig;
+  box.replaceChildren(
+    ...order.map((s, i) =>
       h("span", { class: finished || (now >= 0 && i < now) ? "done" : i === now ? "now" : null, text: s }),
     ),
   );
 }
 
-function jobCard(job) {
-  const fraction = job.status === "succeeded" ? 1 : job.progress;
-  const pct = Math.round(fraction * 100);
+function drawShards(box, job) {
+  box.hidden = !job.shards;
+  if (!job.shards) return;
+  const items = job.shards.items;
+  const label = (s) => `${s.stage} ${s.shard}/${job.shards.count}` + (s.attempts > 1 ? ` · attempt ${s.attempts}` : "");
+  if (box.children.length !== items.length * 2) {
+    box.replaceChildren(...items.flatMap((s) => [h("span"), bar(0, `${s.stage} shard ${s.shard}`)]));
+  }
+  items.forEach((s, i) => {
+    setText(box.children[2 * i], label(s));
+    setBar(box.children[2 * i + 1], s.status === "succeeded" ? 1 : s.progress);
+  });
+}
+
+/** What a job trains: its sensor (a design's name), kind, lights and scenes. */
+function jobWhat(job) {
   const req = job.request || {};
-  const what = [
-    typeof req.sensor === "object" && req.sensor ? "a sensor design" : req.sensor || "paper_default",
+  const design = typeof req.sensor === "object" && req.sensor;
+  return [
+    design ? (design.name ? `${design.name} (a sensor design)` : "a sensor design") : req.sensor || "paper_default",
     req.kind || "si",
     (req.illuminants || ["D65", "Tungsten"]).join("+"),
     req.scenes ? `${req.scenes} scenes of ${req.scene_size || 96} px` : null,
-  ].filter(Boolean);
-  const secs = job.timings && job.timings.running_ms != null ? ` · ${(job.timings.running_ms / 1000).toFixed(1)} s` : "";
-  const card = h(
+  ]
+    .filter(Boolean)
+    .join(" · ");
+}
+
+/** A job's card, built once: its parts are updated in place by updateCard at every poll. */
+function jobCard(job) {
+  const p = {};
+  p.tag = h("span", { class: "tag" });
+  p.what = h("span", { class: "grow sub" });
+  p.cancel = h("button", { class: "small danger", onclick: () => cancelJob(job.id, p) }, "Cancel");
+  p.bar = bar(0, `job ${job.id}`);
+  p.pct = h("span", { class: "pct" });
+  p.stage = h("span");
+  p.attempt = h("span", { class: "attempt" });
+  p.stages = h("div", { class: "stages" });
+  p.shards = h("div", { class: "shards" });
+  p.error = h("p", { class: "msg error" });
+  p.tableId = h("span");
+  p.activeTag = h("span", { class: "tag ok", text: "active" });
+  p.activate = h("button", { class: "small", onclick: () => activateFromCard(p) }, "Activate");
+  p.table = h(
     "div",
-    { class: "job", "data-id": job.id, "data-status": job.status },
-    h(
-      "header",
-      {},
-      shortId(job.id),
-      h("span", { class: "tag" + (job.status === "succeeded" ? " ok" : job.status === "failed" ? " bad" : ""), text: job.status }),
-      h("span", { class: "grow sub", text: what.join(" · ") }),
-      ACTIVE.has(job.status) ? h("button", { class: "small danger", onclick: () => cancelJob(job.id) }, "Cancel") : null,
-    ),
-    bar(fraction, `job ${job.id}`),
-    h("div", { class: "sub" }, h("span", { class: "pct", text: `${pct} %` }), ` · ${job.stage || job.status}${secs}`),
-    stages(job),
+    { class: "sub table" },
+    "table ",
+    p.tableId,
+    p.activeTag,
+    " ",
+    h("button", { class: "small", onclick: () => evaluateTable(p.job.table_id) }, "Evaluate"),
+    " ",
+    p.activate,
   );
-  if (job.shards) {
-    card.append(
-      h(
-        "div",
-        { class: "shards" },
-        job.shards.items.flatMap((s) => [
-          h("span", { text: `${s.stage} ${s.shard}/${job.shards.count}` }),
-          bar(s.status === "succeeded" ? 1 : s.progress, `${s.stage} shard ${s.shard}`),
-        ]),
-      ),
-    );
+  p.msg = h("p", { class: "msg", hidden: true, "aria-live": "polite" });
+  p.card = h(
+    "div",
+    { class: "job", "data-id": job.id },
+    h("header", {}, shortId(job.id), p.tag, p.what, p.cancel),
+    p.bar,
+    h("div", { class: "sub" }, p.pct, p.stage, p.attempt),
+    p.stages,
+    p.shards,
+    p.error,
+    p.table,
+    p.msg,
+  );
+  updateCard(p, job);
+  return p;
+}
+
+function updateCard(p, job) {
+  p.job = job;
+  const fraction = job.status === "succeeded" ? 1 : job.progress;
+  p.card.dataset.status = job.status;
+  setText(p.tag, job.status);
+  p.tag.className = "tag" + (job.status === "succeeded" ? " ok" : job.status === "failed" ? " bad" : "");
+  setText(p.what, jobWhat(job));
+  p.cancel.hidden = !ACTIVE.has(job.status);
+  if (p.said === "cancel" && !ACTIVE.has(job.status)) quietCard(p); // its status tag says the rest
+  setBar(p.bar, fraction);
+  setText(p.pct, `${Math.round(fraction * 100)} %`);
+  const secs = job.timings && job.timings.running_ms != null ? ` · ${(job.timings.running_ms / 1000).toFixed(1)} s` : "";
+  setText(p.stage, ` · ${job.stage || job.status}${secs}`);
+  // a restart re-queues a running job, which starts again from 0 %
+  const attempts = job.attempts || 0;
+  p.attempt.hidden = attempts <= 1;
+  setText(p.attempt, attempts > 1 ? ` · attempt ${attempts} (restarted)` : "");
+  p.attempt.title = attempts > 1 ? "the service restarted while the job ran; it started again from the beginning" : "";
+  drawStages(p.stages, job);
+  drawShards(p.shards, job);
+  p.error.hidden = !job.error;
+  setText(p.error, job.error || "");
+  p.table.hidden = !job.table_id;
+  if (job.table_id && p.tableId.dataset.id !== job.table_id) {
+    p.tableId.dataset.id = job.table_id;
+    p.tableId.replaceChildren(shortId(job.table_id));
   }
-  if (job.error) card.append(h("p", { class: "msg error", text: job.error }));
-  if (job.table_id) {
-    card.append(
-      h(
-        "div",
-        { class: "sub" },
-        "table ",
-        shortId(job.table_id),
-        job.table_id === cache.activeId ? h("span", { class: "tag ok", text: "active" }) : " ",
-        h("button", { class: "small", onclick: () => evaluateTable(job.table_id) }, "Evaluate"),
-        " ",
-        h("button", { class: "small", disabled: job.table_id === cache.activeId, onclick: () => activate(job.table_id) }, "Activate"),
-      ),
-    );
-  }
-  return card;
+  markActive(p);
+}
+
+/** The card's table marked active, or not, as the header says. */
+function markActive(p) {
+  const active = !!p.job.table_id && p.job.table_id === cache.activeId;
+  p.activeTag.hidden = !active;
+  p.activate.disabled = active || p.busy;
+  if (p.said === "activate" && !active && !p.busy) quietCard(p); // another table is active since
+}
+
+function quietCard(p) {
+  p.said = null;
+  quiet(p.msg);
 }
 
 function drawJobs(jobs) {
   const box = $("#jobs-list");
+  const cards = jobsPoll.cards;
+  const seen = new Set(jobs.map((j) => j.id));
+  for (const [id, p] of cards) {
+    if (!seen.has(id)) {
+      p.card.remove();
+      cards.delete(id);
+    }
+  }
   if (!jobs.length) {
     box.replaceChildren(h("p", { class: "empty", text: "No jobs yet." }));
     return;
   }
-  box.replaceChildren(...jobs.map(jobCard));
+  const empty = box.querySelector(":scope > .empty");
+  if (empty) empty.remove();
+  // cards stay the same elements, moved only when out of place, so focus and clicks survive
+  jobs.forEach((job, i) => {
+    let p = cards.get(job.id);
+    if (p) updateCard(p, job);
+    else cards.set(job.id, (p = jobCard(job)));
+    if (box.children[i] !== p.card) box.insertBefore(p.card, box.children[i] || null);
+  });
 }
 
-async function cancelJob(id) {
-  const msg = $("#job-msg");
-  await guarded(msg, async () => {
+function markActiveJobs() {
+  for (const p of jobsPoll.cards.values()) markActive(p);
+}
+
+async function activateFromCard(p) {
+  const id = p.job.table_id;
+  p.busy = true;
+  markActive(p);
+  say(p.msg, `Activating ${id}…`, "info");
+  try {
+    await api("POST", `/v1/tables/${id}/activate`);
+    await refreshStatus();
+    say(p.msg, `${id} is now the active table.`);
+    p.said = "activate";
+  } catch (e) {
+    p.said = null;
+    say(p.msg, e);
+  } finally {
+    p.busy = false;
+    markActive(p);
+  }
+}
+
+async function cancelJob(id, p) {
+  await guarded(p.msg, async () => {
     await api("POST", `/v1/training-jobs/${id}/cancel`);
-    say(msg, `Cancelling ${id}.`);
+    say(p.msg, `Cancelling ${id}.`);
+    p.said = "cancel";
     await loadJobs();
   });
 }
@@ -695,6 +855,7 @@ async function runEval(ev) {
   ev.preventDefault();
   const msg = $("#eval-msg");
   const button = $("#eval-go");
+  quiet(msg);
   button.disabled = true;
   await guarded(msg, async () => {
     const body = {
@@ -755,7 +916,7 @@ async function loadEvals() {
         h("td", {}, shortId(e.id)),
         h("td", { text: e.method }),
         h("td", {}, shortId(e.table_id)),
-        h("td", { text: e.acquisition_illuminant }),
+        h("td", { class: "name", text: e.acquisition_illuminant }),
         h("td", { text: e.request && e.request.exposure_factor != null ? `× ${e.request.exposure_factor}` : "auto" }),
         h("td", { text: fmtNum(e.mean_delta_e) }),
         h("td", { text: fmtTime(e.created_at_ms) }),
@@ -786,6 +947,12 @@ function init() {
   $("#job-form").addEventListener("submit", submitJob);
   $("#eval-form").addEventListener("submit", runEval);
   $("#light-form").addEventListener("submit", addLight);
+  // each submit attempt starts without the last one's message, even one the browser's own
+  // validation stops (the invalid event fires then, instead of submit)
+  for (const form of document.querySelectorAll("form")) {
+    const box = form.querySelector(".msg");
+    form.addEventListener("invalid", () => quiet(box), true);
+  }
   setupDrop();
   showTab(location.hash.slice(1));
   guarded(null, () => Promise.all([loadLights(), loadSensors(), loadJobs(), loadEvals()]));
