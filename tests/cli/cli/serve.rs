@@ -128,7 +128,9 @@ fn serve_until_exit(dir: &Path, args: &[&str], env: &[(&str, &str)]) -> (Option<
 }
 
 /// A start that fails is no usage error: a busy address and a database that cannot be opened
-/// exit with code 1 (not 2) and say why, and a busy address leaves the data directory alone.
+/// exit with code 1 (not 2) and say why, and a busy address leaves the data directory alone. A
+/// database URL of no backend is a bad configuration value instead (code 2), shown without
+/// its password.
 #[test]
 fn serve_start_failures_exit_1_with_the_reason() {
     let tmp = tempfile::tempdir().unwrap();
@@ -160,12 +162,14 @@ fn serve_start_failures_exit_1_with_the_reason() {
     let data = d.join("db");
     let data_arg = ["--bind", &free, "--data-dir", data.to_str().unwrap()];
     // an unknown scheme
-    let (code, err) = serve_until_exit(d, &data_arg, &[("L3_DATABASE_URL", "mysql://db/l3")]);
-    assert_eq!(code, Some(1), "{err}");
+    let url = [("L3_DATABASE_URL", "mysql://l3:s3cret@db/l3")];
+    let (code, err) = serve_until_exit(d, &data_arg, &url);
+    assert_eq!(code, Some(2), "{err}");
     assert!(
-        err.contains("database_url 'mysql://db/l3'") && err.contains("postgres://"),
+        err.contains("database_url 'mysql://l3:***@db/l3'") && err.contains("postgres://"),
         "{err}"
     );
+    assert!(!err.contains("s3cret"), "{err}");
     // a SQLite file that cannot be created (its directory does not exist)
     let (code, err) = serve_until_exit(
         d,
